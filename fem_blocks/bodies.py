@@ -1,0 +1,411 @@
+"""Bodies: deformable blocks (instances of shared block types) and 2D rigid bodies.
+
+A `BlockType` is a prototype: one gmsh mesh, one material, its stiffness K, mass M and damping
+C = a M + b K, assembled once. For a time step h and scheme parameter theta it provides (cached)
+the iteration matrix (DESIGN §2)
+
+    Mhat = M + h theta C + h^2 theta^2 K,   W = Mhat^-1
+
+factorized once with PETSc, and the dense boundary Delassus block W_bb = B W B^T over its boundary
+dofs. Every `DeformableBody` placed by translation and rotation of a type shares these objects:
+displacements and velocities of an instance are stored in the *type frame*; the global
+displacement is R q, so Mhat_rot^-1 = R Mhat^-1 R^T never needs a new factorization.
+
+A `RigidBody` (2D) has dofs (vx, vy, omega) about its centre of mass, mass diag(m, m, I); each dof
+is free (applied force, constant or piecewise linear in time) or driven (prescribed velocity or
+displacement history); the reaction on a driven dof is an output.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import numpy as np
+import scipy.sparse as sp
+
+from .errors import InputError, check_range
+
+
+# ----------------------------------------------------------------------------- load histories
+class History:
+    """Piecewise-linear function of time, constant beyond its ends: value(t)."""
+
+    def __init__(self, times: Sequence[float], values: Sequence[float], name: str = "history"):
+        t = np.asarray(times, dtype=float).ravel()
+        v = np.asarray(values, dtype=float).ravel()
+        if t.size == 0 or t.size != v.size:
+            raise InputError(f"{name}: times and values must be non-empty lists of equal length "
+                             f"(got {t.size} and {v.size})")
+        if np.any(np.diff(t) <= 0):
+            raise InputError(f"{name}.times: expected strictly increasing times")
+        if not (np.all(np.isfinite(t)) and np.all(np.isfinite(v))):
+            raise InputError(f"{name}: expected finite times and values")
+        self.times, self.values, self.name = t, v, name
+
+    @classmethod
+    def constant(cls, value: float, name: str = "history") -> "History":
+        return cls([0.0], [value], name)
+
+    @classmethod
+    def ramp(cls, t0: float, t1: float, v0: float, v1: float, name: str = "ramp") -> "History":
+        return cls([t0, t1], [v0, v1], name)
+
+    def __call__(self, t: float) -> float:
+        return float(np.interp(t, self.times, self.values))
+
+
+def as_history(value, name: str) -> History:
+    if isinstance(value, History):
+        return value
+    if isinstance(value, (int, float, np.floating, np.integer)):
+        return History.constant(float(value), name)
+    if isinstance(value, dict) and set(value) == {"times", "values"}:
+        return History(value["times"], value["values"], name)
+    raise InputError(f"{name}: expected a number or {{times = [...], values = [...]}}, got {value!r}")
+
+
+# ----------------------------------------------------------------------------- material
+@dataclass(frozen=True)
+class Material:
+    """Linear elastic isotropic material, small strain; Rayleigh damping C = alpha M + beta K."""
+
+    E: float
+    nu: float
+    rho: float
+    thickness: float = 1.0
+    plane: str = "stress"
+    alpha: float = 0.0
+    beta: float = 0.0
+    name: str = "material"
+
+    def __post_init__(self):
+        n = self.name
+        check_range(f"{n}.E", self.E, 0.0, lo_open=True, expected="E > 0 [Pa]")
+        check_range(f"{n}.nu", self.nu, -1.0, 0.5, lo_open=True, hi_open=True, expected="-1 < nu < 0.5")
+        check_range(f"{n}.rho", self.rho, 0.0, lo_open=True, expected="rho > 0 [kg/m^3]")
+        check_range(f"{n}.thickness", self.thickness, 0.0, lo_open=True, expected="thickness > 0 [m]")
+        check_range(f"{n}.alpha", self.alpha, 0.0, expected="Rayleigh alpha >= 0 [1/s]")
+        check_range(f"{n}.beta", self.beta, 0.0, expected="Rayleigh beta >= 0 [s]")
+        if self.plane not in ("stress", "strain"):
+            raise InputError(f"{n}.plane = {self.plane!r}: expected 'stress' or 'strain'")
+
+
+def check_step(h: float, theta: float):
+    check_range("h", h, 0.0, lo_open=True, expected="time step h > 0 [s]")
+    check_range("theta", theta, 0.5, 1.0, expected="0.5 <= theta <= 1")
+
+
+def rotation(angle: float) -> np.ndarray:
+    c, s = np.cos(angle), np.sin(angle)
+    return np.array([[c, -s], [s, c]])
+
+
+# ----------------------------------------------------------------------------- block types
+class StepOperator:
+    """Factor of Mhat = M + h theta C + h^2 theta^2 K with clamped dofs eliminated.
+
+    Clamped dofs (zero velocity) get an identity row and column, so `solve(b)` returns x with
+    x_c = b_c and x_f = Mhat_ff^-1 b_f; callers set b_c = 0.
+    """
+
+    def __init__(self, block_type: "BlockType", h: float, theta: float, clamped: np.ndarray):
+        from .linalg import Factor
+        self.h, self.theta = h, theta
+        self.clamped = clamped  # bool (ndof,)
+        bt = block_type
+        Mhat = (bt.M + (h * theta) * bt.C + (h * theta) ** 2 * bt.K).tocsr()
+        keep = sp.diags((~clamped).astype(float))
+        Mmod = (keep @ Mhat @ keep + sp.diags(clamped.astype(float))).tocsr()
+        Mmod.eliminate_zeros()
+        self.factor = Factor(Mmod)
+        self.bdofs = bt.boundary_dofs
+        self._W_bb = None
+
+    def solve(self, B: np.ndarray) -> np.ndarray:
+        return self.factor.solve(B)
+
+    @property
+    def W_bb(self) -> np.ndarray:
+        """Dense boundary Delassus block B Mhat^-1 B^T (type frame), rows/cols = boundary dofs."""
+        if self._W_bb is None:
+            nd = self.clamped.size
+            E = np.zeros((nd, self.bdofs.size))
+            E[self.bdofs, np.arange(self.bdofs.size)] = 1.0
+            E[self.clamped, :] = 0.0
+            X = self.solve(E)
+            X[self.clamped, :] = 0.0
+            W = X[self.bdofs, :]
+            self._W_bb = np.ascontiguousarray(0.5 * (W + W.T))
+        return self._W_bb
+
+
+class BlockType:
+    """Prototype of identical deformable blocks: mesh + material -> K, M, C (assembled once)."""
+
+    def __init__(self, mesh, material: Material, mass: str = "lumped", name: str = "block"):
+        from . import fem_backend, meshing
+        if mass not in ("lumped", "consistent"):
+            raise InputError(f"{name}.mass = {mass!r}: expected 'lumped' or 'consistent'")
+        meshing.validate(mesh, source=name)
+        self.mesh, self.material, self.mass_kind, self.name = mesh, material, mass, name
+        m = material
+        ops = fem_backend.assemble_operators(mesh, m.E, m.nu, m.rho, m.thickness, m.plane)
+        self.K = ops.K.tocsr()
+        self.M = (ops.M_lumped if mass == "lumped" else ops.M_consistent).tocsr()
+        self.C = (m.alpha * self.M + m.beta * self.K).tocsr()
+        self.n_nodes = mesh.points.shape[0]
+        self.ndof = 2 * self.n_nodes
+        self.boundary_nodes = np.asarray(mesh.boundary_nodes(), dtype=np.int64)
+        self.bnode_index = -np.ones(self.n_nodes, dtype=np.int64)
+        self.bnode_index[self.boundary_nodes] = np.arange(self.boundary_nodes.size)
+        self.boundary_dofs = np.stack([2 * self.boundary_nodes, 2 * self.boundary_nodes + 1], 1).ravel()
+        self._ops: dict = {}
+        self._stress = None
+
+    def step_operator(self, h: float, theta: float, clamped: np.ndarray) -> StepOperator:
+        """Shared (cached) step operator for (h, theta, clamped dof set)."""
+        key = (float(h), float(theta), clamped.tobytes())
+        op = self._ops.get(key)
+        if op is None:
+            op = self._ops[key] = StepOperator(self, h, theta, clamped)
+        return op
+
+    @property
+    def stress_operator(self) -> sp.csr_matrix:
+        """S (3 nc x 2n): cell-centroid stress (sxx, syy, sxy) in the type frame from q."""
+        if self._stress is None:
+            from . import fem_backend
+            m = self.material
+            self._stress = fem_backend.stress_operator(self.mesh, m.E, m.nu, m.plane).tocsr()
+        return self._stress
+
+    def gravity_load(self, g_type: np.ndarray) -> np.ndarray:
+        """Nodal body force of gravity, F = M (1 ⊗ g): exact for consistent and row-sum lumped M."""
+        return self.M @ np.tile(np.asarray(g_type, dtype=float), self.n_nodes)
+
+    def traction_load(self, tag: str, traction: np.ndarray) -> np.ndarray:
+        """Nodal forces of a uniform traction (type frame, N/m^2) on the edges tagged `tag`:
+        F_i = sum over edges e of t |e| thickness / 2 at each end node (exact for linear edges)."""
+        mesh = self.mesh
+        if tag not in mesh.tag_names:
+            raise InputError(f"{self.name}: boundary tag {tag!r} not found; "
+                             f"expected one of {sorted(mesh.tag_names)}")
+        edges = mesh.boundary_edges[mesh.edge_tags == mesh.tag_names[tag]]
+        L = np.linalg.norm(mesh.points[edges[:, 1]] - mesh.points[edges[:, 0]], axis=1)
+        f = np.zeros(self.ndof)
+        w = 0.5 * L * self.material.thickness
+        for k in range(2):
+            np.add.at(f, 2 * edges[:, k], w * traction[0])
+            np.add.at(f, 2 * edges[:, k] + 1, w * traction[1])
+        return f
+
+
+# ----------------------------------------------------------------------------- instances
+@dataclass
+class Clamp:
+    """Zero-velocity condition on nodes selected by a global box (xmin, xmax, ymin, ymax) or a tag."""
+
+    box: tuple | None = None
+    tag: str | None = None
+    components: str = "xy"
+
+
+@dataclass
+class Traction:
+    """Uniform traction (global frame, Pa) on a tagged boundary part, scaled by a history."""
+
+    tag: str
+    value: tuple
+    history: History | float = 1.0
+
+
+class DeformableBody:
+    """Instance of a BlockType placed by rotation `angle` about the type origin then translation."""
+
+    kind = 0
+
+    def __init__(self, block_type: BlockType, position=(0.0, 0.0), angle: float = 0.0,
+                 clamps: Sequence[Clamp] = (), tractions: Sequence[Traction] = (), name: str = "block"):
+        self.type, self.name = block_type, name
+        self.position = np.asarray(position, dtype=float).reshape(2)
+        self.angle = float(angle)
+        self.R = rotation(self.angle)
+        self.tractions = list(tractions)
+        for tr in self.tractions:
+            tr.history = as_history(tr.history, f"{name}.traction.history")
+            if tr.tag not in block_type.mesh.tag_names:
+                raise InputError(f"{name}.traction.tag = {tr.tag!r}: expected one of "
+                                 f"{sorted(block_type.mesh.tag_names)}")
+        self.clamped = self._clamped_dofs(clamps)
+        # state (type frame); replaced by views into group arrays by the time stepper
+        self.q = np.zeros(block_type.ndof)
+        self.u = np.zeros(block_type.ndof)
+
+    @property
+    def reference_points(self) -> np.ndarray:
+        """Global node positions of the undeformed instance: x = R X + c."""
+        return self.type.mesh.points @ self.R.T + self.position
+
+    def current_points(self) -> np.ndarray:
+        return (self.type.mesh.points + self.q.reshape(-1, 2)) @ self.R.T + self.position
+
+    def displacement_global(self) -> np.ndarray:
+        return self.q.reshape(-1, 2) @ self.R.T
+
+    def velocity_global(self) -> np.ndarray:
+        return self.u.reshape(-1, 2) @ self.R.T
+
+    def _clamped_dofs(self, clamps) -> np.ndarray:
+        nd = self.type.ndof
+        mask = np.zeros(nd, dtype=bool)
+        X = self.reference_points
+        for c in clamps:
+            if c.components not in ("x", "y", "xy"):
+                raise InputError(f"{self.name}.clamp.components = {c.components!r}: expected 'x', 'y' or 'xy'")
+            if (c.box is None) == (c.tag is None):
+                raise InputError(f"{self.name}.clamp: give exactly one of box or tag")
+            if c.box is not None:
+                x0, x1, y0, y1 = map(float, c.box)
+                scale = max(np.ptp(X[:, 0]), np.ptp(X[:, 1]))
+                eps = 1e-9 * scale
+                nodes = np.flatnonzero((X[:, 0] >= x0 - eps) & (X[:, 0] <= x1 + eps)
+                                       & (X[:, 1] >= y0 - eps) & (X[:, 1] <= y1 + eps))
+            else:
+                m = self.type.mesh
+                if c.tag not in m.tag_names:
+                    raise InputError(f"{self.name}.clamp.tag = {c.tag!r}: expected one of {sorted(m.tag_names)}")
+                nodes = np.unique(m.boundary_edges[m.edge_tags == m.tag_names[c.tag]])
+            if nodes.size == 0:
+                raise InputError(f"{self.name}.clamp: the box {c.box} selects no node")
+            if c.components == "xy":
+                mask[2 * nodes] = mask[2 * nodes + 1] = True
+            else:
+                # a single global component is a single type-frame component only for 90° rotations
+                k = np.rint(self.angle / (np.pi / 2))
+                if abs(self.angle - k * np.pi / 2) > 1e-12:
+                    raise InputError(f"{self.name}.clamp.components = {c.components!r}: a single component can "
+                                     f"be clamped only on blocks rotated by a multiple of 90 degrees")
+                comp = {"x": 0, "y": 1}[c.components]
+                if int(k) % 2:
+                    comp = 1 - comp
+                mask[2 * nodes + comp] = True
+        return mask
+
+    def external_load(self, t: float, g: np.ndarray) -> np.ndarray:
+        """F(t) in the type frame: gravity + tractions."""
+        f = self.type.gravity_load(self.R.T @ g) if np.any(g) else np.zeros(self.type.ndof)
+        for tr in self.tractions:
+            f = f + tr.history(t) * self.type.traction_load(tr.tag, self.R.T @ np.asarray(tr.value, float))
+        return f
+
+
+class Driver:
+    """Prescribed motion of one rigid dof: kind 'velocity' or 'displacement', with a History."""
+
+    def __init__(self, kind: str, history, name: str = "driver"):
+        if kind not in ("velocity", "displacement"):
+            raise InputError(f"{name}.kind = {kind!r}: expected 'velocity' or 'displacement'")
+        self.kind, self.history, self.name = kind, as_history(history, f"{name}.history"), name
+
+    def step_velocity(self, t0: float, t1: float) -> float:
+        """Velocity imposed over [t0, t1] and at t1 (displacement: (d(t1) - d(t0)) / h)."""
+        if self.kind == "velocity":
+            return self.history(t1)
+        return (self.history(t1) - self.history(t0)) / (t1 - t0)
+
+
+def polygon_properties(vertices: np.ndarray):
+    """Area, centroid and polar second moment about the centroid of a simple polygon (CCW)."""
+    x, y = vertices[:, 0], vertices[:, 1]
+    xn, yn = np.roll(x, -1), np.roll(y, -1)
+    cr = x * yn - xn * y
+    A = 0.5 * cr.sum()
+    cx = ((x + xn) * cr).sum() / (6 * A)
+    cy = ((y + yn) * cr).sum() / (6 * A)
+    Ixx = ((y * y + y * yn + yn * yn) * cr).sum() / 12.0
+    Iyy = ((x * x + x * xn + xn * xn) * cr).sum() / 12.0
+    J = Ixx + Iyy - A * (cx * cx + cy * cy)
+    return A, np.array([cx, cy]), J
+
+
+DOF_NAMES = ("x", "y", "rz")
+
+
+class RigidBody:
+    """2D rigid polygon with dofs (vx, vy, omega) at its centre of mass."""
+
+    kind = 1
+
+    def __init__(self, vertices, rho: float = None, thickness: float = 1.0, mass: float = None,
+                 inertia: float = None, drivers: dict | None = None, forces: dict | None = None,
+                 name: str = "rigid"):
+        V = np.asarray(vertices, dtype=float)
+        if V.ndim != 2 or V.shape[1] != 2 or V.shape[0] < 3:
+            raise InputError(f"{name}.vertices: expected at least 3 (x, y) points")
+        A, c, J = polygon_properties(V)
+        if abs(A) < 1e-14 * max(1.0, np.ptp(V) ** 2):
+            raise InputError(f"{name}.vertices: polygon has zero area")
+        if A < 0:
+            V = V[::-1].copy()
+            A, c, J = polygon_properties(V)
+        self.name = name
+        check_range(f"{name}.thickness", thickness, 0.0, lo_open=True, expected="thickness > 0 [m]")
+        if mass is None:
+            if rho is None:
+                raise InputError(f"{name}: give rho (density) or mass")
+            check_range(f"{name}.rho", rho, 0.0, lo_open=True, expected="rho > 0 [kg/m^3]")
+            mass, inertia = rho * A * thickness, rho * J * thickness
+        else:
+            check_range(f"{name}.mass", mass, 0.0, lo_open=True, expected="mass > 0 [kg]")
+            inertia = mass * J / A if inertia is None else inertia
+            check_range(f"{name}.inertia", inertia, 0.0, lo_open=True, expected="inertia > 0 [kg m^2]")
+        self.mass = np.array([mass, mass, inertia], dtype=float)
+        self.center0 = c
+        self.vertices_rel = V - c  # reference vertices relative to the centre of mass
+        self.thickness = thickness
+        self.drivers: dict[int, Driver] = {}
+        for k, d in (drivers or {}).items():
+            i = self._dof(k)
+            self.drivers[i] = d if isinstance(d, Driver) else Driver(*d, name=f"{name}.driver.{k}")
+        self.forces: dict[int, History] = {}
+        for k, f in (forces or {}).items():
+            i = self._dof(k)
+            if i in self.drivers:
+                raise InputError(f"{name}.forces.{k}: dof {k!r} is driven; a driven dof cannot also carry a force")
+            self.forces[i] = as_history(f, f"{name}.forces.{k}")
+        self.q = np.zeros(3)  # (dx, dy, phi) of the centre of mass
+        self.u = np.zeros(3)
+        self.reaction = np.zeros(3)  # force/moment applied by the drivers, last step
+
+    def _dof(self, k) -> int:
+        if k in DOF_NAMES:
+            return DOF_NAMES.index(k)
+        if k in (0, 1, 2):
+            return int(k)
+        raise InputError(f"{self.name}: dof {k!r}: expected one of {DOF_NAMES}")
+
+    @property
+    def driven(self) -> np.ndarray:
+        m = np.zeros(3, dtype=bool)
+        m[list(self.drivers)] = True
+        return m
+
+    @property
+    def center(self) -> np.ndarray:
+        return self.center0 + self.q[:2]
+
+    def current_vertices(self) -> np.ndarray:
+        return self.center + self.vertices_rel @ rotation(self.q[2]).T
+
+    def applied_force(self, t: float, g: np.ndarray) -> np.ndarray:
+        f = np.array([self.mass[0] * g[0], self.mass[1] * g[1], 0.0])
+        for i, hist in self.forces.items():
+            f[i] += hist(t)
+        return f
+
+    @property
+    def W(self) -> np.ndarray:
+        """Inverse mass with driven dofs removed: diag(1/m, 1/m, 1/I), zero on driven dofs."""
+        w = 1.0 / self.mass
+        w[self.driven] = 0.0
+        return np.diag(w)
