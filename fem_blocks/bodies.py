@@ -320,6 +320,8 @@ def polygon_properties(vertices: np.ndarray):
     xn, yn = np.roll(x, -1), np.roll(y, -1)
     cr = x * yn - xn * y
     A = 0.5 * cr.sum()
+    if A == 0.0:
+        return 0.0, np.array([np.nan, np.nan]), np.nan
     cx = ((x + xn) * cr).sum() / (6 * A)
     cy = ((y + yn) * cr).sum() / (6 * A)
     Ixx = ((y * y + y * yn + yn * yn) * cr).sum() / 12.0
