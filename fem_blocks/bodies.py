@@ -352,11 +352,16 @@ class RigidBody:
             A, c, J = polygon_properties(V)
         self.name = name
         check_range(f"{name}.thickness", thickness, 0.0, lo_open=True, expected="thickness > 0 [m]")
-        if mass is None:
+        n_driven = len(drivers or {})
+        if mass is None and rho is None and n_driven == 3:
+            mass, inertia = 0.0, 0.0  # fully driven: its motion is prescribed, its inertia plays no role
+        elif mass is None:
             if rho is None:
                 raise InputError(f"{name}: give rho (density) or mass")
             check_range(f"{name}.rho", rho, 0.0, lo_open=True, expected="rho > 0 [kg/m^3]")
             mass, inertia = rho * A * thickness, rho * J * thickness
+        elif mass == 0.0 and n_driven == 3:
+            inertia = 0.0
         else:
             check_range(f"{name}.mass", mass, 0.0, lo_open=True, expected="mass > 0 [kg]")
             inertia = mass * J / A if inertia is None else inertia
@@ -408,6 +413,5 @@ class RigidBody:
     @property
     def W(self) -> np.ndarray:
         """Inverse mass with driven dofs removed: diag(1/m, 1/m, 1/I), zero on driven dofs."""
-        w = 1.0 / self.mass
-        w[self.driven] = 0.0
+        w = np.divide(1.0, self.mass, out=np.zeros(3), where=~self.driven)
         return np.diag(w)

@@ -143,7 +143,7 @@ class Simulation:
             if self.velocity_reset:
                 b.u[~b.driven] = 0.0
             b.Ftheta = (1 - th) * b.applied_force(t0, self.g) + th * b.applied_force(t1, self.g)
-            uf = b.u + h * b.Ftheta / b.mass
+            uf = b.u + h * np.divide(b.Ftheta, b.mass, out=np.zeros(3), where=b.mass > 0)
             for k, drv in b.drivers.items():
                 uf[k] = drv.step_velocity(t0, t1)
             b.ufree = uf

@@ -1,0 +1,470 @@
+"""Case files (TOML): parse and validate everything before anything runs.
+
+Every error is an `InputError` with one line naming the file, the key path (e.g.
+``blocks[2].position``) and what was expected; the CLI prints it and exits with status 2.
+The key-by-key reference is `docs/case-files.md`.
+
+A case describes materials, block types (meshed once, instanced many times), deformable block
+instances, rigid bodies, and a load protocol of stages. Units are SI unless ``units = "mm-N-MPa"``
+(lengths in mm, forces in N, stresses and moduli in MPa, densities in t/mm^3... see docs), in
+which case values are converted to SI at load.
+"""
+from __future__ import annotations
+
+import math
+import os
+import tomllib
+from dataclasses import dataclass, field
+from typing import Any
+
+from .errors import InputError
+
+NUMBER = (int, float)
+
+# unit systems: factor to SI per physical dimension
+UNIT_SYSTEMS = {
+    "SI": dict(length=1.0, force=1.0, stress=1.0, density=1.0, time=1.0, mass=1.0),
+    # mm, N, MPa, s -> mass unit tonne (N s^2/mm), density t/mm^3
+    "mm-N-MPa": dict(length=1e-3, force=1.0, stress=1e6, density=1e12, time=1.0, mass=1e3),
+}
+
+
+class Table:
+    """A validated view of one TOML table: typed getters that record used keys.
+
+    `done()` raises on any key that was not read (unknown or misspelt key)."""
+
+    def __init__(self, data: dict, path: str, source: str, units: dict):
+        if not isinstance(data, dict):
+            raise InputError(f"{source}: {path}: expected a table, got {_tname(data)}")
+        self.data, self.path, self.source, self.units = data, path, source, units
+        self.used: set[str] = set()
+
+    def key(self, k: str) -> str:
+        return f"{self.path}.{k}" if self.path else k
+
+    def error(self, k: str, msg: str) -> InputError:
+        return InputError(f"{self.source}: {self.key(k)}: {msg}")
+
+    def has(self, k: str) -> bool:
+        return k in self.data
+
+    def raw(self, k: str, default=None):
+        self.used.add(k)
+        return self.data.get(k, default)
+
+    def number(self, k: str, default=None, lo=None, hi=None, lo_open=False, hi_open=False,
+               dim: str | None = None, required: bool = False, integer: bool = False) -> float | None:
+        """A number in [lo, hi] (bounds in SI after conversion are the same as in the file when dim is None)."""
+        self.used.add(k)
+        if k not in self.data:
+            if required or default is _REQUIRED:
+                raise self.error(k, "missing; expected " + _range_text(lo, hi, lo_open, hi_open, integer))
+            return default
+        v = self.data[k]
+        if isinstance(v, bool) or not isinstance(v, NUMBER) or (isinstance(v, float) and not math.isfinite(v)):
+            raise self.error(k, f"expected a finite number, got {v!r}")
+        if integer and not isinstance(v, int):
+            raise self.error(k, f"expected an integer, got {v!r}")
+        ok = (lo is None or (v > lo if lo_open else v >= lo)) and (hi is None or (v < hi if hi_open else v <= hi))
+        if not ok:
+            raise self.error(k, f"= {v!r}: expected {_range_text(lo, hi, lo_open, hi_open, integer)}")
+        return int(v) if integer else float(v) * (self.units[dim] if dim else 1.0)
+
+    def integer(self, k: str, default=None, lo=None, hi=None, required=False) -> int | None:
+        return self.number(k, default, lo, hi, required=required, integer=True)
+
+    def string(self, k: str, default=None, choices=None, required=False) -> str | None:
+        self.used.add(k)
+        if k not in self.data:
+            if required:
+                raise self.error(k, "missing" + (f"; expected one of {list(choices)}" if choices else ""))
+            return default
+        v = self.data[k]
+        if not isinstance(v, str):
+            raise self.error(k, f"expected a string, got {v!r}")
+        if choices is not None and v not in choices:
+            raise self.error(k, f"= {v!r}: expected one of {list(choices)}")
+        return v
+
+    def boolean(self, k: str, default=False) -> bool:
+        self.used.add(k)
+        v = self.data.get(k, default)
+        if not isinstance(v, bool):
+            raise self.error(k, f"expected true or false, got {v!r}")
+        return v
+
+    def vector(self, k: str, n: int, default=None, dim: str | None = None, required=False,
+               lo=None) -> tuple | None:
+        self.used.add(k)
+        if k not in self.data:
+            if required:
+                raise self.error(k, f"missing; expected a list of {n} numbers")
+            return default
+        v = self.data[k]
+        if (not isinstance(v, list) or len(v) != n
+                or any(isinstance(x, bool) or not isinstance(x, NUMBER) or not math.isfinite(x) for x in v)):
+            raise self.error(k, f"expected a list of {n} finite numbers, got {v!r}")
+        if lo is not None and any(x < lo for x in v):
+            raise self.error(k, f"= {v!r}: expected values >= {lo}")
+        f = self.units[dim] if dim else 1.0
+        return tuple(float(x) * f for x in v)
+
+    def points(self, k: str, dim: str = "length", min_count: int = 3, required=True):
+        self.used.add(k)
+        if k not in self.data:
+            if required:
+                raise self.error(k, f"missing; expected a list of at least {min_count} [x, y] points")
+            return None
+        v = self.data[k]
+        ok = isinstance(v, list) and len(v) >= min_count and all(
+            isinstance(p, list) and len(p) == 2 and all(
+                not isinstance(x, bool) and isinstance(x, NUMBER) and math.isfinite(x) for x in p) for p in v)
+        if not ok:
+            raise self.error(k, f"expected a list of at least {min_count} [x, y] points of finite numbers")
+        f = self.units[dim]
+        return [(float(p[0]) * f, float(p[1]) * f) for p in v]
+
+    def history(self, k: str, dim: str | None, default=None, required=False):
+        """A number or {times = [...], values = [...]} (times strictly increasing)."""
+        self.used.add(k)
+        if k not in self.data:
+            if required:
+                raise self.error(k, "missing; expected a number or {times = [...], values = [...]}")
+            return default
+        v = self.data[k]
+        f = self.units[dim] if dim else 1.0
+        if isinstance(v, NUMBER) and not isinstance(v, bool) and math.isfinite(v):
+            return float(v) * f
+        if isinstance(v, dict):
+            t = Table(v, self.key(k), self.source, self.units)
+            times = t.raw("times")
+            values = t.raw("values")
+            t.done()
+            good = (isinstance(times, list) and isinstance(values, list) and len(times) == len(values) >= 1
+                    and all(isinstance(x, NUMBER) and not isinstance(x, bool) and math.isfinite(x)
+                            for x in times + values))
+            if not good:
+                raise self.error(k, "expected {times = [...], values = [...]} of equal non-zero length")
+            if any(b <= a for a, b in zip(times, times[1:])):
+                raise self.error(k + ".times", "expected strictly increasing times")
+            tf = self.units["time"]
+            return {"times": [float(x) * tf for x in times], "values": [float(x) * f for x in values]}
+        raise self.error(k, f"expected a number or {{times = [...], values = [...]}}, got {v!r}")
+
+    def table(self, k: str, required=False) -> "Table | None":
+        self.used.add(k)
+        if k not in self.data:
+            if required:
+                raise self.error(k, "missing table")
+            return None
+        return Table(self.data[k], self.key(k), self.source, self.units)
+
+    def tables(self, k: str, required=False, min_count: int = 0) -> list["Table"]:
+        """An array of tables ([[k]])."""
+        self.used.add(k)
+        v = self.data.get(k)
+        if v is None:
+            if required or min_count:
+                raise self.error(k, f"missing; expected at least {max(1, min_count)} [[{k}]] entries")
+            return []
+        if not isinstance(v, list) or not all(isinstance(x, dict) for x in v):
+            raise self.error(k, f"expected an array of tables [[{k}]]")
+        if len(v) < min_count:
+            raise self.error(k, f"expected at least {min_count} entries, got {len(v)}")
+        return [Table(x, f"{self.key(k)}[{i}]", self.source, self.units) for i, x in enumerate(v)]
+
+    def named_tables(self, k: str) -> dict[str, "Table"]:
+        """A table of tables ([k.name])."""
+        t = self.table(k)
+        if t is None:
+            return {}
+        out = {}
+        for name in t.data:
+            t.used.add(name)
+            out[name] = Table(t.data[name], t.key(name), self.source, self.units)
+        return out
+
+    def done(self):
+        unknown = sorted(set(self.data) - self.used)
+        if unknown:
+            raise self.error(unknown[0], "unknown key" + (f"; expected one of {sorted(self.used)}"
+                                                           if self.used else ""))
+
+
+_REQUIRED = object()
+
+
+def _tname(v) -> str:
+    return type(v).__name__
+
+
+def _range_text(lo, hi, lo_open, hi_open, integer) -> str:
+    kind = "an integer" if integer else "a number"
+    parts = []
+    if lo is not None:
+        parts.append(f"{'>' if lo_open else '>='} {lo:g}")
+    if hi is not None:
+        parts.append(f"{'<' if hi_open else '<='} {hi:g}")
+    return kind + (" " + " and ".join(parts) if parts else "")
+
+
+# ----------------------------------------------------------------------------- case objects
+@dataclass
+class MaterialSpec:
+    name: str
+    E: float
+    nu: float
+    rho: float
+    thickness: float
+    plane: str
+    alpha: float
+    beta: float
+
+
+@dataclass
+class BlockTypeSpec:
+    name: str
+    geometry: str  # rectangle | polygon | file
+    material: str
+    mesh_size: float
+    cell: str
+    mass: str
+    lx: float = 0.0
+    ly: float = 0.0
+    vertices: list | None = None
+    file: str | None = None
+
+
+@dataclass
+class ClampSpec:
+    box: tuple | None
+    tag: str | None
+    components: str
+
+
+@dataclass
+class TractionSpec:
+    tag: str
+    value: tuple
+    history: Any
+
+
+@dataclass
+class BlockSpec:
+    name: str
+    type: str
+    position: tuple
+    angle: float  # radians
+    clamps: list = field(default_factory=list)
+    tractions: list = field(default_factory=list)
+
+
+@dataclass
+class RigidSpec:
+    name: str
+    vertices: list
+    rho: float | None
+    mass: float | None
+    inertia: float | None
+    thickness: float
+    drivers: dict
+    forces: dict
+
+
+@dataclass
+class StageSpec:
+    name: str
+    duration: float
+    h: float
+    theta: float
+    velocity_reset: bool
+    output_every: int
+
+
+@dataclass
+class Case:
+    source: str
+    name: str
+    units: str
+    gravity: tuple
+    materials: dict
+    block_types: dict
+    blocks: list
+    rigid_bodies: list
+    stages: list
+    output: dict
+
+
+def load_case(path: str) -> Case:
+    """Read and validate a TOML case file; raise InputError naming the file and the key."""
+    src = os.fspath(path)
+    try:
+        with open(src, "rb") as f:
+            data = tomllib.load(f)
+    except FileNotFoundError:
+        raise InputError(f"{src}: case file not found") from None
+    except IsADirectoryError:
+        raise InputError(f"{src}: expected a TOML case file, got a directory") from None
+    except PermissionError:
+        raise InputError(f"{src}: case file not readable (permission denied)") from None
+    except tomllib.TOMLDecodeError as e:
+        raise InputError(f"{src}: invalid TOML: {e}") from None
+    except UnicodeDecodeError:
+        raise InputError(f"{src}: invalid TOML: not UTF-8 text") from None
+    return parse_case(data, src)
+
+
+def parse_case(data: dict, source: str = "<case>") -> Case:
+    base = os.path.dirname(os.path.abspath(source)) if os.path.exists(source) else os.getcwd()
+    root = Table(data, "", source, UNIT_SYSTEMS["SI"])
+    units = root.string("units", "SI", choices=list(UNIT_SYSTEMS))
+    U = UNIT_SYSTEMS[units]
+    root.units = U
+    name = root.string("name", os.path.splitext(os.path.basename(source))[0])
+    gravity = root.vector("gravity", 2, default=(0.0, -9.81))
+    gravity = tuple(g * U["length"] / U["time"] ** 2 for g in gravity)
+
+    materials = {}
+    for mname, t in root.named_tables("materials").items():
+        ray = t.vector("rayleigh", 2, default=(0.0, 0.0), lo=0.0)
+        materials[mname] = MaterialSpec(
+            name=mname,
+            E=t.number("E", lo=0, lo_open=True, dim="stress", required=True),
+            nu=t.number("nu", lo=-1, hi=0.5, lo_open=True, hi_open=True, required=True),
+            rho=t.number("rho", lo=0, lo_open=True, dim="density", required=True),
+            thickness=t.number("thickness", 1.0, lo=0, lo_open=True, dim="length"),
+            plane=t.string("plane", "stress", choices=("stress", "strain")),
+            alpha=ray[0], beta=ray[1])
+        t.done()
+
+    block_types = {}
+    for tname, t in root.named_tables("block_types").items():
+        geom = t.string("geometry", required=True, choices=("rectangle", "polygon", "file"))
+        mat = t.string("material", required=True)
+        if mat not in materials:
+            raise t.error("material", f"= {mat!r}: expected one of the [materials] {sorted(materials)}")
+        bt = BlockTypeSpec(name=tname, geometry=geom, material=mat,
+                           mesh_size=t.number("mesh_size", None if geom == "file" else _REQUIRED,
+                                              lo=0, lo_open=True, dim="length"),
+                           cell=t.string("cell", "quad" if geom == "rectangle" else "triangle",
+                                         choices=("quad", "triangle")),
+                           mass=t.string("mass", "lumped", choices=("lumped", "consistent")))
+        if geom == "rectangle":
+            bt.lx = t.number("lx", lo=0, lo_open=True, dim="length", required=True)
+            bt.ly = t.number("ly", lo=0, lo_open=True, dim="length", required=True)
+        elif geom == "polygon":
+            bt.vertices = t.points("vertices")
+        else:
+            f = t.string("file", required=True)
+            full = f if os.path.isabs(f) else os.path.join(base, f)
+            if not os.path.isfile(full):
+                raise t.error("file", f"= {f!r}: mesh file not found (expected a .geo or .msh file, "
+                                      f"relative to the case file)")
+            if not full.endswith((".geo", ".msh")):
+                raise t.error("file", f"= {f!r}: expected a .geo or .msh file")
+            bt.file = full
+        t.done()
+        block_types[tname] = bt
+
+    blocks = []
+    names = set()
+    for i, t in enumerate(root.tables("blocks")):
+        ty = t.string("type", required=True)
+        if ty not in block_types:
+            raise t.error("type", f"= {ty!r}: expected one of the [block_types] {sorted(block_types)}")
+        bname = t.string("name", f"block{i}")
+        if bname in names:
+            raise t.error("name", f"= {bname!r}: duplicate body name")
+        names.add(bname)
+        b = BlockSpec(name=bname, type=ty, position=t.vector("position", 2, (0.0, 0.0), dim="length"),
+                      angle=math.radians(t.number("angle", 0.0)))
+        for c in t.tables("clamps"):
+            box = c.vector("box", 4, dim="length")
+            tag = c.string("tag")
+            if (box is None) == (tag is None):
+                raise c.error("box", "give exactly one of box = [xmin, xmax, ymin, ymax] or tag")
+            if box is not None and (box[1] < box[0] or box[3] < box[2]):
+                raise c.error("box", f"= {list(box)}: expected [xmin, xmax, ymin, ymax] with xmin <= xmax, "
+                                     f"ymin <= ymax")
+            b.clamps.append(ClampSpec(box, tag, c.string("components", "xy", choices=("x", "y", "xy"))))
+            c.done()
+        for c in t.tables("tractions"):
+            b.tractions.append(TractionSpec(tag=c.string("tag", required=True),
+                                            value=c.vector("value", 2, dim="stress", required=True),
+                                            history=c.history("history", None, default=1.0)))
+            c.done()
+        t.done()
+        blocks.append(b)
+
+    rigid = []
+    for i, t in enumerate(root.tables("rigid_bodies")):
+        rname = t.string("name", f"rigid{i}")
+        if rname in names:
+            raise t.error("name", f"= {rname!r}: duplicate body name")
+        names.add(rname)
+        rho = t.number("rho", lo=0, lo_open=True, dim="density")
+        mass = t.number("mass", lo=0, lo_open=True, dim="mass")
+        inertia = t.number("inertia", lo=0, lo_open=True)
+        if inertia is not None:
+            inertia *= U["mass"] * U["length"] ** 2
+        drivers, forces = {}, {}
+        dt = t.table("drivers")
+        if dt is not None:
+            for dof in list(dt.data):
+                if dof not in ("x", "y", "rz"):
+                    raise dt.error(dof, "unknown dof; expected x, y or rz")
+                d = dt.table(dof)
+                kind = d.string("kind", required=True, choices=("velocity", "displacement"))
+                dim = None if dof == "rz" else "length"
+                hist = d.history("history", dim, required=True)
+                drivers[dof] = (kind, hist)
+                d.done()
+            dt.done()
+        ft = t.table("forces")
+        if ft is not None:
+            for dof in list(ft.data):
+                if dof not in ("x", "y", "rz"):
+                    raise ft.error(dof, "unknown dof; expected x, y or rz")
+                if dof in drivers:
+                    raise ft.error(dof, "this dof is driven; a driven dof cannot also carry a force")
+                forces[dof] = ft.history(dof, "force" if dof != "rz" else None)
+            ft.done()
+        if rho is None and mass is None and not (len(drivers) == 3):
+            raise t.error("rho", "missing; give rho [kg/m^3] or mass [kg] (only a body with all three dofs "
+                                 "driven may omit both)")
+        rigid.append(RigidSpec(name=rname, vertices=t.points("vertices"), rho=rho, mass=mass, inertia=inertia,
+                               thickness=t.number("thickness", 1.0, lo=0, lo_open=True, dim="length"),
+                               drivers=drivers, forces=forces))
+        t.done()
+    if not blocks and not rigid:
+        raise root.error("blocks", "missing; expected at least one [[blocks]] or [[rigid_bodies]] entry")
+
+    stages = []
+    stage_names = set()
+    for i, t in enumerate(root.tables("stages", min_count=1)):
+        sname = t.string("name", f"stage{i}")
+        if sname in stage_names:
+            raise t.error("name", f"= {sname!r}: duplicate stage name")
+        stage_names.add(sname)
+        h = t.number("h", lo=0, lo_open=True, dim="time", required=True)
+        dur = t.number("duration", lo=0, lo_open=True, dim="time", required=True)
+        if dur < h * (1 - 1e-12):
+            raise t.error("duration", f"= {dur:g} s: expected at least one time step h = {h:g} s")
+        if dur / h > 1e8:
+            raise t.error("duration", f"= {dur:g} s: expected at most 1e8 steps of h = {h:g} s")
+        stages.append(StageSpec(name=sname, duration=dur, h=h,
+                                theta=t.number("theta", 0.5, lo=0.5, hi=1.0),
+                                velocity_reset=t.boolean("velocity_reset", False),
+                                output_every=t.integer("output_every", 1, lo=1)))
+        t.done()
+
+    out = root.table("output")
+    output = {"paraview": True, "stress": True}
+    if out is not None:
+        output["paraview"] = out.boolean("paraview", True)
+        output["stress"] = out.boolean("stress", True)
+        out.done()
+    root.done()
+    return Case(source=source, name=name, units=units, gravity=gravity, materials=materials,
+                block_types=block_types, blocks=blocks, rigid_bodies=rigid, stages=stages, output=output)

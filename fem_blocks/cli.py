@@ -1,0 +1,93 @@
+"""Command line: `fem-blocks run CASE.toml --out DIR`, `fem-blocks demo [NAME|--list]`, `--version`.
+
+Exit status: 0 success, 2 invalid input (one line on stderr naming the file/key and what was
+expected, no traceback), 1 a run that failed numerically (message says where).
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+
+from . import __version__
+from .errors import InputError
+
+DEMO_DIR = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "demos")
+DEFAULT_DEMO = "vibrating_block"
+
+
+def list_demos() -> dict[str, str]:
+    """name -> case file path of the demos shipped in `demos/`."""
+    out = {}
+    if os.path.isdir(DEMO_DIR):
+        for f in sorted(os.listdir(DEMO_DIR)):
+            if f.endswith(".toml"):
+                out[f[:-5]] = os.path.join(DEMO_DIR, f)
+    return out
+
+
+def _first_line(path: str) -> str:
+    with open(path, encoding="utf-8") as f:
+        for line in f:
+            if line.startswith("#"):
+                return line.lstrip("# ").strip()
+    return ""
+
+
+def _run(case_path: str, out: str, quiet: bool) -> int:
+    from .case import load_case
+    case = load_case(case_path)  # validate before importing the heavy stages
+    from .runner import run_case
+    summary = run_case(case, out, progress=not quiet)
+    pv = summary["outputs"].get("paraview")
+    print(f"fem-blocks: {case.name}: {summary['steps']} steps in {summary['wall_time']:.1f} s")
+    if pv:
+        print(f"ParaView files: {os.path.join(os.path.abspath(out), pv)}")
+    print(f"history: {os.path.join(os.path.abspath(out), 'history.csv')}; "
+          f"summary: {os.path.join(os.path.abspath(out), 'summary.json')}")
+    return 0
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(prog="fem-blocks", description="Deformable-block masonry simulator (NSCD).")
+    p.add_argument("--version", action="version", version=f"fem-blocks {__version__}")
+    sub = p.add_subparsers(dest="command")
+    r = sub.add_parser("run", help="run a case file")
+    r.add_argument("case", help="TOML case file")
+    r.add_argument("--out", required=True, help="output directory")
+    r.add_argument("--quiet", action="store_true", help="no progress line")
+    d = sub.add_parser("demo", help="run a shipped demo")
+    d.add_argument("name", nargs="?", default="default", help="demo name (see --list); 'default' = "
+                                                              + DEFAULT_DEMO)
+    d.add_argument("--list", action="store_true", help="list the demos")
+    d.add_argument("--out", default=None, help="output directory (default out/demo-NAME)")
+    d.add_argument("--quiet", action="store_true")
+    args = p.parse_args(argv)
+    if args.command is None:
+        p.print_help()
+        return 2
+    try:
+        if args.command == "run":
+            return _run(args.case, args.out, args.quiet)
+        demos = list_demos()
+        if args.list:
+            for name, path in demos.items():
+                print(f"{name:24s} {_first_line(path)}")
+            return 0
+        name = DEFAULT_DEMO if args.name == "default" else args.name
+        if name not in demos:
+            raise InputError(f"demo {name!r} not found; expected one of {sorted(demos)} (fem-blocks demo --list)")
+        return _run(demos[name], args.out or os.path.join("out", f"demo-{name}"), args.quiet)
+    except InputError as e:
+        print(f"fem-blocks: error: {e}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("fem-blocks: interrupted", file=sys.stderr)
+        return 130
+    except (FloatingPointError, ArithmeticError) as e:
+        print(f"fem-blocks: run failed: {e}", file=sys.stderr)
+        return 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

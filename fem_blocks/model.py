@@ -1,0 +1,74 @@
+"""From a validated Case to bodies: mesh each block type once, build its operators once, place instances."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .bodies import BlockType, Clamp, DeformableBody, Driver, Material, RigidBody, Traction
+from .case import Case, BlockTypeSpec
+from .errors import InputError
+
+
+@dataclass
+class Model:
+    bodies: list
+    block_types: dict
+    names: list
+    gravity: np.ndarray
+    interfaces: dict = field(default_factory=dict)
+
+    def index(self, name: str) -> int:
+        try:
+            return self.names.index(name)
+        except ValueError:
+            raise InputError(f"body {name!r} not found; expected one of {self.names}") from None
+
+
+def mesh_block_type(spec: BlockTypeSpec):
+    """gmsh mesh of a block type (rectangle, polygon or user .geo/.msh file)."""
+    from . import meshing
+    if spec.geometry == "rectangle":
+        return meshing.mesh_rectangle(spec.lx, spec.ly, spec.mesh_size, cell=spec.cell)
+    if spec.geometry == "polygon":
+        return meshing.mesh_polygon(np.asarray(spec.vertices), spec.mesh_size, cell=spec.cell)
+    if spec.file.endswith(".geo"):
+        return meshing.load_geo(spec.file, size=spec.mesh_size, cell=spec.cell)
+    return meshing.load_msh(spec.file)
+
+
+def build_model(case: Case) -> Model:
+    block_types = {}
+    used_types = {b.type for b in case.blocks}
+    for name, spec in case.block_types.items():
+        if name not in used_types:
+            continue
+        ms = case.materials[spec.material]
+        mat = Material(ms.E, ms.nu, ms.rho, ms.thickness, ms.plane, ms.alpha, ms.beta,
+                       name=f"materials.{ms.name}")
+        try:
+            mesh = mesh_block_type(spec)
+        except InputError as e:
+            raise InputError(f"{case.source}: block_types.{name}: {e}") from None
+        block_types[name] = BlockType(mesh, mat, mass=spec.mass, name=f"block_types.{name}")
+    bodies, names = [], []
+    for i, b in enumerate(case.blocks):
+        bt = block_types[b.type]
+        label = f"{case.source}: blocks[{i}]"
+        try:
+            body = DeformableBody(bt, b.position, b.angle,
+                                  clamps=[Clamp(c.box, c.tag, c.components) for c in b.clamps],
+                                  tractions=[Traction(t.tag, t.value, t.history) for t in b.tractions],
+                                  name=label)
+        except InputError as e:
+            raise InputError(str(e)) from None
+        bodies.append(body)
+        names.append(b.name)
+    for i, r in enumerate(case.rigid_bodies):
+        label = f"{case.source}: rigid_bodies[{i}]"
+        drivers = {dof: Driver(kind, hist, name=f"{label}.drivers.{dof}") for dof, (kind, hist) in r.drivers.items()}
+        body = RigidBody(r.vertices, rho=r.rho, thickness=r.thickness, mass=r.mass, inertia=r.inertia,
+                         drivers=drivers, forces=r.forces, name=label)
+        bodies.append(body)
+        names.append(r.name)
+    return Model(bodies, block_types, names, np.asarray(case.gravity, dtype=float))
