@@ -1,0 +1,166 @@
+"""Flat-array view of the bodies of a Simulation, as the contact layer sees them (architecture.md).
+
+Bodies 0..nb-1 (deformable and rigid in one list). Boundary nodes of all bodies are concatenated
+in `bx` (deformable: the type's boundary nodes in `BlockType.boundary_nodes` order; rigid: polygon
+vertices); `bedges` index `bx`, counter-clockwise per body. Velocities and impulses are exchanged in
+the *W numbering*: deformable body = its type's boundary dofs `2*bnode_index + c` in the type frame,
+rigid body = (vx, vy, omega) at its centre of mass. `U_offset[b]` locates body b in flat vectors.
+
+All per-step gathers/scatters are batched per group of bodies sharing a step operator.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+
+class ContactScene:
+    def __init__(self, sim, body_group=None):
+        self.sim = sim
+        bodies = sim.bodies
+        nb = len(bodies)
+        self.nb = nb
+        self.kind = np.array([b.kind for b in bodies], dtype=np.int64)
+        self.rot = np.zeros((nb, 2, 2))
+        self.body_group = (np.zeros(nb, dtype=np.int64) if body_group is None
+                           else np.asarray(body_group, dtype=np.int64))
+        # per-type boundary numbering (shared offsets), rigid: identity over its vertices
+        type_offset = {}
+        index_parts, off = [], 0
+        self.bnode_offset = np.zeros(nb, dtype=np.int64)
+        self.nbnodes = np.zeros(nb, dtype=np.int64)
+        for i, b in enumerate(bodies):
+            if b.kind == 0:
+                self.rot[i] = b.R
+                key = id(b.type)
+                if key not in type_offset:
+                    type_offset[key] = off
+                    index_parts.append(b.type.bnode_index)
+                    off += b.type.n_nodes
+                self.bnode_offset[i] = type_offset[key]
+                self.nbnodes[i] = b.type.boundary_nodes.size
+            else:
+                self.rot[i] = np.eye(2)
+                nv = len(b.vertices_rel)
+                self.bnode_offset[i] = off
+                index_parts.append(np.arange(nv, dtype=np.int64))
+                off += nv
+                self.nbnodes[i] = nv
+        self.bnode_index_flat = np.concatenate(index_parts).astype(np.int64)
+        # boundary nodes and edges in bx numbering
+        self.bx_start = np.zeros(nb + 1, dtype=np.int64)
+        self.bx_start[1:] = np.cumsum(self.nbnodes)
+        nbn = int(self.bx_start[-1])
+        self.bnode_body = np.repeat(np.arange(nb), self.nbnodes)
+        self.bnode_local = np.zeros(nbn, dtype=np.int64)
+        edges, ebody = [], []
+        for i, b in enumerate(bodies):
+            s = self.bx_start[i]
+            if b.kind == 0:
+                bt = b.type
+                self.bnode_local[s:s + bt.boundary_nodes.size] = bt.boundary_nodes
+                e = bt.bnode_index[bt.mesh.boundary_edges] + s
+            else:
+                nv = self.nbnodes[i]
+                self.bnode_local[s:s + nv] = np.arange(nv)
+                k = np.arange(nv)
+                e = np.column_stack([k, (k + 1) % nv]) + s
+            edges.append(e)
+            ebody.append(np.full(len(e), i, dtype=np.int64))
+        self.bedges = np.concatenate(edges).astype(np.int64)
+        self.bedge_body = np.concatenate(ebody)
+        # W numbering
+        self.W_size = np.where(self.kind == 0, 2 * self.nbnodes, 3).astype(np.int64)
+        self.U_offset = np.zeros(nb + 1, dtype=np.int64)
+        self.U_offset[1:] = np.cumsum(self.W_size)
+        self.n_udof = int(self.U_offset[-1])
+        self._group_index()
+
+    def _group_index(self):
+        """Per simulation group: index matrices into bx and into the flat W-numbered vectors."""
+        sim = self.sim
+        self.groups = []
+        for gr in sim.groups:
+            bt = gr.type
+            nbd = 2 * bt.boundary_nodes.size
+            members = gr.members
+            uidx = self.U_offset[members][:, None] + np.arange(nbd)[None, :]  # (k, nbd)
+            xidx = self.bx_start[members][:, None] + np.arange(bt.boundary_nodes.size)[None, :]
+            R = np.stack([sim.bodies[b].R for b in members])
+            C = np.stack([sim.bodies[b].position for b in members])
+            self.groups.append((gr, uidx, xidx, R, C))
+        self.rigid = np.array(sim.rigid, dtype=np.int64)
+
+    # ------------------------------------------------------------------ geometry
+    def positions(self, reference: bool = False) -> np.ndarray:
+        """bx (nbn, 2): global positions of all boundary nodes (current or reference)."""
+        bx = np.zeros((int(self.bx_start[-1]), 2))
+        for gr, uidx, xidx, R, C in self.groups:
+            bt = gr.type
+            X = bt.mesh.points[bt.boundary_nodes]  # (nbn_t, 2)
+            k = len(gr.members)
+            if reference:
+                P = np.broadcast_to(X, (k,) + X.shape)
+            else:
+                Q = gr.Q[bt.boundary_dofs, :].T.reshape(k, -1, 2)
+                P = X[None] + Q
+            bx[xidx.ravel()] = (np.einsum("kij,knj->kni", R, P) + C[:, None, :]).reshape(-1, 2)
+        for i in self.rigid:
+            b = self.sim.bodies[i]
+            s, e = self.bx_start[i], self.bx_start[i + 1]
+            bx[s:e] = (b.center0 + b.vertices_rel) if reference else b.current_vertices()
+        return bx
+
+    def centers(self, reference: bool = False) -> np.ndarray:
+        c = np.zeros((self.nb, 2))
+        for i in self.rigid:
+            b = self.sim.bodies[i]
+            c[i] = b.center0 if reference else b.center
+        return c
+
+    # ------------------------------------------------------------------ W numbering
+    def W_blocks(self):
+        """(W_flat, W_offset, W_size): dense W per body, row-major; bodies sharing a step operator share it."""
+        parts, off = [], 0
+        W_offset = np.zeros(self.nb, dtype=np.int64)
+        for gr, uidx, xidx, R, C in self.groups:
+            Wbb = gr.op.W_bb
+            parts.append(Wbb.ravel())
+            W_offset[gr.members] = off
+            off += Wbb.size
+        for i in self.rigid:
+            parts.append(self.sim.bodies[i].W.ravel())
+            W_offset[i] = off
+            off += 9
+        W_flat = np.ascontiguousarray(np.concatenate(parts)) if parts else np.zeros(0)
+        return W_flat, W_offset, self.W_size.copy()
+
+    def gather(self, which: str) -> np.ndarray:
+        """Flat W-numbered vector of 'ufree', 'u' (start-of-step velocity) or 'q' (displacement)."""
+        out = np.zeros(self.n_udof)
+        for gr, uidx, xidx, R, C in self.groups:
+            A = {"ufree": gr.Ufree, "u": gr.U, "q": gr.Q}[which]
+            out[uidx.ravel()] = A[gr.type.boundary_dofs, :].T.ravel()
+        for i in self.rigid:
+            b = self.sim.bodies[i]
+            s = self.U_offset[i]
+            out[s:s + 3] = {"ufree": b.ufree, "u": b.u, "q": b.q}[which]
+        return out
+
+    def apply_impulse(self, imp: np.ndarray):
+        """Velocity correction W H (h r) from flat W-numbered impulses: one batched solve per group."""
+        for gr, uidx, xidx, R, C in self.groups:
+            rhs = np.zeros_like(gr.U)
+            rhs[gr.type.boundary_dofs, :] = imp[uidx].T
+            rhs[gr.clamped, :] = 0.0
+            if np.any(rhs):
+                corr = gr.op.solve(rhs)
+                corr[gr.clamped, :] = 0.0
+                gr.Ucorr = corr
+            else:
+                gr.Ucorr = None
+        for i in self.rigid:
+            b = self.sim.bodies[i]
+            s = self.U_offset[i]
+            p = imp[s:s + 3]
+            b.contact_impulse = p.copy()
+            b.ucorr = b.W @ p
