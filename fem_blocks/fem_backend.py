@@ -1,0 +1,159 @@
+"""Finite-element operators of a block type: THE ONLY module of fem_blocks that imports dolfinx.
+
+dolfinx 0.5.2 API (Debian bookworm). A newer dolfinx (0.7–0.9) changes this file only.
+
+Linear elasticity, small strain, P1 (triangles) / Q1 (quads), 2D:
+
+    K = t ∫ sigma(u) : eps(v) dx,   sigma = lambda* tr(eps) I + 2 mu eps,
+    plane strain lambda* = lambda, plane stress lambda* = 2 lambda mu / (lambda + 2 mu),
+    M = t rho ∫ u . v dx  (consistent),  lumped: vertex quadrature on triangles, row sum on quads,
+
+with t the thickness. Returned as scipy CSR in the BlockMesh node order, dof `2*node + c`.
+The cell-centroid stress operator S (3 nc x 2n) is plain numpy (no dolfinx).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+from .errors import InputError, check_range
+
+
+@dataclass
+class FEOperators:
+    K: sp.csr_matrix
+    M_consistent: sp.csr_matrix
+    M_lumped: sp.csr_matrix
+
+
+def check_material(E, nu, rho, thickness, plane):
+    check_range("E", E, 0.0, lo_open=True, expected="E > 0 [Pa]")
+    check_range("nu", nu, -1.0, 0.5, lo_open=True, hi_open=True, expected="-1 < nu < 0.5")
+    check_range("rho", rho, 0.0, lo_open=True, expected="rho > 0 [kg/m^3]")
+    check_range("thickness", thickness, 0.0, lo_open=True, expected="thickness > 0 [m]")
+    if plane not in ("stress", "strain"):
+        raise InputError(f"plane = {plane!r}: expected 'stress' or 'strain'")
+
+
+def lame(E, nu, plane):
+    """(lambda*, mu) of the 2D model."""
+    lam = E * nu / ((1 + nu) * (1 - 2 * nu))
+    mu = E / (2 * (1 + nu))
+    if plane == "stress":
+        lam = 2 * lam * mu / (lam + 2 * mu)
+    return lam, mu
+
+
+def _petsc_to_scipy(A, perm) -> sp.csr_matrix:
+    """PETSc AIJ (dolfinx dof order) -> scipy CSR in BlockMesh dof order: A_ours[perm[i], perm[j]] = A[i, j]."""
+    indptr, indices, data = A.getValuesCSR()
+    n = len(indptr) - 1
+    rows = np.repeat(np.arange(n), np.diff(indptr))
+    B = sp.coo_matrix((data, (perm[rows], perm[indices])), shape=(n, n)).tocsr()
+    B.sum_duplicates()
+    B.eliminate_zeros()
+    return B
+
+
+def assemble_operators(mesh, E, nu, rho, thickness=1.0, plane="stress") -> FEOperators:
+    """K, M (consistent and lumped) of a BlockMesh with dolfinx, in the BlockMesh dof order."""
+    check_material(E, nu, rho, thickness, plane)
+    import ufl
+    from mpi4py import MPI
+    from dolfinx import cpp, fem, mesh as dmesh
+    from dolfinx.fem.petsc import assemble_matrix
+    from dolfinx.io import gmshio
+
+    gmsh_type = 2 if mesh.cell_type == "triangle" else 3
+    cells = np.asarray(mesh.cells, dtype=np.int64)
+    if mesh.cell_type == "quad":  # gmsh (CCW) -> dolfinx (tensor-product) vertex order
+        perm = cpp.io.perm_gmsh(cpp.mesh.CellType.quadrilateral, 4)
+        cells = cells[:, perm]
+    domain = gmshio.ufl_mesh(gmsh_type, 2)  # one ufl.Mesh per dolfinx mesh (0.5.2 requirement)
+    msh = dmesh.create_mesh(MPI.COMM_SELF, cells, np.ascontiguousarray(mesh.points, dtype=np.float64), domain)
+    V = fem.VectorFunctionSpace(msh, ("Lagrange", 1))
+    n = mesh.points.shape[0]
+    if V.dofmap.index_map.size_local != n:
+        raise InputError(f"{mesh.source}: dolfinx built {V.dofmap.index_map.size_local} nodes for {n} mesh nodes")
+    # dolfinx node j -> geometry node d2g[j] -> input (BlockMesh) node igi[d2g[j]]
+    d2g = np.empty(n, dtype=np.int64)
+    d2g[V.dofmap.list.array] = msh.geometry.dofmap.array
+    node = np.asarray(msh.geometry.input_global_indices, dtype=np.int64)[d2g]
+    perm = np.empty(2 * n, dtype=np.int64)
+    perm[0::2], perm[1::2] = 2 * node, 2 * node + 1
+
+    lam, mu = lame(E, nu, plane)
+    u, v = ufl.TrialFunction(V), ufl.TestFunction(V)
+    eps = lambda w: ufl.sym(ufl.grad(w))  # noqa: E731
+    sig = lambda w: lam * ufl.tr(eps(w)) * ufl.Identity(2) + 2 * mu * eps(w)  # noqa: E731
+    t = float(thickness)
+    k_form = fem.form(t * ufl.inner(sig(u), eps(v)) * ufl.dx)
+    m_form = fem.form(t * rho * ufl.inner(u, v) * ufl.dx)
+    K = assemble_matrix(k_form)
+    K.assemble()
+    M = assemble_matrix(m_form)
+    M.assemble()
+    Ks, Ms = _petsc_to_scipy(K, perm), _petsc_to_scipy(M, perm)
+    K.destroy()
+    M.destroy()
+    if mesh.cell_type == "triangle":
+        import warnings
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)  # "requested degree 2" of the vertex rule
+            ml_form = fem.form(t * rho * ufl.inner(u, v) * ufl.dx(metadata={"quadrature_rule": "vertex"}))
+        ML = assemble_matrix(ml_form)
+        ML.assemble()
+        Ml = _petsc_to_scipy(ML, perm)
+        ML.destroy()
+        Ml = sp.diags(Ml.diagonal()).tocsr()
+    else:
+        Ml = sp.diags(np.asarray(Ms.sum(axis=1)).ravel()).tocsr()  # row-sum lumping (Q1)
+    return FEOperators(Ks, Ms, Ml)
+
+
+# ----------------------------------------------------------------------------- stresses (numpy)
+def elasticity_matrix(E, nu, plane) -> np.ndarray:
+    """D with (sxx, syy, sxy) = D (exx, eyy, gxy), gxy = du/dy + dv/dx."""
+    if plane == "stress":
+        c = E / (1 - nu * nu)
+        return c * np.array([[1, nu, 0], [nu, 1, 0], [0, 0, (1 - nu) / 2]])
+    c = E / ((1 + nu) * (1 - 2 * nu))
+    return c * np.array([[1 - nu, nu, 0], [nu, 1 - nu, 0], [0, 0, (1 - 2 * nu) / 2]])
+
+
+def centroid_gradients(mesh) -> np.ndarray:
+    """dN_a/dx at each cell centroid: (nc, nv, 2) (exact constant for P1, centroid value for Q1)."""
+    P = mesh.points[mesh.cells]  # (nc, nv, 2)
+    if mesh.cell_type == "triangle":
+        dN = np.array([[-1.0, -1.0], [1.0, 0.0], [0.0, 1.0]])  # d/dxi, d/deta
+    else:  # bilinear on [-1,1]^2, CCW nodes (-1,-1), (1,-1), (1,1), (-1,1), at xi = eta = 0
+        dN = 0.25 * np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]])
+    J = np.einsum("cai,aj->cij", P, dN)  # dx_i / dxi_j
+    Jinv = np.linalg.inv(J)
+    return np.einsum("aj,cji->cai", dN, Jinv)
+
+
+def stress_operator(mesh, E, nu, plane="stress") -> sp.csr_matrix:
+    """S (3 nc x 2n): cell-centroid Cauchy stress (sxx, syy, sxy) = D B q."""
+    G = centroid_gradients(mesh)
+    nc, nv = mesh.cells.shape
+    B = np.zeros((nc, 3, 2 * nv))
+    B[:, 0, 0::2] = G[:, :, 0]
+    B[:, 1, 1::2] = G[:, :, 1]
+    B[:, 2, 0::2] = G[:, :, 1]
+    B[:, 2, 1::2] = G[:, :, 0]
+    DB = np.einsum("ij,cjk->cik", elasticity_matrix(E, nu, plane), B)
+    dofs = np.empty((nc, 2 * nv), dtype=np.int64)
+    dofs[:, 0::2], dofs[:, 1::2] = 2 * mesh.cells, 2 * mesh.cells + 1
+    rows = np.broadcast_to((3 * np.arange(nc))[:, None, None] + np.arange(3)[None, :, None], DB.shape)
+    cols = np.broadcast_to(dofs[:, None, :], DB.shape)
+    return sp.csr_matrix((DB.ravel(), (rows.ravel(), cols.ravel())), shape=(3 * nc, 2 * mesh.points.shape[0]))
+
+
+def von_mises(s: np.ndarray, nu: float, plane: str) -> np.ndarray:
+    """von Mises stress of (sxx, syy, sxy) rows; plane strain includes szz = nu (sxx + syy)."""
+    s = np.asarray(s).reshape(-1, 3)
+    szz = nu * (s[:, 0] + s[:, 1]) if plane == "strain" else 0.0
+    return np.sqrt(0.5 * ((s[:, 0] - s[:, 1]) ** 2 + (s[:, 1] - szz) ** 2 + (szz - s[:, 0]) ** 2) + 3 * s[:, 2] ** 2)
