@@ -171,3 +171,47 @@ def test_demo_cases_parse():
     for f in sorted(os.listdir(os.path.join(ROOT, "demos"))):
         if f.endswith(".toml"):
             load_case(os.path.join(ROOT, "demos", f))
+
+
+CLI_BAD = [
+    ("materials.m.E", "E = 0.0", "materials.m.E: = 0.0: expected a number > 0"),
+    ("materials.m.nu", "nu = 0.7", "materials.m.nu: = 0.7: expected a number > -1 and < 0.5"),
+    ("materials.m.rho", "rho = -3.0", "materials.m.rho: = -3.0: expected a number > 0"),
+    ("stages[0].h", "h = 0.0", "stages[0].h: = 0.0: expected a number > 0"),
+    ("stages[0].theta", "theta = 0.2", "stages[0].theta: = 0.2: expected a number >= 0.5 and <= 1"),
+    ("unknown key", "colour = 'red'", "stages[0].colour: unknown key"),
+]
+
+
+@pytest.mark.parametrize("field, line, message", CLI_BAD, ids=[c[0] for c in CLI_BAD])
+def test_cli_bad_parameters_exit_2(tmp_path, field, line, message):
+    key = line.split("=")[0].strip()
+    base = {"E": "E = 1e9", "nu": "nu = 0.2", "rho": "rho = 1000.0", "h": "h = 0.01", "theta": "theta = 0.5"}
+    if key in base:
+        base[key] = line
+        extra = ""
+    else:
+        extra = line
+    case = tmp_path / "c.toml"
+    case.write_text(f"""[materials.m]
+{base['E']}
+{base['nu']}
+{base['rho']}
+[block_types.t]
+geometry = "rectangle"
+lx = 1.0
+ly = 0.2
+mesh_size = 0.1
+material = "m"
+[[blocks]]
+type = "t"
+[[stages]]
+duration = 0.1
+{base['h']}
+{base['theta']}
+{extra}
+""")
+    p = run_cli("run", str(case), "--out", str(tmp_path / "o"))
+    assert p.returncode == 2
+    assert len(p.stderr.strip().splitlines()) == 1
+    assert p.stderr.strip().startswith(f"fem-blocks: error: {case}: {message}")
