@@ -1,0 +1,315 @@
+"""Nonlinear block Gauss–Seidel (NLGS) for 2D frictional contact, compiled with numba.
+
+Problem (FCLIB / Siconos convention, contact α occupies entries (2α, 2α+1) = (normal, tangent)):
+
+    u = W r + q,   r_N >= 0, u_N >= 0, r_N u_N = 0,   |r_T| <= mu r_N,
+    u_T = 0 if |r_T| < mu r_N, else r_T = -mu r_N u_T/|u_T|.
+
+Sweep: for α in order, v_loc = q_α + Σ_{β≠α} W_αβ r_β, then the exact 2D local solve of
+v = W_αα r + v_loc (thesis §6.3.2.c): the affine line intersected with the Signorini and
+Coulomb graphs — open (r = 0 if v_loc,N >= 0), stick (v = 0), slide forward / backward
+(v_N = 0, r_T = -s mu r_N, s v_T >= 0) — then relaxation r_α <- ω r_loc + (1-ω) r_α.
+
+Measures (both reported): relative change ‖Δr‖/‖r‖ over a sweep, and the FCLIB natural-map
+residual ‖F‖/‖q‖ with F_α = r_α - P_K(r_α - (u_α + [mu‖u_T‖, 0])) (README of data/fclib).
+The residual reported is always recomputed from the returned reactions.
+
+W is stored as block-CSR arrays (indptr, indices, blocks (nnzb, 2, 2), diag_pos) so the time
+stepper calls the kernel without scipy objects.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+from numba import njit
+
+from ..errors import InputError
+
+ORDERS = {"given": 0, "reversed": 1, "shuffled": 2}
+
+
+@dataclass
+class BlockCSR:
+    indptr: np.ndarray   # (nc+1,) int64
+    indices: np.ndarray  # (nnzb,) int64, sorted per row
+    blocks: np.ndarray   # (nnzb, d, d) float64, C-contiguous
+    diag_pos: np.ndarray  # (nc,) int64: position of the diagonal block of each row
+
+    @property
+    def n(self) -> int:
+        return len(self.indptr) - 1
+
+    @property
+    def dim(self) -> int:
+        return self.blocks.shape[1]
+
+    def to_scipy(self) -> sp.csr_matrix:
+        d = self.dim
+        return sp.bsr_matrix((self.blocks, self.indices, self.indptr), shape=(d * self.n, d * self.n)).tocsr()
+
+
+def to_block_csr(W, dim: int = 2) -> BlockCSR:
+    """Block-CSR of a dense or sparse W (m x m, m = dim * nc); a missing diagonal block is added as zeros."""
+    if isinstance(W, BlockCSR):
+        return W
+    if sp.issparse(W):
+        Ws = W.tocsr()
+    else:
+        Wd = np.asarray(W, dtype=float)
+        if Wd.ndim != 2:
+            raise InputError(f"W: expected a square matrix, got shape {Wd.shape}")
+        Ws = sp.csr_matrix(Wd)
+    m = Ws.shape[0]
+    if Ws.shape[1] != m or m % dim:
+        raise InputError(f"W: expected a square matrix of size dim * n_contacts, got shape {Ws.shape} (dim {dim})")
+    nc = m // dim
+    Ws = (Ws + sp.csr_matrix((np.zeros(m), (np.arange(m), np.arange(m))), shape=(m, m))).tocsr()
+    B = Ws.tobsr(blocksize=(dim, dim))
+    B.sort_indices()
+    indptr = B.indptr.astype(np.int64)
+    indices = B.indices.astype(np.int64)
+    blocks = np.ascontiguousarray(B.data, dtype=np.float64)
+    diag_pos = np.full(nc, -1, dtype=np.int64)
+    rows = np.repeat(np.arange(nc), np.diff(indptr))
+    on = rows == indices
+    diag_pos[rows[on]] = np.flatnonzero(on)
+    return BlockCSR(indptr, indices, blocks, diag_pos)
+
+
+# ----------------------------------------------------------------------------- compiled kernels
+@njit(cache=True)
+def local_2d(w00, w01, w10, w11, q0, q1, mu):
+    """Exact solution of v = w r + q with Signorini + Coulomb (2D). Returns (r_N, r_T, case):
+    case 0 open, 1 stick, 2 slide forward (v_T > 0), 3 slide backward, -1 no consistent case (r = 0)."""
+    if q0 >= 0.0:
+        return 0.0, 0.0, 0
+    det = w00 * w11 - w01 * w10
+    if det > 0.0:
+        rn = -(w11 * q0 - w01 * q1) / det
+        rt = -(-w10 * q0 + w00 * q1) / det
+        if rn > 0.0 and abs(rt) <= mu * rn:
+            return rn, rt, 1
+    best_rn, best_rt, best_case = 0.0, 0.0, -1
+    for k in range(2):
+        s = 1.0 if k == 0 else -1.0
+        den = w00 - s * mu * w01
+        if den > 0.0:
+            rn = -q0 / den
+            rt = -s * mu * rn
+            vt = w10 * rn + w11 * rt + q1
+            if rn >= 0.0 and s * vt >= 0.0:
+                return rn, rt, 2 + k
+            if best_case < 0 and rn >= 0.0 and abs(vt) < 1e-14 * (abs(q1) + abs(q0) + 1e-300):
+                best_rn, best_rt, best_case = rn, rt, 2 + k
+    if best_case < 0 and w00 > 0.0:
+        # numerically degenerate (e.g. mu = 0 and w01 != 0): frictionless normal solve
+        rn = -q0 / w00
+        return rn, 0.0, 2
+    return best_rn, best_rt, best_case
+
+
+@njit(cache=True)
+def _sweep(indptr, indices, blocks, diag_pos, q, mu, r, order, omega):
+    dr2 = 0.0
+    r2 = 0.0
+    for ii in range(order.shape[0]):
+        a = order[ii]
+        v0 = q[2 * a]
+        v1 = q[2 * a + 1]
+        for k in range(indptr[a], indptr[a + 1]):
+            b = indices[k]
+            if b != a:
+                rb0 = r[2 * b]
+                rb1 = r[2 * b + 1]
+                v0 += blocks[k, 0, 0] * rb0 + blocks[k, 0, 1] * rb1
+                v1 += blocks[k, 1, 0] * rb0 + blocks[k, 1, 1] * rb1
+        d = diag_pos[a]
+        if d < 0:
+            rn, rt = 0.0, 0.0
+        else:
+            rn, rt, case = local_2d(blocks[d, 0, 0], blocks[d, 0, 1], blocks[d, 1, 0], blocks[d, 1, 1], v0, v1, mu[a])
+        if omega != 1.0:
+            rn = omega * rn + (1.0 - omega) * r[2 * a]
+            rt = omega * rt + (1.0 - omega) * r[2 * a + 1]
+            if rn < 0.0:
+                rn = 0.0
+            lim = mu[a] * rn
+            if rt > lim:
+                rt = lim
+            elif rt < -lim:
+                rt = -lim
+        e0 = rn - r[2 * a]
+        e1 = rt - r[2 * a + 1]
+        dr2 += e0 * e0 + e1 * e1
+        r2 += rn * rn + rt * rt
+        r[2 * a] = rn
+        r[2 * a + 1] = rt
+    return dr2, r2
+
+
+@njit(cache=True)
+def matvec_bcsr(indptr, indices, blocks, x, y):
+    """y = W x (block-CSR, 2x2 blocks)."""
+    n = indptr.shape[0] - 1
+    for a in range(n):
+        s0 = 0.0
+        s1 = 0.0
+        for k in range(indptr[a], indptr[a + 1]):
+            b = indices[k]
+            s0 += blocks[k, 0, 0] * x[2 * b] + blocks[k, 0, 1] * x[2 * b + 1]
+            s1 += blocks[k, 1, 0] * x[2 * b] + blocks[k, 1, 1] * x[2 * b + 1]
+        y[2 * a] = s0
+        y[2 * a + 1] = s1
+
+
+@njit(cache=True)
+def natural_map_2d(r, u, mu):
+    """‖F‖_2 with F_α = r_α - P_K(r_α - (u_α + [mu |u_T|, 0])) (2D Coulomb cone K)."""
+    n = mu.shape[0]
+    s = 0.0
+    for a in range(n):
+        m = mu[a]
+        x0 = r[2 * a] - (u[2 * a] + m * abs(u[2 * a + 1]))
+        x1 = r[2 * a + 1] - u[2 * a + 1]
+        ax1 = abs(x1)
+        if ax1 <= m * x0:
+            p0, p1 = x0, x1
+        elif m * ax1 <= -x0:
+            p0, p1 = 0.0, 0.0
+        else:
+            c = (x0 + m * ax1) / (1.0 + m * m)
+            p0 = c
+            p1 = c * m * (1.0 if x1 > 0.0 else -1.0)
+        f0 = r[2 * a] - p0
+        f1 = r[2 * a + 1] - p1
+        s += f0 * f0 + f1 * f1
+    return np.sqrt(s)
+
+
+@njit(cache=True)
+def _run(indptr, indices, blocks, diag_pos, q, mu, r, order_kind, omega, tol, max_sweeps, seed,
+         use_residual, check_every, qnorm):
+    n = mu.shape[0]
+    order = np.arange(n)
+    if order_kind == 1:
+        order = order[::-1].copy()
+    if order_kind == 2:
+        np.random.seed(seed)
+    u = np.empty_like(q)
+    change = np.inf
+    res = np.inf
+    sweeps = 0
+    converged = False
+    while sweeps < max_sweeps:
+        if order_kind == 2:
+            np.random.shuffle(order)
+        dr2, r2 = _sweep(indptr, indices, blocks, diag_pos, q, mu, r, order, omega)
+        sweeps += 1
+        change = np.sqrt(dr2 / r2) if r2 > 0.0 else np.sqrt(dr2)
+        if use_residual:
+            if sweeps % check_every == 0 or sweeps == max_sweeps:
+                matvec_bcsr(indptr, indices, blocks, r, u)
+                for i in range(q.shape[0]):
+                    u[i] += q[i]
+                res = natural_map_2d(r, u, mu) / qnorm
+                if res <= tol:
+                    converged = True
+                    break
+        elif change <= tol:
+            converged = True
+            break
+    return sweeps, change, converged
+
+
+# ----------------------------------------------------------------------------- public API
+@dataclass
+class NLGSResult:
+    r: np.ndarray
+    u: np.ndarray
+    sweeps: int
+    converged: bool
+    change: float
+    residual: float  # ‖F‖ / ‖q‖ recomputed from r
+    residual_abs: float
+    message: str
+
+
+def _check(bcsr: BlockCSR, q, mu, tol, max_sweeps, omega, order, check_every):
+    n = bcsr.n
+    if bcsr.dim != 2:
+        raise InputError(f"dim = {bcsr.dim}: this solver handles 2D problems (dim = 2)")
+    q = np.ascontiguousarray(q, dtype=np.float64).ravel()
+    if q.size != 2 * n:
+        raise InputError(f"q: expected {2 * n} entries (2 per contact), got {q.size}")
+    mu = np.ascontiguousarray(np.broadcast_to(np.asarray(mu, dtype=np.float64), (n,)).copy())
+    if np.any(~np.isfinite(mu)) or np.any(mu < 0):
+        raise InputError("mu: expected friction coefficients >= 0")
+    if not np.all(np.isfinite(q)):
+        raise InputError("q: expected finite values")
+    if not (tol > 0):
+        raise InputError(f"tol = {tol!r}: expected tol > 0")
+    if int(max_sweeps) < 1:
+        raise InputError(f"max_sweeps = {max_sweeps!r}: expected an integer >= 1")
+    if not (0 < omega < 2):
+        raise InputError(f"omega = {omega!r}: expected 0 < omega < 2")
+    if order not in ORDERS:
+        raise InputError(f"order = {order!r}: expected one of {list(ORDERS)}")
+    if int(check_every) < 1:
+        raise InputError(f"check_every = {check_every!r}: expected an integer >= 1")
+    return q, mu
+
+
+def solve_block_csr(W: BlockCSR, q, mu, r0=None, tol: float = 1e-8, max_sweeps: int = 10000,
+                    omega: float = 1.0, order: str = "given", seed: int = 0, criterion: str = "change",
+                    check_every: int = 10) -> NLGSResult:
+    """NLGS on block-CSR arrays. criterion "change": stop when ‖Δr‖/‖r‖ <= tol over a sweep;
+    "residual": stop when the FCLIB residual ‖F‖/‖q‖ <= tol (checked every `check_every` sweeps)."""
+    if criterion not in ("change", "residual"):
+        raise InputError(f"criterion = {criterion!r}: expected 'change' or 'residual'")
+    q, mu = _check(W, q, mu, tol, max_sweeps, omega, order, check_every)
+    n = W.n
+    r = np.zeros(2 * n) if r0 is None else np.array(r0, dtype=np.float64).ravel()
+    if r.size != 2 * n:
+        raise InputError(f"r0: expected {2 * n} entries, got {r.size}")
+    qnorm = float(np.linalg.norm(q)) or 1.0
+    if n == 0:
+        return NLGSResult(r, q.copy(), 0, True, 0.0, 0.0, 0.0, "no contact")
+    sweeps, change, converged = _run(W.indptr, W.indices, W.blocks, W.diag_pos, q, mu, r, ORDERS[order],
+                                     float(omega), float(tol), int(max_sweeps), int(seed),
+                                     criterion == "residual", int(check_every), qnorm)
+    u = np.empty_like(q)
+    matvec_bcsr(W.indptr, W.indices, W.blocks, r, u)
+    u += q
+    res_abs = float(natural_map_2d(r, u, mu))
+    res = res_abs / qnorm
+    if converged:
+        msg = f"converged in {sweeps} sweeps"
+    else:
+        msg = (f"not converged after {sweeps} sweeps (change {change:.3g}, residual {res:.3g}, "
+               f"tolerance {tol:g} on the {criterion})")
+    return NLGSResult(r, u, int(sweeps), bool(converged), float(change), res, res_abs, msg)
+
+
+def solve(W, q, mu, dim: int = 2, tol: float = 1e-8, max_sweeps: int = 10000, r0=None, omega: float = 1.0,
+          order: str = "given", seed: int = 0, criterion: str = "change", check_every: int = 10) -> NLGSResult:
+    """Solve u = W r + q with Signorini–Coulomb per contact (FCLIB ordering, normal first).
+    W: dense array, scipy sparse matrix or BlockCSR. Never raises on non-convergence: see `converged`."""
+    if dim != 2:
+        raise InputError(f"dim = {dim!r}: this solver handles 2D problems (dim = 2)")
+    return solve_block_csr(to_block_csr(W, dim), q, mu, r0=r0, tol=tol, max_sweeps=max_sweeps, omega=omega,
+                           order=order, seed=seed, criterion=criterion, check_every=check_every)
+
+
+def fclib_residual(W, q, mu, r) -> tuple[float, float]:
+    """(‖F‖, ‖F‖/‖q‖) of the natural map for reactions r (2D)."""
+    B = to_block_csr(W, 2)
+    q = np.ascontiguousarray(q, dtype=np.float64).ravel()
+    r = np.ascontiguousarray(r, dtype=np.float64).ravel()
+    mu = np.ascontiguousarray(np.broadcast_to(np.asarray(mu, dtype=np.float64), (B.n,)).copy())
+    u = np.empty_like(q)
+    matvec_bcsr(B.indptr, B.indices, B.blocks, r, u)
+    u += q
+    f = float(natural_map_2d(r, u, mu))
+    return f, f / (float(np.linalg.norm(q)) or 1.0)
