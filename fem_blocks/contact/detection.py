@@ -1,0 +1,409 @@
+"""2D contact detection on plain arrays: candidate points on candidate edges, projected on antagonist edges.
+
+Conventions (DESIGN §1, §6): boundary edges are counter-clockwise per body (body on the left), so the
+outward normal of an edge with unit direction e is (e_y, -e_x). For a contact, the normal n is the
+outward normal of the *antagonist* edge (it points toward the candidate), t = (-n_y, n_x) (the
+antagonist edge direction), local arrays are (n, t). Gap g = (x_c - x_a)·n, x_a the orthogonal
+projection of the candidate point on the antagonist edge; a thick joint has g0 = joint thickness.
+
+Candidate/antagonist (one side only, deterministic): the interface's `candidate` group if given and the
+two bodies differ in group; else a deformable body is candidate against a rigid one; else the lower
+body index is candidate.
+
+Candidate points: on each candidate edge at relative positions (default 0.25, 0.75 — retreated from the
+corners, thesis §7.2.1.a), or at its FE nodes (one point per node, shared nodes counted once); each
+carries its tributary length x thickness (`area`). A point is paired with the nearest facing antagonist
+edge (angle between outward normals within `max_angle` of opposite) onto which it projects inside the
+edge, with -(reach) <= g <= g0 + alert.
+
+Broad phase: uniform grid over edge boxes enlarged by the search distance (numba, linear in the
+number of edges); each edge pair is examined once.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from ..errors import InputError
+
+
+@dataclass
+class InterfaceTable:
+    """pair_iface[gi, gj] -> interface id (-1: no contact); split_head[i] -> interface id used instead of i for
+    contacts whose normal is closer to horizontal than to vertical (head joints), -1 none."""
+
+    pair_iface: np.ndarray  # (ng, ng) int64, symmetric
+    g0: np.ndarray          # (ni,)
+    alert: np.ndarray       # (ni,)
+    placement: np.ndarray   # (ni,) 0 positions, 1 nodes
+    positions: np.ndarray   # (ni, P) padded with -1
+    cand_group: np.ndarray  # (ni,) group id whose bodies are candidates, -1 default rule
+    thickness: np.ndarray   # (ni,) out-of-plane thickness (tributary area = length x thickness)
+    cos_max_angle: np.ndarray  # (ni,)
+    split_head: np.ndarray  # (ni,) int64
+
+    def validate(self):
+        ni = len(self.g0)
+        for name in ("alert", "placement", "cand_group", "thickness", "cos_max_angle", "split_head"):
+            if len(getattr(self, name)) != ni:
+                raise InputError(f"interface table: {name} has {len(getattr(self, name))} entries, expected {ni}")
+        if np.any(~np.isfinite(self.g0)) or np.any(self.g0 < 0):
+            raise InputError("interfaces.g0: expected joint thickness >= 0 [m]")
+        if np.any(~np.isfinite(self.alert)) or np.any(self.alert <= 0):
+            raise InputError("interfaces.alert: expected alert distance > 0 [m]")
+        if np.any(self.thickness <= 0):
+            raise InputError("interfaces.thickness: expected > 0 [m]")
+        p = self.positions
+        if p.ndim != 2 or p.shape[0] != ni:
+            raise InputError("interfaces.positions: expected one row per interface")
+        used = p >= 0
+        if np.any((p[used] <= 0) | (p[used] >= 1)):
+            raise InputError("interfaces.positions: expected relative positions strictly between 0 and 1")
+        if np.any((self.placement == 0) & ~used.any(axis=1)):
+            raise InputError("interfaces.positions: expected at least one position")
+
+
+@dataclass
+class ContactSet:
+    cand_body: np.ndarray
+    ant_body: np.ndarray
+    cand_nodes: np.ndarray  # (nc, 2) body-local node ids (bnode_local) of the candidate edge ends
+    ant_nodes: np.ndarray
+    cand_w: np.ndarray      # (nc, 2) interpolation weights
+    ant_w: np.ndarray
+    point: np.ndarray       # (nc, 2)
+    n: np.ndarray
+    t: np.ndarray
+    gap: np.ndarray
+    g0: np.ndarray
+    area: np.ndarray
+    interface: np.ndarray
+    cand_edge: np.ndarray
+    ant_edge: np.ndarray
+    key: np.ndarray         # stable id of the candidate point (edge*P + k, or -(node index)-1 for nodes)
+
+    def __len__(self):
+        return len(self.gap)
+
+    def subset(self, idx) -> "ContactSet":
+        return ContactSet(**{k: v[idx] for k, v in self.__dict__.items()})
+
+
+# ----------------------------------------------------------------------------- broad phase
+@njit(cache=True)
+def _grid_pairs(box, body, cell):
+    """Pairs (i, j), i < j, of edges of different bodies whose boxes overlap; each pair once."""
+    ne = box.shape[0]
+    x0 = box[:, 0].min()
+    y0 = box[:, 1].min()
+    nx = int((box[:, 2].max() - x0) / cell) + 1
+    ny = int((box[:, 3].max() - y0) / cell) + 1
+    # count cells per edge
+    cnt = np.zeros(ne, dtype=np.int64)
+    for e in range(ne):
+        i0 = int((box[e, 0] - x0) / cell)
+        i1 = int((box[e, 2] - x0) / cell)
+        j0 = int((box[e, 1] - y0) / cell)
+        j1 = int((box[e, 3] - y0) / cell)
+        cnt[e] = (i1 - i0 + 1) * (j1 - j0 + 1)
+    total = cnt.sum()
+    keys = np.empty(total, dtype=np.int64)
+    vals = np.empty(total, dtype=np.int64)
+    k = 0
+    for e in range(ne):
+        i0 = int((box[e, 0] - x0) / cell)
+        i1 = int((box[e, 2] - x0) / cell)
+        j0 = int((box[e, 1] - y0) / cell)
+        j1 = int((box[e, 3] - y0) / cell)
+        for i in range(i0, i1 + 1):
+            for j in range(j0, j1 + 1):
+                keys[k] = i * ny + j
+                vals[k] = e
+                k += 1
+    order = np.argsort(keys, kind="mergesort")
+    keys = keys[order]
+    vals = vals[order]
+    # pairs within each cell; keep a pair only in the cell holding the min corner of the boxes' intersection
+    cap = 1024
+    out = np.empty((cap, 2), dtype=np.int64)
+    m = 0
+    s = 0
+    while s < total:
+        t = s
+        while t < total and keys[t] == keys[s]:
+            t += 1
+        ci = keys[s] // ny
+        cj = keys[s] % ny
+        for a in range(s, t):
+            ea = vals[a]
+            for b in range(a + 1, t):
+                eb = vals[b]
+                if body[ea] == body[eb]:
+                    continue
+                if box[ea, 0] > box[eb, 2] or box[eb, 0] > box[ea, 2] or box[ea, 1] > box[eb, 3] \
+                        or box[eb, 1] > box[ea, 3]:
+                    continue
+                mx = max(box[ea, 0], box[eb, 0])
+                my = max(box[ea, 1], box[eb, 1])
+                if int((mx - x0) / cell) != ci or int((my - y0) / cell) != cj:
+                    continue
+                if m == cap:
+                    cap *= 2
+                    new = np.empty((cap, 2), dtype=np.int64)
+                    new[:m] = out[:m]
+                    out = new
+                if ea < eb:
+                    out[m, 0] = ea
+                    out[m, 1] = eb
+                else:
+                    out[m, 0] = eb
+                    out[m, 1] = ea
+                m += 1
+        s = t
+    return out[:m]
+
+
+# ----------------------------------------------------------------------------- narrow phase
+@njit(cache=True)
+def _narrow(pairs, bx, bedges, bedge_body, kind, body_group, pair_iface, g0, alert, placement, positions,
+            cand_group, cos_max, reach_frac):
+    """For each oriented (candidate edge, antagonist edge) pair: candidate points and their projections.
+    Returns arrays of raw matches (possibly several per candidate point)."""
+    npairs = pairs.shape[0]
+    P = positions.shape[1]
+    cap = max(16, 4 * npairs)
+    ce = np.empty(cap, dtype=np.int64)
+    ae = np.empty(cap, dtype=np.int64)
+    sk = np.empty(cap, dtype=np.float64)   # relative position on the candidate edge
+    lam = np.empty(cap, dtype=np.float64)  # relative position on the antagonist edge
+    gap = np.empty(cap, dtype=np.float64)
+    itf = np.empty(cap, dtype=np.int64)
+    pk = np.empty(cap, dtype=np.int64)     # position index (or 0/1 = start/end node)
+    m = 0
+    for p in range(npairs):
+        e1 = pairs[p, 0]
+        e2 = pairs[p, 1]
+        b1 = bedge_body[e1]
+        b2 = bedge_body[e2]
+        i = pair_iface[body_group[b1], body_group[b2]]
+        if i < 0:
+            continue
+        # who is candidate
+        c1 = True
+        cg = cand_group[i]
+        if cg >= 0 and body_group[b1] != body_group[b2] and (body_group[b1] == cg or body_group[b2] == cg):
+            c1 = body_group[b1] == cg
+        elif kind[b1] != kind[b2]:
+            c1 = kind[b1] == 0
+        else:
+            c1 = b1 < b2
+        ec = e1 if c1 else e2
+        ea = e2 if c1 else e1
+        ax = bx[bedges[ea, 0], 0]
+        ay = bx[bedges[ea, 0], 1]
+        dx = bx[bedges[ea, 1], 0] - ax
+        dy = bx[bedges[ea, 1], 1] - ay
+        la = np.sqrt(dx * dx + dy * dy)
+        cx = bx[bedges[ec, 0], 0]
+        cy = bx[bedges[ec, 0], 1]
+        ex = bx[bedges[ec, 1], 0] - cx
+        ey = bx[bedges[ec, 1], 1] - cy
+        lc = np.sqrt(ex * ex + ey * ey)
+        if la <= 0.0 or lc <= 0.0:
+            continue
+        tax, tay = dx / la, dy / la
+        nax, nay = tay, -tax           # outward normal of the antagonist edge
+        ncx, ncy = ey / lc, -ex / lc   # outward normal of the candidate edge
+        if -(nax * ncx + nay * ncy) < cos_max[i]:
+            continue
+        reach = reach_frac * min(la, lc) + alert[i]
+        npts = 2 if placement[i] == 1 else 0
+        if placement[i] == 0:
+            for k in range(P):
+                if positions[i, k] >= 0:
+                    npts += 1
+        for k in range(npts):
+            s = (0.0 if k == 0 else 1.0) if placement[i] == 1 else positions[i, k]
+            px = cx + s * ex
+            py = cy + s * ey
+            l = ((px - ax) * tax + (py - ay) * tay) / la
+            if l < -1e-9 or l > 1.0 + 1e-9:
+                continue
+            g = (px - ax) * nax + (py - ay) * nay
+            if g > g0[i] + alert[i] or g < -reach:
+                continue
+            if m == cap:
+                cap *= 2
+                ce = _grow_i(ce, cap); ae = _grow_i(ae, cap); itf = _grow_i(itf, cap); pk = _grow_i(pk, cap)
+                sk = _grow_f(sk, cap); lam = _grow_f(lam, cap); gap = _grow_f(gap, cap)
+            ce[m] = ec
+            ae[m] = ea
+            sk[m] = s
+            lam[m] = min(max(l, 0.0), 1.0)
+            gap[m] = g
+            itf[m] = i
+            pk[m] = k
+            m += 1
+    return ce[:m], ae[:m], sk[:m], lam[:m], gap[:m], itf[:m], pk[:m]
+
+
+@njit(cache=True)
+def _grow_i(a, cap):
+    b = np.empty(cap, dtype=a.dtype)
+    b[:a.shape[0]] = a
+    return b
+
+
+@njit(cache=True)
+def _grow_f(a, cap):
+    b = np.empty(cap, dtype=a.dtype)
+    b[:a.shape[0]] = a
+    return b
+
+
+# ----------------------------------------------------------------------------- public API
+def detect(bx, bnode_body, bnode_local, bedges, bedge_body, kind, body_group, table: InterfaceTable,
+           reach_frac: float = 0.25) -> ContactSet:
+    """Contact points between bodies (see module docstring). All inputs are flat arrays (architecture.md)."""
+    bx = np.ascontiguousarray(bx, dtype=np.float64)
+    bedges = np.ascontiguousarray(bedges, dtype=np.int64)
+    if bx.ndim != 2 or bx.shape[1] != 2:
+        raise InputError(f"bx: expected an (n, 2) array, got shape {bx.shape}")
+    if not np.all(np.isfinite(bx)):
+        bad = int(np.flatnonzero(~np.all(np.isfinite(bx), axis=1))[0])
+        raise InputError(f"body {int(bnode_body[bad])}: node {int(bnode_local[bad])} has a non-finite position")
+    table.validate()
+    bedge_body = np.ascontiguousarray(bedge_body, dtype=np.int64)
+    kind = np.ascontiguousarray(kind, dtype=np.int64)
+    body_group = np.ascontiguousarray(body_group, dtype=np.int64)
+    a, b = bx[bedges[:, 0]], bx[bedges[:, 1]]
+    L = np.linalg.norm(b - a, axis=1)
+    if len(L) and np.any(L <= 1e-12 * max(1.0, float(np.ptp(bx)))):
+        e = int(np.flatnonzero(L <= 1e-12 * max(1.0, float(np.ptp(bx))))[0])
+        raise InputError(f"body {int(bedge_body[e])}: boundary edge {e} has zero length (degenerate edge)")
+    search = float(np.max(table.g0 + table.alert)) if len(table.g0) else 0.0
+    box = np.column_stack([np.minimum(a, b) - search, np.maximum(a, b) + search])
+    cell = max(float(np.median(L)) if len(L) else 1.0, 2 * search, 1e-12)
+    pairs = _grid_pairs(box, bedge_body, cell) if len(L) > 1 else np.zeros((0, 2), dtype=np.int64)
+    ce, ae, sk, lam, gap, itf, pk = _narrow(pairs, bx, bedges, bedge_body, kind, body_group,
+                                            np.ascontiguousarray(table.pair_iface, dtype=np.int64),
+                                            table.g0.astype(float), table.alert.astype(float),
+                                            table.placement.astype(np.int64),
+                                            np.ascontiguousarray(table.positions, dtype=float),
+                                            table.cand_group.astype(np.int64), table.cos_max_angle.astype(float),
+                                            float(reach_frac))
+    P = table.positions.shape[1]
+    nodes_pl = table.placement[itf] == 1
+    # key: position points -> edge * P + k ; node points -> -(global boundary node index) - 1
+    node_idx = np.where(pk == 0, bedges[ce, 0], bedges[ce, 1])
+    key = np.where(nodes_pl, -node_idx - 1, ce * P + pk)
+    Lc = L[ce]
+    trib = np.where(nodes_pl, 0.5 * Lc, Lc / np.maximum(1, (table.positions[itf] >= 0).sum(axis=1)))
+    # keep, per key, the match with the smallest |g - g0| (ties: lower antagonist edge index)
+    score = np.abs(gap - table.g0[itf])
+    order = np.lexsort((ae, score, key))
+    ks = key[order]
+    first = np.ones(len(ks), dtype=bool)
+    first[1:] = ks[1:] != ks[:-1]
+    sel = order[first]
+    # node points: tributary length = half of every candidate edge that produced this node
+    if np.any(nodes_pl):
+        uk, inv = np.unique(key, return_inverse=True)
+        # sum of L/2 over distinct candidate edges per node key
+        pair_code = np.unique(np.column_stack([inv, ce]), axis=0)
+        tsum = np.zeros(len(uk))
+        np.add.at(tsum, pair_code[:, 0], 0.5 * L[pair_code[:, 1]])
+        trib_sel = np.where(nodes_pl[sel], tsum[np.searchsorted(uk, key[sel])], trib[sel])
+    else:
+        trib_sel = trib[sel]
+    sel_order = np.argsort(key[sel], kind="stable")
+    sel = sel[sel_order]
+    trib_sel = trib_sel[sel_order]
+    ce, ae, sk, lam, gap, itf, key = ce[sel], ae[sel], sk[sel], lam[sel], gap[sel], itf[sel], key[sel]
+    na = (b[ae] - a[ae]) / L[ae][:, None]
+    n = np.column_stack([na[:, 1], -na[:, 0]])
+    t = np.column_stack([-n[:, 1], n[:, 0]])
+    point = a[ce] + sk[:, None] * (b[ce] - a[ce])
+    # head/bed split: contacts whose normal is closer to horizontal use the head-joint interface
+    head = table.split_head[itf]
+    use_head = (head >= 0) & (np.abs(n[:, 1]) < np.sqrt(0.5))
+    itf = np.where(use_head, head, itf)
+    return ContactSet(
+        cand_body=bedge_body[ce], ant_body=bedge_body[ae],
+        cand_nodes=bnode_local[bedges[ce]], ant_nodes=bnode_local[bedges[ae]],
+        cand_w=np.column_stack([1 - sk, sk]), ant_w=np.column_stack([1 - lam, lam]),
+        point=point, n=n, t=t, gap=gap, g0=table.g0[itf].astype(float),
+        area=trib_sel * table.thickness[itf], interface=itf.astype(np.int64),
+        cand_edge=ce, ant_edge=ae, key=key.astype(np.int64))
+
+
+def update_geometry(cs: ContactSet, bx, bedges) -> ContactSet:
+    """Same pairs and weights, frames and gaps recomputed from current positions (small-sliding mode)."""
+    a, b = bx[bedges[cs.ant_edge, 0]], bx[bedges[cs.ant_edge, 1]]
+    ca, cb = bx[bedges[cs.cand_edge, 0]], bx[bedges[cs.cand_edge, 1]]
+    d = b - a
+    L = np.linalg.norm(d, axis=1)
+    e = d / L[:, None]
+    n = np.column_stack([e[:, 1], -e[:, 0]])
+    t = np.column_stack([-n[:, 1], n[:, 0]])
+    xc = cs.cand_w[:, :1] * ca + cs.cand_w[:, 1:] * cb
+    xa = cs.ant_w[:, :1] * a + cs.ant_w[:, 1:] * b
+    gap = np.einsum("ij,ij->i", xc - xa, n)
+    out = ContactSet(**dict(cs.__dict__))
+    out.point, out.n, out.t, out.gap = xc, n, t, gap
+    return out
+
+
+def match(old: ContactSet, new: ContactSet) -> np.ndarray:
+    """Index into `old` of each contact of `new` with the same key and the same antagonist body, or -1."""
+    if len(old) == 0 or len(new) == 0:
+        return -np.ones(len(new), dtype=np.int64)
+    o = np.argsort(old.key, kind="stable")
+    ks = old.key[o]
+    pos = np.searchsorted(ks, new.key)
+    pos = np.minimum(pos, len(ks) - 1)
+    hit = (ks[pos] == new.key)
+    idx = np.where(hit, o[pos], -1)
+    same_body = np.zeros(len(new), dtype=bool)
+    same_body[hit] = old.ant_body[idx[hit]] == new.ant_body[hit]
+    return np.where(same_body, idx, -1).astype(np.int64)
+
+
+def build_table(interfaces, group_index: dict) -> InterfaceTable:
+    """InterfaceTable from interface specs (objects with name, groups, g0, alert, placement, positions,
+    candidate, orientation, and optional thickness / max_angle)."""
+    ng = len(group_index)
+    ni = len(interfaces)
+    pair = -np.ones((ng, ng), dtype=np.int64)
+    P = max([len(i.positions) for i in interfaces] + [1])
+    positions = -np.ones((ni, P))
+    split = -np.ones(ni, dtype=np.int64)
+    by_pair: dict = {}
+    for k, itf in enumerate(interfaces):
+        ga, gb = (group_index[g] for g in itf.groups)
+        by_pair.setdefault((min(ga, gb), max(ga, gb)), []).append((k, itf.orientation))
+        positions[k, :len(itf.positions)] = itf.positions
+    for (ga, gb), lst in by_pair.items():
+        orients = sorted(o for _, o in lst)
+        if len(lst) == 1 and orients[0] == "any":
+            main = lst[0][0]
+        elif len(lst) == 2 and orients == ["bed", "head"]:
+            main = next(k for k, o in lst if o == "bed")
+            split[main] = next(k for k, o in lst if o == "head")
+        else:
+            names = [interfaces[k].name for k, _ in lst]
+            raise InputError(f"interfaces {names}: one group pair takes either one interface (orientation 'any') "
+                             f"or two ('bed' and 'head')")
+        pair[ga, gb] = pair[gb, ga] = main
+    return InterfaceTable(
+        pair_iface=pair,
+        g0=np.array([i.g0 for i in interfaces], dtype=float),
+        alert=np.array([i.alert for i in interfaces], dtype=float),
+        placement=np.array([0 if i.placement == "positions" else 1 for i in interfaces], dtype=np.int64),
+        positions=positions,
+        cand_group=np.array([group_index[i.candidate] if i.candidate else -1 for i in interfaces], dtype=np.int64),
+        thickness=np.array([getattr(i, "thickness", 1.0) for i in interfaces], dtype=float),
+        cos_max_angle=np.cos(np.deg2rad([getattr(i, "max_angle", 30.0) for i in interfaces])),
+        split_head=split)

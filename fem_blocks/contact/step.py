@@ -1,0 +1,222 @@
+"""Contact stage of a time step: detection -> G blocks -> Delassus -> NLGS -> velocity correction.
+
+Per step [t_i, t_{i+1}] (DESIGN §3–§5), with impulses P = h r as unknowns:
+
+    v = v_free + W_del P,   v_free = G u_free,   W_del = sum_bodies G W_k G^T,
+    gt = g - g0 (thick joints),   gbar = gt_i + h (1 - theta) v_N,i,
+    Signorini on the shifted normal velocity  v_N + gbar / (h theta) >= 0  ⊥  P_N >= 0,
+    Coulomb |P_T| <= mu P_N (implicit, on v_T).
+
+So the NLGS local problem is `u = W_del P + q` with `q = v_free + (gbar/(h theta), 0)`: at the end
+of the step the θ-rule position update gives gt_{i+1} = gbar + h theta v_N >= 0 exactly (frozen
+geometry). Then u_{i+1} = u_free + W H P (one batched solve per block type).
+
+Geometry: "frozen" (small displacements; detection, frames, G and W_del once in the reference
+configuration; gaps follow the displacement jumps gt = gt_ref + (G q)_N) or "updated" (re-detection
+from the current configuration every `redetect_every` steps, reactions carried over by contact key).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import InputError, check_range
+from . import detection as det
+from . import kinematics as kin
+from .scene import ContactScene
+
+STATUS_NAMES = ("open", "stick", "slip")
+
+
+@dataclass
+class InterfaceSpec:
+    """Interface between two body groups: law and joint geometry."""
+
+    name: str
+    groups: tuple  # (group_a, group_b)
+    law: str = "coulomb"
+    mu: float = 0.5
+    g0: float = 0.0
+    alert: float = 1e-3
+    placement: str = "positions"
+    positions: tuple = (0.25, 0.75)
+    candidate: str | None = None  # group name whose bodies are candidates
+    orientation: str = "any"  # "any" | "bed" (normal within 45° of vertical) | "head"
+    params: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        n = f"interfaces.{self.name}"
+        check_range(f"{n}.mu", self.mu, 0.0, expected="mu >= 0")
+        check_range(f"{n}.g0", self.g0, 0.0, expected="g0 >= 0 [m] (joint thickness)")
+        check_range(f"{n}.alert", self.alert, 0.0, lo_open=True, expected="alert > 0 [m]")
+        if self.placement not in ("positions", "nodes"):
+            raise InputError(f"{n}.placement = {self.placement!r}: expected 'positions' or 'nodes'")
+        for p in self.positions:
+            check_range(f"{n}.positions", p, 0.0, 1.0, lo_open=True, hi_open=True, expected="0 < position < 1")
+        if self.orientation not in ("any", "bed", "head"):
+            raise InputError(f"{n}.orientation = {self.orientation!r}: expected 'any', 'bed' or 'head'")
+
+
+@dataclass
+class ContactOptions:
+    geometry: str = "frozen"
+    redetect_every: int = 1
+    tol: float = 1e-6
+    max_sweeps: int = 2000
+    omega: float = 1.0
+    order: str = "given"
+    seed: int = 0
+    on_nonconvergence: str = "warn"
+
+    def __post_init__(self):
+        if self.geometry not in ("frozen", "updated"):
+            raise InputError(f"contact.geometry = {self.geometry!r}: expected 'frozen' or 'updated'")
+        check_range("contact.tol", self.tol, 0.0, lo_open=True, expected="tol > 0")
+        check_range("contact.max_sweeps", self.max_sweeps, 1, expected="max_sweeps >= 1")
+        check_range("contact.omega", self.omega, 0.0, 2.0, lo_open=True, hi_open=True, expected="0 < omega < 2")
+        if self.order not in ("given", "reversed", "shuffled"):
+            raise InputError(f"contact.order = {self.order!r}: expected 'given', 'reversed' or 'shuffled'")
+        if self.on_nonconvergence not in ("warn", "fail"):
+            raise InputError(f"contact.on_nonconvergence = {self.on_nonconvergence!r}: expected 'warn' or 'fail'")
+
+
+class ContactStep:
+    """The `contact` hook of `dynamics.Simulation` (solve / on_step_change)."""
+
+    def __init__(self, interfaces, body_groups, options: ContactOptions | None = None, body_names=None):
+        self.interfaces = list(interfaces)
+        self.opts = options or ContactOptions()
+        self.group_names = sorted(set(body_groups))
+        gid = {g: i for i, g in enumerate(self.group_names)}
+        self.body_group = np.array([gid[g] for g in body_groups], dtype=np.int64)
+        self.body_names = body_names
+        for itf in self.interfaces:
+            for g in itf.groups:
+                if g not in gid:
+                    raise InputError(f"interfaces.{itf.name}.groups: group {g!r} has no body; expected one of "
+                                     f"{self.group_names}")
+        self.scene = None
+        self.cs = None
+        self.P = None  # impulses of the last step (nc, 2)
+        self.W_dirty = True
+        self.n_unconverged = 0
+        self.steps = 0
+        self.last = {}
+
+    # ------------------------------------------------------------------ set-up
+    def on_step_change(self, sim):
+        self.W_dirty = True
+
+    def _table(self):
+        gid = {g: i for i, g in enumerate(self.group_names)}
+        return det.build_table(self.interfaces, gid)
+
+    def _detect(self, bx):
+        s = self.scene
+        cs = det.detect(bx, s.bnode_body, s.bnode_local, s.bedges, s.bedge_body, s.kind, self.body_group,
+                        self.table)
+        cs.area = cs.area * self.body_thickness[cs.cand_body]  # tributary length x thickness
+        return cs
+
+    def _assign_laws(self):
+        """Per-contact friction and interface id (orientation filters split bed and head joints)."""
+        cs = self.cs
+        nc = len(cs.gap)
+        self.mu = np.zeros(nc)
+        for k, itf in enumerate(self.interfaces):
+            sel = cs.interface == k
+            self.mu[sel] = itf.mu
+
+    def _geometry(self, sim, first: bool):
+        s = self.scene
+        if first or (self.opts.geometry == "updated" and self.steps % self.opts.redetect_every == 0):
+            ref = first and self.opts.geometry == "frozen"
+            bx = s.positions(reference=ref)
+            old, oldP = self.cs, self.P
+            self.cs = self._detect(bx)
+            self._check_initial_penetration(first)
+            self._assign_laws()
+            nc = len(self.cs.gap)
+            self.P = np.zeros((nc, 2))
+            if old is not None and oldP is not None and nc:
+                m = det.match(old, self.cs)
+                ok = m >= 0
+                self.P[ok] = oldP[m[ok]]
+            centers = s.centers(reference=ref)
+            self.G = kin.build_G(self.cs, s.kind, s.rot, centers, s.bnode_index_flat, s.bnode_offset)
+            self.W_dirty = True
+            if ref:
+                self.gap_ref = self.cs.gap - self.cs.g0
+        if self.W_dirty:
+            from .. import delassus
+            W_flat, W_offset, W_size = s.W_blocks()
+            self.Wdel = delassus.assemble(self.G, W_flat, W_offset, W_size, s.nb)
+            self.W_dirty = False
+
+    def _check_initial_penetration(self, first):
+        if not first or len(self.cs.gap) == 0:
+            return
+        gt = self.cs.gap - self.cs.g0
+        alert = np.array([itf.alert for itf in self.interfaces])[self.cs.interface]
+        bad = np.flatnonzero(gt < -alert)
+        if bad.size:
+            a = bad[np.argmin(gt[bad])]
+            names = self.body_names or [str(i) for i in range(self.scene.nb)]
+            raise InputError(f"bodies {names[self.cs.cand_body[a]]!r} and {names[self.cs.ant_body[a]]!r} overlap "
+                             f"at the start: penetration {-gt[a]:.3g} m > alert distance {alert[a]:.3g} m")
+
+    # ------------------------------------------------------------------ the step
+    def solve(self, sim, t0, t1):
+        from ..solver import nlgs
+        first = self.scene is None
+        if first:
+            self.scene = ContactScene(sim, self.body_group)
+            self.table = self._table()
+            self.body_thickness = np.array([b.type.material.thickness if b.kind == 0 else b.thickness
+                                            for b in sim.bodies])
+        self._geometry(sim, first)
+        s, cs = self.scene, self.cs
+        h, th = sim.h, sim.theta
+        nc = len(cs.gap)
+        self.steps += 1
+        if nc == 0:
+            s.apply_impulse(np.zeros(s.n_udof))
+            self.last = dict(contacts=0, active=0, sweeps=0, change=0.0, residual=0.0, converged=True)
+            return self.last
+        ufree = s.gather("ufree")
+        vfree = kin.local_velocity(self.G, ufree, s.U_offset)
+        vi = kin.local_velocity(self.G, s.gather("u"), s.U_offset)
+        if self.opts.geometry == "frozen":
+            gt = self.gap_ref + kin.local_velocity(self.G, s.gather("q"), s.U_offset)[:, 0]
+        else:
+            gt = cs.gap - cs.g0
+        gbar = gt + h * (1 - th) * vi[:, 0]
+        q = vfree.copy()
+        q[:, 0] += gbar / (h * th)
+        res = nlgs.solve_block_csr(self.Wdel, q.ravel(), self.mu, r0=self.P.ravel(), tol=self.opts.tol,
+                                   max_sweeps=self.opts.max_sweeps, omega=self.opts.omega, order=self.opts.order,
+                                   seed=self.opts.seed + self.steps)
+        P = res.r.reshape(-1, 2)
+        self.P = P
+        v = res.u.reshape(-1, 2)
+        imp = kin.accumulate_impulse(self.G, P, s.n_udof, s.U_offset)
+        s.apply_impulse(imp)
+        self.gt_end = gbar + h * th * v[:, 0]
+        self.v = v
+        self.r = P / h
+        status = np.zeros(nc, dtype=np.int64)
+        closed = P[:, 0] > 0
+        slip = closed & (np.abs(P[:, 1]) >= self.mu * P[:, 0] * (1 - 1e-9)) & (np.abs(v[:, 1]) > 1e-12)
+        status[closed] = 1
+        status[slip] = 2
+        self.status = status
+        if not res.converged:
+            self.n_unconverged += 1
+        self.last = dict(contacts=nc, active=int(closed.sum()), slip=int(slip.sum()), sweeps=int(res.sweeps),
+                         change=float(res.change), residual=float(res.residual), converged=bool(res.converged))
+        if not res.converged and self.opts.on_nonconvergence == "fail":
+            from ..errors import ConvergenceError
+            raise ConvergenceError(f"step {sim.step_count + 1} (t = {t1:.6g} s): NLGS did not converge in "
+                                   f"{res.sweeps} sweeps (change {res.change:.3g}, residual {res.residual:.3g})")
+        return self.last
