@@ -339,6 +339,74 @@ def detect(bx, bnode_body, bnode_local, bedges, bedge_body, kind, body_group, ta
         cand_edge=ce, ant_edge=ae, key=key.astype(np.int64))
 
 
+@njit(cache=True)
+def _inside_depth(pairs, bx, bedges, node_start, edge_start, tol):
+    """For body pairs (A, B): deepest boundary node of one body strictly inside the other (ray casting),
+    depth = distance to the other body's boundary. Returns (depth per pair)."""
+    out = np.zeros(pairs.shape[0])
+    for p in range(pairs.shape[0]):
+        for side in range(2):
+            A = pairs[p, side]
+            B = pairs[p, 1 - side]
+            for k in range(node_start[A], node_start[A + 1]):
+                x = bx[k, 0]
+                y = bx[k, 1]
+                inside = False
+                dmin = np.inf
+                for e in range(edge_start[B], edge_start[B + 1]):
+                    x0 = bx[bedges[e, 0], 0]
+                    y0 = bx[bedges[e, 0], 1]
+                    x1 = bx[bedges[e, 1], 0]
+                    y1 = bx[bedges[e, 1], 1]
+                    if (y0 > y) != (y1 > y):
+                        xc = x0 + (y - y0) * (x1 - x0) / (y1 - y0)
+                        if xc > x:
+                            inside = not inside
+                    dx = x1 - x0
+                    dy = y1 - y0
+                    l2 = dx * dx + dy * dy
+                    tpar = ((x - x0) * dx + (y - y0) * dy) / l2 if l2 > 0 else 0.0
+                    tpar = min(max(tpar, 0.0), 1.0)
+                    ex = x0 + tpar * dx - x
+                    ey = y0 + tpar * dy - y
+                    d = np.sqrt(ex * ex + ey * ey)
+                    if d < dmin:
+                        dmin = d
+                if inside and dmin > tol and dmin > out[p]:
+                    out[p] = dmin
+    return out
+
+
+def find_overlap(bx, bnode_body, bedges, bedge_body, tol: float):
+    """(body_a, body_b, depth) of the deepest overlap — a boundary node of one body inside another by more
+    than `tol` — or None. Bodies only touching are not overlapping. Nodes and edges must be grouped by body."""
+    bx = np.ascontiguousarray(bx, dtype=np.float64)
+    bedges = np.ascontiguousarray(bedges, dtype=np.int64)
+    nb = int(max(bnode_body.max(), bedge_body.max())) + 1 if len(bnode_body) else 0
+    if nb < 2:
+        return None
+    node_start = np.zeros(nb + 1, dtype=np.int64)
+    node_start[1:] = np.cumsum(np.bincount(bnode_body, minlength=nb))
+    edge_start = np.zeros(nb + 1, dtype=np.int64)
+    edge_start[1:] = np.cumsum(np.bincount(bedge_body, minlength=nb))
+    if np.any(np.diff(bnode_body) < 0) or np.any(np.diff(bedge_body) < 0):
+        raise ValueError("find_overlap: nodes and edges must be sorted by body")
+    lo = np.full((nb, 2), np.inf)
+    hi = np.full((nb, 2), -np.inf)
+    np.minimum.at(lo, bnode_body, bx)
+    np.maximum.at(hi, bnode_body, bx)
+    box = np.column_stack([lo, hi])
+    size = float(np.median(np.max(hi - lo, axis=1)))
+    pairs = _grid_pairs(box, np.arange(nb, dtype=np.int64), max(size, 1e-12))
+    if len(pairs) == 0:
+        return None
+    depth = _inside_depth(pairs, bx, bedges, node_start, edge_start, float(tol))
+    k = int(np.argmax(depth))
+    if depth[k] <= 0:
+        return None
+    return int(pairs[k, 0]), int(pairs[k, 1]), float(depth[k])
+
+
 def update_geometry(cs: ContactSet, bx, bedges) -> ContactSet:
     """Same pairs and weights, frames and gaps recomputed from current positions (small-sliding mode)."""
     a, b = bx[bedges[cs.ant_edge, 0]], bx[bedges[cs.ant_edge, 1]]

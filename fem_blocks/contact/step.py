@@ -135,7 +135,7 @@ class ContactStep:
             bx = s.positions(reference=ref)
             old, oldP = self.cs, self.P
             self.cs = self._detect(bx)
-            self._check_initial_penetration(first)
+            self._check_initial_penetration(first, bx)
             self._assign_laws()
             nc = len(self.cs.gap)
             self.P = np.zeros((nc, 2))
@@ -154,17 +154,27 @@ class ContactStep:
             self.Wdel = delassus.assemble(self.G, W_flat, W_offset, W_size, s.nb)
             self.W_dirty = False
 
-    def _check_initial_penetration(self, first):
-        if not first or len(self.cs.gap) == 0:
+    def _check_initial_penetration(self, first, bx):
+        """Bodies overlapping at the start (boundaries crossing deeper than the alert distance) are a
+        geometry error, as are contact points already penetrating by more than the alert distance."""
+        if not first:
+            return
+        names = self.body_names or [str(i) for i in range(self.scene.nb)]
+        alert = min(itf.alert for itf in self.interfaces)
+        s = self.scene
+        ov = det.find_overlap(bx, s.bnode_body, s.bedges, s.bedge_body, alert)
+        if ov is not None:
+            raise InputError(f"bodies {names[ov[0]]} and {names[ov[1]]} overlap at the start by {ov[2]:.3g} m "
+                             f"(more than the alert distance {alert:.3g} m)")
+        if len(self.cs.gap) == 0:
             return
         gt = self.cs.gap - self.cs.g0
-        alert = np.array([itf.alert for itf in self.interfaces])[self.cs.interface]
-        bad = np.flatnonzero(gt < -alert)
+        alerts = np.array([itf.alert for itf in self.interfaces])[self.cs.interface]
+        bad = np.flatnonzero(gt < -alerts)
         if bad.size:
             a = bad[np.argmin(gt[bad])]
-            names = self.body_names or [str(i) for i in range(self.scene.nb)]
-            raise InputError(f"bodies {names[self.cs.cand_body[a]]!r} and {names[self.cs.ant_body[a]]!r} overlap "
-                             f"at the start: penetration {-gt[a]:.3g} m > alert distance {alert[a]:.3g} m")
+            raise InputError(f"bodies {names[self.cs.cand_body[a]]} and {names[self.cs.ant_body[a]]} overlap at the "
+                             f"start by {-gt[a]:.3g} m (more than the alert distance {alerts[a]:.3g} m)")
 
     # ------------------------------------------------------------------ the step
     def solve(self, sim, t0, t1):
