@@ -256,6 +256,7 @@ class BlockSpec:
     type: str
     position: tuple
     angle: float  # radians
+    group: str = "blocks"
     clamps: list = field(default_factory=list)
     tractions: list = field(default_factory=list)
 
@@ -270,6 +271,21 @@ class RigidSpec:
     thickness: float
     drivers: dict
     forces: dict
+    group: str = "rigid"
+
+
+@dataclass
+class InterfaceCaseSpec:
+    name: str
+    groups: tuple
+    law: str
+    mu: float
+    g0: float
+    alert: float
+    placement: str
+    positions: tuple
+    candidate: str | None
+    orientation: str
 
 
 @dataclass
@@ -280,6 +296,9 @@ class StageSpec:
     theta: float
     velocity_reset: bool
     output_every: int
+    stop_at_equilibrium: bool = False
+    equilibrium_velocity: float = 1e-6
+    min_steps: int = 1
 
 
 @dataclass
@@ -294,6 +313,8 @@ class Case:
     rigid_bodies: list
     stages: list
     output: dict
+    contact: dict = field(default_factory=dict)
+    interfaces: list = field(default_factory=list)
 
 
 def load_case(path: str) -> Case:
@@ -322,8 +343,8 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
     U = UNIT_SYSTEMS[units]
     root.units = U
     name = root.string("name", os.path.splitext(os.path.basename(source))[0])
-    gravity = root.vector("gravity", 2, default=(0.0, -9.81))
-    gravity = tuple(g * U["length"] / U["time"] ** 2 for g in gravity)
+    gravity = root.vector("gravity", 2)
+    gravity = (0.0, -9.81) if gravity is None else tuple(g * U["length"] / U["time"] ** 2 for g in gravity)
 
     materials = {}
     for mname, t in root.named_tables("materials").items():
@@ -378,7 +399,7 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
             raise t.error("name", f"= {bname!r}: duplicate body name")
         names.add(bname)
         b = BlockSpec(name=bname, type=ty, position=t.vector("position", 2, (0.0, 0.0), dim="length"),
-                      angle=math.radians(t.number("angle", 0.0)))
+                      angle=math.radians(t.number("angle", 0.0)), group=t.string("group", "blocks"))
         for c in t.tables("clamps"):
             box = c.vector("box", 4, dim="length")
             tag = c.string("tag")
@@ -403,40 +424,14 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
         if rname in names:
             raise t.error("name", f"= {rname!r}: duplicate body name")
         names.add(rname)
-        rho = t.number("rho", lo=0, lo_open=True, dim="density")
-        mass = t.number("mass", lo=0, lo_open=True, dim="mass")
-        inertia = t.number("inertia", lo=0, lo_open=True)
-        if inertia is not None:
-            inertia *= U["mass"] * U["length"] ** 2
-        drivers, forces = {}, {}
-        dt = t.table("drivers")
-        if dt is not None:
-            for dof in list(dt.data):
-                if dof not in ("x", "y", "rz"):
-                    raise dt.error(dof, "unknown dof; expected x, y or rz")
-                d = dt.table(dof)
-                kind = d.string("kind", required=True, choices=("velocity", "displacement"))
-                dim = None if dof == "rz" else "length"
-                hist = d.history("history", dim, required=True)
-                drivers[dof] = (kind, hist)
-                d.done()
-            dt.done()
-        ft = t.table("forces")
-        if ft is not None:
-            for dof in list(ft.data):
-                if dof not in ("x", "y", "rz"):
-                    raise ft.error(dof, "unknown dof; expected x, y or rz")
-                if dof in drivers:
-                    raise ft.error(dof, "this dof is driven; a driven dof cannot also carry a force")
-                forces[dof] = ft.history(dof, "force" if dof != "rz" else None)
-            ft.done()
-        if rho is None and mass is None and not (len(drivers) == 3):
-            raise t.error("rho", "missing; give rho [kg/m^3] or mass [kg] (only a body with all three dofs "
-                                 "driven may omit both)")
-        rigid.append(RigidSpec(name=rname, vertices=t.points("vertices"), rho=rho, mass=mass, inertia=inertia,
-                               thickness=t.number("thickness", 1.0, lo=0, lo_open=True, dim="length"),
-                               drivers=drivers, forces=forces))
+        r = _parse_rigid(t, U, rname, t.points("vertices"))
+        r.group = t.string("group", "rigid")
+        rigid.append(r)
         t.done()
+    wall = root.table("wall")
+    if wall is not None:
+        _parse_wall(wall, U, materials, block_types, blocks, rigid, names)
+        wall.done()
     if not blocks and not rigid:
         raise root.error("blocks", "missing; expected at least one [[blocks]] or [[rigid_bodies]] entry")
 
@@ -453,11 +448,72 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
             raise t.error("duration", f"= {dur:g} s: expected at least one time step h = {h:g} s")
         if dur / h > 1e8:
             raise t.error("duration", f"= {dur:g} s: expected at most 1e8 steps of h = {h:g} s")
-        stages.append(StageSpec(name=sname, duration=dur, h=h,
-                                theta=t.number("theta", 0.5, lo=0.5, hi=1.0),
-                                velocity_reset=t.boolean("velocity_reset", False),
-                                output_every=t.integer("output_every", 1, lo=1)))
+        st = StageSpec(name=sname, duration=dur, h=h,
+                       theta=t.number("theta", 0.5, lo=0.5, hi=1.0),
+                       velocity_reset=t.boolean("velocity_reset", False),
+                       output_every=t.integer("output_every", 1, lo=1))
+        eq = t.table("stop_at_equilibrium")
+        if eq is not None:
+            st.stop_at_equilibrium = True
+            st.equilibrium_velocity = eq.number("max_velocity", 1e-6, lo=0, lo_open=True, dim="length")
+            st.min_steps = eq.integer("min_steps", 10, lo=1)
+            eq.done()
+        stages.append(st)
         t.done()
+
+    contact = {}
+    ct = root.table("contact")
+    if ct is not None:
+        contact = dict(geometry=ct.string("geometry", "frozen", choices=("frozen", "updated")),
+                       redetect_every=ct.integer("redetect_every", 1, lo=1),
+                       tol=ct.number("tol", 1e-6, lo=0, lo_open=True),
+                       max_sweeps=ct.integer("max_sweeps", 2000, lo=1),
+                       omega=ct.number("omega", 1.0, lo=0, hi=2, lo_open=True, hi_open=True),
+                       order=ct.string("order", "given", choices=("given", "reversed", "shuffled")),
+                       seed=ct.integer("seed", 0, lo=0),
+                       on_nonconvergence=ct.string("on_nonconvergence", "warn", choices=("warn", "fail")))
+        ct.done()
+    all_groups = {b.group for b in blocks} | {r.group for r in rigid}
+    interfaces = []
+    seen_if = set()
+    for i, t in enumerate(root.tables("interfaces")):
+        iname = t.string("name", f"interface{i}")
+        if iname in seen_if:
+            raise t.error("name", f"= {iname!r}: duplicate interface name")
+        seen_if.add(iname)
+        between = t.raw("between")
+        if (not isinstance(between, list) or len(between) != 2 or not all(isinstance(g, str) for g in between)):
+            raise t.error("between", "expected two body group names, e.g. [\"bricks\", \"bricks\"]")
+        for g in between:
+            if g not in all_groups:
+                raise t.error("between", f"group {g!r} has no body; expected groups among {sorted(all_groups)}")
+        cand = t.string("candidate")
+        if cand is not None and cand not in between:
+            raise t.error("candidate", f"= {cand!r}: expected one of {between}")
+        pos = t.raw("positions", [0.25, 0.75])
+        if (not isinstance(pos, list) or not pos or
+                not all(isinstance(x, NUMBER) and not isinstance(x, bool) and 0 < x < 1 for x in pos)):
+            raise t.error("positions", f"= {pos!r}: expected a list of relative positions strictly between 0 and 1")
+        law = t.string("law", "coulomb", choices=("coulomb",))
+        interfaces.append(InterfaceCaseSpec(
+            name=iname, groups=tuple(between), law=law, mu=t.number("mu", required=True, lo=0),
+            g0=t.number("g0", 0.0, lo=0, dim="length"),
+            alert=t.number("alert", 1e-3, lo=0, lo_open=True, dim="length"),
+            placement=t.string("placement", "positions", choices=("positions", "nodes")),
+            positions=tuple(float(x) for x in pos), candidate=cand,
+            orientation=t.string("orientation", "any", choices=("any", "bed", "head"))))
+        t.done()
+    pairs = {}
+    for itf in interfaces:
+        pairs.setdefault(tuple(sorted(itf.groups)), []).append(itf)
+    for key, lst in pairs.items():
+        orients = sorted(x.orientation for x in lst)
+        if not (orients == ["any"] or orients == ["bed", "head"]):
+            raise InputError(f"{source}: interfaces {[x.name for x in lst]}: the group pair {list(key)} takes one "
+                             f"interface (orientation 'any') or two ('bed' and 'head'), got {orients}")
+    if interfaces and not contact:
+        contact = dict(geometry="frozen", redetect_every=1, tol=1e-6, max_sweeps=2000, omega=1.0, order="given",
+                       seed=0, on_nonconvergence="warn")
 
     out = root.table("output")
     output = {"paraview": True, "stress": True}
@@ -467,4 +523,142 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
         out.done()
     root.done()
     return Case(source=source, name=name, units=units, gravity=gravity, materials=materials,
-                block_types=block_types, blocks=blocks, rigid_bodies=rigid, stages=stages, output=output)
+                block_types=block_types, blocks=blocks, rigid_bodies=rigid, stages=stages, output=output,
+                contact=contact, interfaces=interfaces)
+
+
+def _parse_rigid(t: Table, U: dict, rname: str, vertices) -> RigidSpec:
+    """Mass, thickness, drivers and forces of a rigid body table."""
+    rho = t.number("rho", lo=0, lo_open=True, dim="density")
+    mass = t.number("mass", lo=0, lo_open=True, dim="mass")
+    inertia = t.number("inertia", lo=0, lo_open=True)
+    if inertia is not None:
+        inertia *= U["mass"] * U["length"] ** 2
+    drivers, forces = {}, {}
+    dt = t.table("drivers")
+    if dt is not None:
+        for dof in list(dt.data):
+            if dof not in ("x", "y", "rz"):
+                raise dt.error(dof, "unknown dof; expected x, y or rz")
+            d = dt.table(dof)
+            kind = d.string("kind", required=True, choices=("velocity", "displacement"))
+            hist = d.history("history", None if dof == "rz" else "length", required=True)
+            drivers[dof] = (kind, hist)
+            d.done()
+        dt.done()
+    ft = t.table("forces")
+    if ft is not None:
+        for dof in list(ft.data):
+            if dof not in ("x", "y", "rz"):
+                raise ft.error(dof, "unknown dof; expected x, y or rz")
+            if dof in drivers:
+                raise ft.error(dof, "this dof is driven; a driven dof cannot also carry a force")
+            forces[dof] = ft.history(dof, "force" if dof != "rz" else None)
+        ft.done()
+    if rho is None and mass is None and not (len(drivers) == 3):
+        raise t.error("rho", "missing; give rho [kg/m^3] or mass [kg] (only a body with all three dofs "
+                             "driven may omit both)")
+    return RigidSpec(name=rname, vertices=vertices, rho=rho, mass=mass, inertia=inertia,
+                     thickness=t.number("thickness", 1.0, lo=0, lo_open=True, dim="length"),
+                     drivers=drivers, forces=forces)
+
+
+FIXED = {k: ("velocity", 0.0) for k in ("x", "y", "rz")}
+
+
+def _parse_wall(w: Table, U: dict, materials, block_types, blocks, rigid, names):
+    """[wall]: a masonry wall built by `builders`, its block types, optional rigid foundation and top beam."""
+    from . import builders
+    kind = w.string("type", "running_bond", choices=("running_bond", "courses", "prism"))
+    mat = w.string("material", required=True)
+    if mat not in materials:
+        raise w.error("material", f"= {mat!r}: expected one of the [materials] {sorted(materials)}")
+    L = w.number("brick_length", required=True, lo=0, lo_open=True, dim="length")
+    H = w.number("brick_height", required=True, lo=0, lo_open=True, dim="length")
+    joint = w.number("joint", 0.0, lo=0, dim="length")
+    expanded = w.boolean("expanded", False)
+    size = w.number("mesh_size", required=True, lo=0, lo_open=True, dim="length")
+    cell = w.string("cell", "quad", choices=("quad", "triangle"))
+    mass = w.string("mass", "lumped", choices=("lumped", "consistent"))
+    x0, y0 = w.vector("position", 2, (0.0, 0.0), dim="length")
+    group = w.string("group", "bricks")
+    name = f"{w.source}: wall"
+    try:
+        if kind == "running_bond":
+            ops = w.raw("openings", [])
+            if not isinstance(ops, list) or not all(isinstance(o, list) and len(o) == 4 for o in ops):
+                raise w.error("openings", "expected a list of [x0, y0, x1, y1] rectangles [m]")
+            ops = [[float(v) * U["length"] for v in o] for o in ops]
+            lay = builders.running_bond(w.integer("courses", required=True, lo=1),
+                                        w.integer("bricks_per_course", required=True, lo=1), L, H, joint, expanded,
+                                        w.boolean("half_bricks", True), openings=ops, name=name)
+        elif kind == "courses":
+            rows = w.raw("rows")
+            if not isinstance(rows, list) or not rows:
+                raise w.error("rows", "expected a list of courses, e.g. [[0.5, 1, 1, 0.5], [1, 1, 1]]")
+            rows = [[({"gap": float(it["gap"]) * U["length"]} if isinstance(it, dict) and "gap" in it else it)
+                     for it in row] if isinstance(row, list) else row for row in rows]
+            lay = builders.courses(rows, L, H, joint, expanded, name=f"{w.source}: wall.rows")
+        else:
+            lay = builders.stack_prism(w.integer("bricks", required=True, lo=1), L, H, joint, expanded, name=name)
+    except InputError:
+        raise
+    builders.Layout(lay).check_no_overlap(name)
+    sizes = {}
+    for k, b in enumerate(lay):
+        if b.size_key not in sizes:
+            tname = f"wall_{len(sizes)}"
+            sizes[b.size_key] = tname
+            block_types[tname] = BlockTypeSpec(name=tname, geometry="rectangle", material=mat, mesh_size=size,
+                                               cell=cell, mass=mass, lx=b.length, ly=b.height)
+        bname = f"brick{k}"
+        if bname in names:
+            raise w.error("group", f"body name {bname!r} already used")
+        names.add(bname)
+        blocks.append(BlockSpec(name=bname, type=sizes[b.size_key], position=(b.x + x0, b.y + y0), angle=0.0,
+                                group=group))
+    xs0 = min(b.x for b in lay) + x0
+    xs1 = max(b.x + b.length for b in lay) + x0
+    ybot = min(b.y for b in lay) + y0
+    ytop = max(b.y + b.height for b in lay) + y0
+    gap = 0.0 if expanded else joint
+    f = w.table("foundation")
+    if f is not None:
+        depth = f.number("depth", 0.1, lo=0, lo_open=True, dim="length")
+        over = f.number("overhang", 0.0, lo=0, dim="length")
+        splits = f.raw("split", [])
+        if not isinstance(splits, list) or not all(isinstance(v, NUMBER) for v in splits):
+            raise f.error("split", "expected a list of x positions [m] where the foundation is cut")
+        cuts = sorted(float(v) * U["length"] + x0 for v in splits)
+        for c in cuts:
+            if not (xs0 - over < c < xs1 + over):
+                raise f.error("split", f"cut at x = {c:g} m outside the foundation [{xs0 - over:g}, {xs1 + over:g}]")
+        edges = [xs0 - over] + cuts + [xs1 + over]
+        sett = f.table("settlement")
+        part, hist = None, None
+        if sett is not None:
+            part = sett.integer("part", required=True, lo=0, hi=len(edges) - 2)
+            hist = sett.history("history", "length", required=True)
+            sett.done()
+        for k in range(len(edges) - 1):
+            top = ybot - gap
+            verts = [(edges[k], top - depth), (edges[k + 1], top - depth), (edges[k + 1], top), (edges[k], top)]
+            drv = dict(FIXED)
+            if k == part:
+                drv["y"] = ("displacement", hist)
+            rname = "foundation" if len(edges) == 2 else f"foundation{k}"
+            names.add(rname)
+            rigid.append(RigidSpec(name=rname, vertices=verts, rho=None, mass=None, inertia=None, thickness=1.0,
+                                   drivers=drv, forces={}, group="foundation"))
+        f.done()
+    bt = w.table("beam")
+    if bt is not None:
+        depth = bt.number("depth", required=True, lo=0, lo_open=True, dim="length")
+        over = bt.number("overhang", 0.0, lo=0, dim="length")
+        bot = ytop + gap
+        verts = [(xs0 - over, bot), (xs1 + over, bot), (xs1 + over, bot + depth), (xs0 - over, bot + depth)]
+        r = _parse_rigid(bt, U, "beam", verts)
+        r.group = "beam"
+        names.add("beam")
+        rigid.append(r)
+        bt.done()

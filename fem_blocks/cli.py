@@ -10,7 +10,7 @@ import os
 import sys
 
 from . import __version__
-from .errors import InputError
+from .errors import ConvergenceError, InputError
 
 DEMO_DIR = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "demos")
 DEFAULT_DEMO = "vibrating_block"
@@ -84,6 +84,9 @@ def main(argv=None) -> int:
     except KeyboardInterrupt:
         print("fem-blocks: interrupted", file=sys.stderr)
         return 130
+    except ConvergenceError as e:
+        print(f"fem-blocks: run stopped: {e}", file=sys.stderr)
+        return 1
     except (FloatingPointError, ArithmeticError) as e:
         print(f"fem-blocks: run failed: {e}", file=sys.stderr)
         return 1

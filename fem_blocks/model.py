@@ -16,7 +16,8 @@ class Model:
     block_types: dict
     names: list
     gravity: np.ndarray
-    interfaces: dict = field(default_factory=dict)
+    groups: list = field(default_factory=list)
+    contact: object = None  # contact.step.ContactStep or None
 
     def index(self, name: str) -> int:
         try:
@@ -51,7 +52,7 @@ def build_model(case: Case) -> Model:
         except InputError as e:
             raise InputError(f"{case.source}: block_types.{name}: {e}") from None
         block_types[name] = BlockType(mesh, mat, mass=spec.mass, name=f"block_types.{name}")
-    bodies, names = [], []
+    bodies, names, groups = [], [], []
     for i, b in enumerate(case.blocks):
         bt = block_types[b.type]
         label = f"{case.source}: blocks[{i}]"
@@ -64,6 +65,7 @@ def build_model(case: Case) -> Model:
             raise InputError(str(e)) from None
         bodies.append(body)
         names.append(b.name)
+        groups.append(b.group)
     for i, r in enumerate(case.rigid_bodies):
         label = f"{case.source}: rigid_bodies[{i}]"
         drivers = {dof: Driver(kind, hist, name=f"{label}.drivers.{dof}") for dof, (kind, hist) in r.drivers.items()}
@@ -71,4 +73,12 @@ def build_model(case: Case) -> Model:
                          drivers=drivers, forces=r.forces, name=label)
         bodies.append(body)
         names.append(r.name)
-    return Model(bodies, block_types, names, np.asarray(case.gravity, dtype=float))
+        groups.append(r.group)
+    contact = None
+    if case.interfaces:
+        from .contact.step import ContactOptions, ContactStep, InterfaceSpec
+        specs = [InterfaceSpec(name=i.name, groups=i.groups, law=i.law, mu=i.mu, g0=i.g0, alert=i.alert,
+                               placement=i.placement, positions=i.positions, candidate=i.candidate,
+                               orientation=i.orientation) for i in case.interfaces]
+        contact = ContactStep(specs, groups, ContactOptions(**case.contact), body_names=names)
+    return Model(bodies, block_types, names, np.asarray(case.gravity, dtype=float), groups, contact)

@@ -16,6 +16,7 @@ from .case import Case
 from .dynamics import Simulation
 from .model import Model, build_model
 from .output.history import HistoryWriter
+from .output.contacts import ContactsWriter
 from .output.paraview import BodiesWriter
 from .output.summary import write_summary
 
@@ -58,6 +59,8 @@ def history_columns(model: Model) -> list[str]:
             name = model.names[i]
             cols += [f"{name}.u{d}" for d in DOFS]
             cols += [f"{name}.R{DOFS[k]}" for k in sorted(b.drivers)]
+    if model.contact is not None:
+        cols += ["contacts", "closed", "slip", "sweeps", "change", "residual", "converged"]
     return cols
 
 
@@ -72,6 +75,11 @@ def history_row(model: Model, info, stage_index: int) -> dict:
                 row[f"{name}.u{d}"] = b.q[k]
             for k in sorted(b.drivers):
                 row[f"{name}.R{DOFS[k]}"] = b.reaction[k]
+    if model.contact is not None:
+        c = info.contact or {}
+        row.update(contacts=c.get("contacts", 0), closed=c.get("active", 0), slip=c.get("slip", 0),
+                   sweeps=c.get("sweeps", 0), change=c.get("change", 0.0), residual=c.get("residual", 0.0),
+                   converged=int(c.get("converged", True)))
     return row
 
 
@@ -83,15 +91,20 @@ def run_case(case: Case, out_dir: str, progress: bool = True) -> dict:
     t_setup = _time.perf_counter() - t_start
     st0 = case.stages[0]
     sim = Simulation(model.bodies, h=st0.h, theta=st0.theta, gravity=model.gravity,
-                     velocity_reset=st0.velocity_reset)
+                     velocity_reset=st0.velocity_reset, contact=model.contact)
     pv = BodiesWriter(sim, os.path.join(out_dir, "paraview"), stress=case.output["stress"]) \
         if case.output["paraview"] else None
+    pc = ContactsWriter(model.contact, os.path.join(out_dir, "paraview")) \
+        if case.output["paraview"] and model.contact is not None else None
+    cstats = dict(steps=0, sweeps=0, max_sweeps=0, unconverged=0, max_residual=0.0, max_change=0.0)
     hist = HistoryWriter(os.path.join(out_dir, "history.csv"), history_columns(model), flush_every=50)
     bar = Progress(progress)
     info = sim.info()
     hist.write(history_row(model, info, 0))
     if pv:
         pv.write(sim.time)
+    if pc:
+        pc.write(sim.time)
     n_frames = 1
     e0 = info.total_energy
     stages_done = []
@@ -101,18 +114,41 @@ def run_case(case: Case, out_dir: str, progress: bool = True) -> dict:
             sim.velocity_reset = st.velocity_reset
             n_steps = max(1, int(round(st.duration / st.h)))
             t_stage = _time.perf_counter()
+            unconv0 = cstats["unconverged"]
+            stopped = None
             for k in range(1, n_steps + 1):
                 info = sim.step()
                 hist.write(history_row(model, info, si))
-                if pv and (k % st.output_every == 0 or k == n_steps):
-                    pv.write(sim.time)
-                    n_frames += 1
-                bar.update(f"[{si + 1}/{len(case.stages)} {st.name}] step {k}/{n_steps} t = {sim.time:.6g} s "
-                           f"E = {info.total_energy:.6g} J vmax = {info.max_velocity:.3g} m/s", force=k == n_steps)
+                c = info.contact
+                if c:
+                    cstats["steps"] += 1
+                    cstats["sweeps"] += c["sweeps"]
+                    cstats["max_sweeps"] = max(cstats["max_sweeps"], c["sweeps"])
+                    cstats["unconverged"] += 0 if c["converged"] else 1
+                    cstats["max_residual"] = max(cstats["max_residual"], c["residual"])
+                    cstats["max_change"] = max(cstats["max_change"], c["change"])
                 if not np.isfinite(info.total_energy):
                     raise FloatingPointError(f"stage {st.name!r}, step {k}: the state became NaN/Inf")
-            stages_done.append(dict(name=st.name, steps=n_steps, h=st.h, theta=st.theta,
-                                    wall_time=_time.perf_counter() - t_stage))
+                at_eq = (st.stop_at_equilibrium and k >= st.min_steps
+                         and info.max_velocity <= st.equilibrium_velocity)
+                last = k == n_steps or at_eq
+                if pv and (k % st.output_every == 0 or last):
+                    pv.write(sim.time)
+                    if pc:
+                        pc.write(sim.time)
+                    n_frames += 1
+                extra = f" sweeps {c['sweeps']}" if c else ""
+                bar.update(f"[{si + 1}/{len(case.stages)} {st.name}] step {k}/{n_steps} t = {sim.time:.6g} s "
+                           f"E = {info.total_energy:.6g} J vmax = {info.max_velocity:.3g} m/s{extra}", force=last)
+                if at_eq:
+                    stopped = f"equilibrium (max velocity {info.max_velocity:.3g} m/s) after {k} steps"
+                    break
+            n_unconv = cstats["unconverged"] - unconv0
+            if n_unconv:
+                print(f"fem-blocks: warning: stage {st.name!r}: {n_unconv} of {k} steps reached the NLGS sweep "
+                      f"limit without converging (see the 'converged' column of history.csv)", file=sys.stderr)
+            stages_done.append(dict(name=st.name, steps=k, h=st.h, theta=st.theta, stopped=stopped or "duration",
+                                    unconverged_steps=n_unconv, wall_time=_time.perf_counter() - t_stage))
     finally:
         hist.close()
         bar.close()
@@ -127,8 +163,9 @@ def run_case(case: Case, out_dir: str, progress: bool = True) -> dict:
                    final_energy=dict(kinetic=info.kinetic, elastic=info.elastic,
                                      gravity_potential=info.gravity_potential, total=info.total_energy,
                                      initial_total=e0, external_work=info.external_work),
-                   frames=n_frames, setup_time=t_setup, wall_time=_time.perf_counter() - t_start,
+                   frames=n_frames, setup_time=t_setup, contact=cstats if model.contact is not None else None, wall_time=_time.perf_counter() - t_start,
                    outputs=dict(paraview=os.path.join("paraview", "blocks.pvd") if pv else None,
+                                contacts=os.path.join("paraview", "contacts.pvd") if pc else None,
                                 history="history.csv"))
     write_summary(os.path.join(out_dir, "summary.json"), summary)
     return summary

@@ -202,3 +202,16 @@ def test_bad_interface_parameters():
         InterfaceSpec("j", ("a", "a"), g0=-1e-3)
     with pytest.raises(InputError, match="group 'c' has no body"):
         ContactStep([InterfaceSpec("j", ("a", "c"))], ["a", "a"])
+
+
+def test_contacts_survive_a_change_of_time_step():
+    """Stages with different h rebuild the step operators; contacts must keep acting on the new state."""
+    blocks, floor, cs, m = stack(3)
+    sim = Simulation(blocks + [floor], h=1e-3, theta=1.0, contact=cs, velocity_reset=True)
+    for _ in range(50):
+        sim.step()
+    sim.set_step(2e-3, 1.0)
+    for _ in range(50):
+        sim.step()
+    assert floor.reaction[1] == pytest.approx(3 * m * G, rel=1e-4)
+    assert sim.info().max_velocity < 1e-6

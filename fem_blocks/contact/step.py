@@ -106,7 +106,10 @@ class ContactStep:
 
     # ------------------------------------------------------------------ set-up
     def on_step_change(self, sim):
+        """New (h, theta): the simulation rebuilt its groups (new state arrays and step operators)."""
         self.W_dirty = True
+        if self.scene is not None:
+            self.scene._group_index()
 
     def _table(self):
         gid = {g: i for i, g in enumerate(self.group_names)}

@@ -1,0 +1,47 @@
+"""ParaView output of the contact points: a vertex cloud per frame in `contacts.pvd`.
+
+Point data: reaction (force of the antagonist on the candidate, global frame, N), r_N, r_T (local, N),
+normal, gap (joint-corrected gap g - g0 at the end of the step, m), status (0 open, 1 stick, 2 slip),
+interface (interface/law id), area (tributary area, m²)."""
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+from .pvd import PvdSeries
+from .vtu import write_vtu
+
+
+class ContactsWriter:
+    def __init__(self, contact, directory: str, append: bool = False, basename: str = "contacts"):
+        self.contact, self.dir, self.base = contact, directory, basename
+        os.makedirs(directory, exist_ok=True)
+        pvd = os.path.join(directory, f"{basename}.pvd")
+        self.series = PvdSeries.open_existing(pvd) if append and os.path.exists(pvd) else PvdSeries(pvd)
+        self.frame = len(self.series.entries)
+
+    def arrays(self):
+        c = self.contact
+        cs = getattr(c, "cs", None)
+        if cs is None or len(cs.gap) == 0 or getattr(c, "r", None) is None or len(c.r) != len(cs.gap):
+            return np.zeros((0, 2)), {}
+        s = c.scene
+        bx = s.positions()
+        b = cs.cand_body
+        idx = s.bx_start[b][:, None] + s.bnode_index_flat[s.bnode_offset[b][:, None] + cs.cand_nodes]
+        x = cs.cand_w[:, :1] * bx[idx[:, 0]] + cs.cand_w[:, 1:] * bx[idx[:, 1]]
+        r = c.r
+        data = {"reaction": r[:, :1] * cs.n + r[:, 1:] * cs.t, "r_N": r[:, 0].copy(), "r_T": r[:, 1].copy(),
+                "normal": cs.n.copy(), "gap": np.asarray(c.gt_end, dtype=float),
+                "status": np.asarray(c.status, dtype=np.int64), "interface": cs.interface.astype(np.int64),
+                "area": cs.area.copy()}
+        return x, data
+
+    def write(self, time: float) -> str:
+        x, data = self.arrays()
+        name = f"{self.base}_{self.frame:06d}.vtu"
+        write_vtu(os.path.join(self.dir, name), x, [("vertex", np.arange(len(x)))], point_data=data or None)
+        self.series.add(time, name)
+        self.frame += 1
+        return name
