@@ -103,6 +103,7 @@ class ContactStep:
         self.n_unconverged = 0
         self.steps = 0
         self.last = {}
+        self.timers = dict(detection=0.0, delassus=0.0, nlgs=0.0, correction=0.0, local=0.0)
 
     # ------------------------------------------------------------------ set-up
     def on_step_change(self, sim):
@@ -153,9 +154,12 @@ class ContactStep:
                 self.gap_ref = self.cs.gap - self.cs.g0
         if self.W_dirty:
             from .. import delassus
+            from time import perf_counter
+            c = perf_counter()
             W_flat, W_offset, W_size = s.W_blocks()
             self.Wdel = delassus.assemble(self.G, W_flat, W_offset, W_size, s.nb)
             self.W_dirty = False
+            self.timers["delassus"] += perf_counter() - c
 
     def _check_initial_penetration(self, first, bx):
         """Bodies overlapping at the start (boundaries crossing deeper than the alert distance) are a
@@ -181,7 +185,10 @@ class ContactStep:
 
     # ------------------------------------------------------------------ the step
     def solve(self, sim, t0, t1):
+        from time import perf_counter
         from ..solver import nlgs
+        tm = self.timers
+        c0 = perf_counter()
         first = self.scene is None
         if first:
             self.scene = ContactScene(sim, self.body_group)
@@ -189,6 +196,8 @@ class ContactStep:
             self.body_thickness = np.array([b.type.material.thickness if b.kind == 0 else b.thickness
                                             for b in sim.bodies])
         self._geometry(sim, first)
+        c1 = perf_counter()
+        tm["detection"] += c1 - c0  # includes the Delassus assembly when geometry or h changed
         s, cs = self.scene, self.cs
         h, th = sim.h, sim.theta
         nc = len(cs.gap)
@@ -207,14 +216,19 @@ class ContactStep:
         gbar = gt + h * (1 - th) * vi[:, 0]
         q = vfree.copy()
         q[:, 0] += gbar / (h * th)
+        c2 = perf_counter()
+        tm["local"] += c2 - c1
         res = nlgs.solve_block_csr(self.Wdel, q.ravel(), self.mu, r0=self.P.ravel(), tol=self.opts.tol,
                                    max_sweeps=self.opts.max_sweeps, omega=self.opts.omega, order=self.opts.order,
                                    seed=self.opts.seed + self.steps)
+        c3 = perf_counter()
+        tm["nlgs"] += c3 - c2
         P = res.r.reshape(-1, 2)
         self.P = P
         v = res.u.reshape(-1, 2)
         imp = kin.accumulate_impulse(self.G, P, s.n_udof, s.U_offset)
         s.apply_impulse(imp)
+        tm["correction"] += perf_counter() - c3
         self.gt_end = gbar + h * th * v[:, 0]
         self.v = v
         self.r = P / h
