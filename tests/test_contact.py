@@ -215,3 +215,27 @@ def test_contacts_survive_a_change_of_time_step():
         sim.step()
     assert floor.reaction[1] == pytest.approx(3 * m * G, rel=1e-4)
     assert sim.info().max_velocity < 1e-6
+
+
+def test_updated_geometry_follows_large_sliding():
+    """A block pushed from one rigid slab onto the next: with re-detection ('updated' geometry) the second
+    slab carries the whole weight at the end; the first carries nothing."""
+    m_rho, L, H = 1000.0, 0.2, 0.1
+    blk = RigidBody([(0.05, 0), (0.05 + L, 0), (0.05 + L, H), (0.05, H)], rho=m_rho)
+    s1 = RigidBody([(-0.5, -0.1), (0.3, -0.1), (0.3, 0), (-0.5, 0)],
+                   drivers={k: Driver("velocity", 0.0) for k in ("x", "y", "rz")}, name="s1")
+    s2 = RigidBody([(0.3, -0.1), (1.5, -0.1), (1.5, 0), (0.3, 0)],
+                   drivers={k: Driver("velocity", 0.0) for k in ("x", "y", "rz")}, name="s2")
+    pusher = RigidBody([(-0.05, 0.02), (0.05, 0.02), (0.05, 0.08), (-0.05, 0.08)],
+                       drivers={"x": Driver("velocity", 0.5), "y": Driver("velocity", 0.0),
+                                "rz": Driver("velocity", 0.0)}, name="pusher")
+    cs = ContactStep([InterfaceSpec("floor", ("b", "s"), mu=0.3), InterfaceSpec("push", ("b", "p"), mu=0.0)],
+                     ["b", "s", "s", "p"], ContactOptions(geometry="updated", tol=1e-10, max_sweeps=10000))
+    sim = Simulation([blk, s1, s2, pusher], h=1e-3, theta=1.0, contact=cs)
+    for _ in range(1000):  # 0.5 m of travel
+        sim.step()
+    weight = m_rho * L * H * G
+    assert blk.center[0] > 0.3 + L / 2 + 0.05  # fully on the second slab
+    assert s2.reaction[1] == pytest.approx(weight, rel=1e-6)
+    assert abs(s1.reaction[1]) < 1e-9 * weight
+    assert cs.gt_end.min() > -1e-9

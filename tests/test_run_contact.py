@@ -1,0 +1,104 @@
+"""End to end: a case file with a [wall] prism on a foundation, interfaces, an equilibrium stop; outputs."""
+import json
+import os
+import subprocess
+import sys
+
+import meshio
+import numpy as np
+import pytest
+
+from fem_blocks.case import load_case
+from fem_blocks.errors import InputError
+from fem_blocks.output.history import read_history
+
+pytestmark = pytest.mark.dolfinx
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+CASE = """
+name = "prism"
+[materials.brick]
+E = 5e9
+nu = 0.2
+rho = 2000.0
+thickness = 0.1
+[wall]
+type = "prism"
+material = "brick"
+brick_length = 0.2
+brick_height = 0.05
+bricks = 3
+mesh_size = 0.05
+[wall.foundation]
+depth = 0.05
+[contact]
+tol = 1e-10
+max_sweeps = 100000
+[[interfaces]]
+name = "bed"
+between = ["bricks", "bricks"]
+mu = 0.6
+[[interfaces]]
+name = "base"
+between = ["bricks", "foundation"]
+mu = 0.6
+[[stages]]
+name = "gravity"
+duration = 1.0
+h = 1e-3
+theta = 1.0
+velocity_reset = true
+output_every = 100
+[stages.stop_at_equilibrium]
+max_velocity = 1e-9
+min_steps = 5
+"""
+
+
+def test_prism_case_runs_to_equilibrium_with_contact_outputs(tmp_path):
+    case = tmp_path / "prism.toml"
+    case.write_text(CASE)
+    out = tmp_path / "out"
+    p = subprocess.run([sys.executable, "-m", "fem_blocks.cli", "run", str(case), "--out", str(out), "--quiet"],
+                       capture_output=True, text=True, cwd=ROOT, timeout=600)
+    assert p.returncode == 0, p.stderr
+    s = json.loads((out / "summary.json").read_text())
+    st = s["stages"][0]
+    assert st["stopped"].startswith("equilibrium") and st["steps"] < 1000
+    assert s["contact"]["unconverged"] == 0
+    h = read_history(out / "history.csv")
+    weight = 2000.0 * 3 * 0.2 * 0.05 * 0.1 * 9.81
+    assert h["foundation.Ry"][-1] == pytest.approx(weight, rel=1e-6)
+    assert h["contacts"][-1] == 3 * 8  # 4 mesh edges x 2 positions on each of the 3 bed faces
+    assert set(np.unique(h["converged"][1:])) == {1.0}
+    pvd = (out / "paraview" / "contacts.pvd").read_text()
+    assert pvd.count("<DataSet") == pvd_count(out / "paraview" / "blocks.pvd")
+    last = sorted(os.listdir(out / "paraview"))
+    m = meshio.read(out / "paraview" / [f for f in last if f.startswith("contacts_")][-1])
+    assert len(m.points) == 24
+    for field in ("reaction", "r_N", "r_T", "normal", "gap", "status", "interface", "area"):
+        assert field in m.point_data
+    rN = np.asarray(m.point_data["r_N"]).ravel()
+    iface = np.asarray(m.point_data["interface"]).ravel()
+    assert rN[iface == 1].sum() == pytest.approx(weight, rel=1e-6)  # base joint carries the whole prism
+    Ry = np.asarray(m.point_data["reaction"])[:, 1]
+    assert Ry[iface == 1].sum() == pytest.approx(weight, rel=1e-6)  # force of the foundation on the bricks, upward
+    assert np.asarray(m.point_data["area"]).ravel() == pytest.approx(np.full(24, 0.025 * 0.1))
+
+
+def pvd_count(path):
+    return path.read_text().count("<DataSet")
+
+
+@pytest.mark.parametrize("edit, message", [
+    (("mu = 0.6\n[[interfaces]]", "mu = -0.6\n[[interfaces]]"), r"interfaces\[0\]\.mu: = -0\.6: expected a number >= 0"),
+    (('between = ["bricks", "bricks"]', 'between = ["bricks", "mortar"]'), r"interfaces\[0\]\.between: group 'mortar'"),
+    (("bricks = 3", "bricks = 0"), r"wall\.bricks: = 0: expected an integer >= 1"),
+    (("[contact]\ntol = 1e-10", "[contact]\ntol = -1.0"), r"contact\.tol: = -1\.0: expected a number > 0"),
+    (("mesh_size = 0.05", "mesh_size = 0.05\nopenings = [[0, 0, 1, 1]]"), r"wall\.openings: unknown key|wall: unknown"),
+])
+def test_contact_case_errors(tmp_path, edit, message):
+    case = tmp_path / "c.toml"
+    case.write_text(CASE.replace(*edit))
+    with pytest.raises(InputError, match=message):
+        load_case(str(case))
