@@ -21,7 +21,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from numba import njit
+
 from ..errors import InputError, check_range
+from ..laws import commit
 from . import detection as det
 from . import kinematics as kin
 from .scene import ContactScene
@@ -56,6 +59,12 @@ class InterfaceSpec:
             check_range(f"{n}.positions", p, 0.0, 1.0, lo_open=True, hi_open=True, expected="0 < position < 1")
         if self.orientation not in ("any", "bed", "head"):
             raise InputError(f"{n}.orientation = {self.orientation!r}: expected 'any', 'bed' or 'head'")
+        from ..laws import law_parameters
+        prm = dict(self.params)
+        if self.law != "mixed":
+            prm.setdefault("mu", self.mu)
+        self.law_code, self.law_par = law_parameters(self.law, prm, n)
+        self.mu = float(self.law_par[0])
 
 
 @dataclass
@@ -79,6 +88,12 @@ class ContactOptions:
             raise InputError(f"contact.order = {self.order!r}: expected 'given', 'reversed' or 'shuffled'")
         if self.on_nonconvergence not in ("warn", "fail"):
             raise InputError(f"contact.on_nonconvergence = {self.on_nonconvergence!r}: expected 'warn' or 'fail'")
+
+
+@njit(cache=True)
+def _commit_all(law, par, st, trial, u_new, area):
+    for a in range(law.shape[0]):
+        commit(law[a], par[a], st[a], trial[a], u_new[a, 0], u_new[a, 1], area[a])
 
 
 class ContactStep:
@@ -124,13 +139,14 @@ class ContactStep:
         return cs
 
     def _assign_laws(self):
-        """Per-contact friction and interface id (orientation filters split bed and head joints)."""
+        """Per-contact law code, parameters (per unit area) and friction from the contact's interface."""
         cs = self.cs
-        nc = len(cs.gap)
-        self.mu = np.zeros(nc)
-        for k, itf in enumerate(self.interfaces):
-            sel = cs.interface == k
-            self.mu[sel] = itf.mu
+        codes = np.array([itf.law_code for itf in self.interfaces], dtype=np.int64)
+        pars = np.array([itf.law_par for itf in self.interfaces])
+        self.law = codes[cs.interface]
+        self.par = np.ascontiguousarray(pars[cs.interface])
+        self.mu = self.par[:, 0].copy()
+        self.cohesive = bool(np.any(self.law != 0))
 
     def _geometry(self, sim, first: bool):
         s = self.scene
@@ -143,10 +159,14 @@ class ContactStep:
             self._assign_laws()
             nc = len(self.cs.gap)
             self.P = np.zeros((nc, 2))
+            from ..laws import initial_state
+            st = initial_state(self.law)
             if old is not None and oldP is not None and nc:
                 m = det.match(old, self.cs)
                 ok = m >= 0
                 self.P[ok] = oldP[m[ok]]
+                st[ok] = self.state[m[ok]]
+            self.state = st
             centers = s.centers(reference=ref)
             self.G = kin.build_G(self.cs, s.kind, s.rot, centers, s.bnode_index_flat, s.bnode_offset)
             self.W_dirty = True
@@ -218,9 +238,25 @@ class ContactStep:
         q[:, 0] += gbar / (h * th)
         c2 = perf_counter()
         tm["local"] += c2 - c1
-        res = nlgs.solve_block_csr(self.Wdel, q.ravel(), self.mu, r0=self.P.ravel(), tol=self.opts.tol,
-                                   max_sweeps=self.opts.max_sweeps, omega=self.opts.omega, order=self.opts.order,
-                                   seed=self.opts.seed + self.steps)
+        if self.cohesive:
+            from ..laws import S_UN, S_UT
+            ueff = self.state[:, [S_UN, S_UT]] + h * (1 - th) * vi
+            ueff[:, 0] -= gbar  # u = u_eff + h theta v_shifted (v_shifted = v_N + gbar/(h theta))
+            res, trial = nlgs.solve_cohesive(self.Wdel, q.ravel(), self.mu, self.law, self.par, self.state, ueff,
+                                             cs.area, h, th, r0=self.P.ravel(), tol=self.opts.tol,
+                                             max_sweeps=self.opts.max_sweeps, omega=self.opts.omega,
+                                             order=self.opts.order, seed=self.opts.seed + self.steps)
+            vs = res.u.reshape(-1, 2)
+            u_new = ueff + h * th * vs
+            _commit_all(self.law, self.par, self.state, trial, u_new, cs.area)
+        else:
+            res = nlgs.solve_block_csr(self.Wdel, q.ravel(), self.mu, r0=self.P.ravel(), tol=self.opts.tol,
+                                       max_sweeps=self.opts.max_sweeps, omega=self.opts.omega,
+                                       order=self.opts.order, seed=self.opts.seed + self.steps)
+            from ..laws import S_UN, S_UT
+            vs = res.u.reshape(-1, 2)
+            self.state[:, S_UN] += h * ((1 - th) * vi[:, 0] + th * (vs[:, 0] - gbar / (h * th)))
+            self.state[:, S_UT] += h * ((1 - th) * vi[:, 1] + th * vs[:, 1])
         c3 = perf_counter()
         tm["nlgs"] += c3 - c2
         P = res.r.reshape(-1, 2)

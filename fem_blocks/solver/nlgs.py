@@ -313,3 +313,169 @@ def fclib_residual(W, q, mu, r) -> tuple[float, float]:
     u += q
     f = float(natural_map_2d(r, u, mu))
     return f, f / (float(np.linalg.norm(q)) or 1.0)
+
+
+# ----------------------------------------------------------------------------- cohesive interfaces
+# Change of variables (thesis §6.3.4): with the adhesive impulse P_adh = h (K u + f) linearised at the trial jump
+# u = u_eff + h θ v (u_eff = u_i + h(1-θ) v_i - h θ s e_N, s the Signorini shift of the normal velocity),
+# P̃ = P + P_adh satisfies Signorini–Coulomb with the exact local operator
+#   v = W' P̃ + q',  W' = A⁻¹ W_αα,  q' = A⁻¹ (v_loc - h W_αα (K u_eff + f)),  A = I + h² θ W_αα K.
+from ..laws import adhesion as _adhesion  # noqa: E402
+
+
+@njit(cache=True)
+def _sweep_cohesive(indptr, indices, blocks, diag_pos, q, mu, r, order, omega, law, par, st, trial, ueff, area,
+                    h, theta):
+    dr2 = 0.0
+    r2 = 0.0
+    c = h * h * theta
+    for ii in range(order.shape[0]):
+        a = order[ii]
+        v0 = q[2 * a]
+        v1 = q[2 * a + 1]
+        for k in range(indptr[a], indptr[a + 1]):
+            b = indices[k]
+            if b != a:
+                rb0 = r[2 * b]
+                rb1 = r[2 * b + 1]
+                v0 += blocks[k, 0, 0] * rb0 + blocks[k, 0, 1] * rb1
+                v1 += blocks[k, 1, 0] * rb0 + blocks[k, 1, 1] * rb1
+        d = diag_pos[a]
+        w00, w01, w10, w11 = blocks[d, 0, 0], blocks[d, 0, 1], blocks[d, 1, 0], blocks[d, 1, 1]
+        if law[a] == 0:
+            rn, rt, case = local_2d(w00, w01, w10, w11, v0, v1, mu[a])
+        else:
+            vt0 = w00 * r[2 * a] + w01 * r[2 * a + 1] + v0
+            vt1 = w10 * r[2 * a] + w11 * r[2 * a + 1] + v1
+            uN = ueff[a, 0] + h * theta * vt0
+            uT = ueff[a, 1] + h * theta * vt1
+            kN, kT, fN, fT, mue, x = _adhesion(law[a], par[a], st[a], trial[a], uN, uT, h)
+            trial[a] = x
+            A = area[a]
+            kN *= A
+            kT *= A
+            fN *= A
+            fT *= A
+            a00 = 1.0 + c * w00 * kN
+            a01 = c * w01 * kT
+            a10 = c * w10 * kN
+            a11 = 1.0 + c * w11 * kT
+            det = a00 * a11 - a01 * a10
+            i00, i01, i10, i11 = a11 / det, -a01 / det, -a10 / det, a00 / det
+            g0 = h * (kN * ueff[a, 0] + fN)
+            g1 = h * (kT * ueff[a, 1] + fT)
+            b0 = v0 - (w00 * g0 + w01 * g1)
+            b1 = v1 - (w10 * g0 + w11 * g1)
+            q0 = i00 * b0 + i01 * b1
+            q1 = i10 * b0 + i11 * b1
+            m00 = i00 * w00 + i01 * w10
+            m01 = i00 * w01 + i01 * w11
+            m10 = i10 * w00 + i11 * w10
+            m11 = i10 * w01 + i11 * w11
+            pn, pt, case = local_2d(m00, m01, m10, m11, q0, q1, mue)
+            vn = m00 * pn + m01 * pt + q0
+            vtt = m10 * pn + m11 * pt + q1
+            rn = pn - h * (kN * (ueff[a, 0] + h * theta * vn) + fN)
+            rt = pt - h * (kT * (ueff[a, 1] + h * theta * vtt) + fT)
+        if omega != 1.0:
+            rn = omega * rn + (1.0 - omega) * r[2 * a]
+            rt = omega * rt + (1.0 - omega) * r[2 * a + 1]
+        e0 = rn - r[2 * a]
+        e1 = rt - r[2 * a + 1]
+        dr2 += e0 * e0 + e1 * e1
+        r2 += rn * rn + rt * rt
+        r[2 * a] = rn
+        r[2 * a + 1] = rt
+    return dr2, r2
+
+
+@njit(cache=True)
+def natural_map_cohesive(indptr, indices, blocks, q, mu, r, law, par, st, trial, ueff, area, h, theta):
+    """‖F‖ of the transformed problem: F = P̃ - P_K(P̃ - (v + [μ|v_T|, 0])), P̃ = P + P_adh(u(v))."""
+    n = mu.shape[0]
+    u = np.empty_like(q)
+    matvec_bcsr(indptr, indices, blocks, r, u)
+    s = 0.0
+    for a in range(n):
+        v0 = u[2 * a] + q[2 * a]
+        v1 = u[2 * a + 1] + q[2 * a + 1]
+        p0 = r[2 * a]
+        p1 = r[2 * a + 1]
+        m = mu[a]
+        if law[a] != 0:
+            uN = ueff[a, 0] + h * theta * v0
+            uT = ueff[a, 1] + h * theta * v1
+            kN, kT, fN, fT, m, x = _adhesion(law[a], par[a], st[a], trial[a], uN, uT, h)
+            p0 += h * area[a] * (kN * uN + fN)
+            p1 += h * area[a] * (kT * uT + fT)
+        x0 = p0 - (v0 + m * abs(v1))
+        x1 = p1 - v1
+        ax1 = abs(x1)
+        if ax1 <= m * x0:
+            y0, y1 = x0, x1
+        elif m * ax1 <= -x0:
+            y0, y1 = 0.0, 0.0
+        else:
+            cc = (x0 + m * ax1) / (1.0 + m * m)
+            y0 = cc
+            y1 = cc * m * (1.0 if x1 > 0.0 else -1.0)
+        f0 = p0 - y0
+        f1 = p1 - y1
+        s += f0 * f0 + f1 * f1
+    return np.sqrt(s)
+
+
+@njit(cache=True)
+def _run_cohesive(indptr, indices, blocks, diag_pos, q, mu, r, order_kind, omega, tol, max_sweeps, seed,
+                  law, par, st, trial, ueff, area, h, theta):
+    n = mu.shape[0]
+    order = np.arange(n)
+    if order_kind == 1:
+        order = order[::-1].copy()
+    if order_kind == 2:
+        np.random.seed(seed)
+    change = np.inf
+    sweeps = 0
+    converged = False
+    while sweeps < max_sweeps:
+        if order_kind == 2:
+            np.random.shuffle(order)
+        dr2, r2 = _sweep_cohesive(indptr, indices, blocks, diag_pos, q, mu, r, order, omega, law, par, st, trial,
+                                  ueff, area, h, theta)
+        sweeps += 1
+        change = np.sqrt(dr2 / r2) if r2 > 0.0 else np.sqrt(dr2)
+        if change <= tol and sweeps > 1:
+            converged = True
+            break
+    return sweeps, change, converged
+
+
+def solve_cohesive(W: BlockCSR, q, mu, law, par, st, ueff, area, h: float, theta: float, r0=None,
+                   tol: float = 1e-8, max_sweeps: int = 10000, omega: float = 1.0, order: str = "given",
+                   seed: int = 0):
+    """NLGS with interface laws (laws.py) per contact. Returns (NLGSResult, trial internal variables).
+    `q` includes the Signorini shift; `ueff` = u_i + h(1-θ)v_i - hθ shift e_N per contact (nc, 2)."""
+    q, mu = _check(W, q, mu, tol, max_sweeps, omega, order, 1)
+    n = W.n
+    r = np.zeros(2 * n) if r0 is None else np.array(r0, dtype=np.float64).ravel()
+    law = np.ascontiguousarray(law, dtype=np.int64)
+    par = np.ascontiguousarray(par, dtype=np.float64)
+    st = np.ascontiguousarray(st, dtype=np.float64)
+    from ..laws import S_BETA
+    trial = np.ascontiguousarray(st[:, S_BETA].copy())
+    ueff = np.ascontiguousarray(ueff, dtype=np.float64)
+    area = np.ascontiguousarray(area, dtype=np.float64)
+    if n == 0:
+        return NLGSResult(r, q.copy(), 0, True, 0.0, 0.0, 0.0, "no contact"), trial
+    sweeps, change, converged = _run_cohesive(W.indptr, W.indices, W.blocks, W.diag_pos, q, mu, r, ORDERS[order],
+                                              float(omega), float(tol), int(max_sweeps), int(seed), law, par, st,
+                                              trial, ueff, area, float(h), float(theta))
+    u = np.empty_like(q)
+    matvec_bcsr(W.indptr, W.indices, W.blocks, r, u)
+    u += q
+    qnorm = float(np.linalg.norm(q)) or 1.0
+    res_abs = float(natural_map_cohesive(W.indptr, W.indices, W.blocks, q, mu, r, law, par, st, trial, ueff, area,
+                                         float(h), float(theta)))
+    msg = f"converged in {sweeps} sweeps" if converged else \
+        f"not converged after {sweeps} sweeps (change {change:.3g}, tolerance {tol:g})"
+    return NLGSResult(r, u, int(sweeps), bool(converged), float(change), res_abs / qnorm, res_abs, msg), trial

@@ -1,0 +1,260 @@
+"""Interface laws per contact point (thesis §5.2–5.3, DESIGN §4): Signorini–Coulomb plus cohesive parts.
+
+Every law is written with the change of variables of thesis §6.3.4: r̃ = r + r_adh, where
+(v_N shifted, r̃_N) ∈ Signorini and (v_T, r̃_T) ∈ Coulomb(μ r̃_N). Per unit area (then times the
+contact's tributary area A), with u = (u_N, u_T) the displacement jump since the reference state
+(θ-integrated: u_{i+1} = u_i + h[(1-θ) v_i + θ v_{i+1}]):
+
+* coulomb (0):        r_adh = 0.
+* elastic (1):        r_adh = (c_N u_N, c_T u_T) (§5.3.2).
+* brittle (2), variant "elastic": r_adh = (c_N u_N, c_T u_T) until c_N u_N > r_c (or |c_T u_T| > s_c
+  when a shear strength s_c is given), then broken for good (Signorini–Coulomb). Dissipated energy at
+  the break = the elastic energy released, r_c²/(2 c_N) per unit area in pure tension.
+* brittle (3), variant "dugdale": r_adh = (r_c, 0) while u_N < l_c (a constant cohesive stress: the
+  joint holds any tension up to r_c, then opens at constant stress), then broken. Dissipation r_c·l_c.
+  Through Coulomb on r̃_N = r_N + r_c the joint also has a cohesion μ r_c in shear.
+* fremond (4) (Frémond–Cangémi, §5.3.4, eq. 5.3.40–5.3.44): r_adh = β² (c_N u_N, c_T u_T) with the
+  adhesion intensity β ∈ [0, 1] non-increasing, Y = c_N⟨u_N⟩₊² + c_T u_T²:
+  rate-independent (b = 0): β = min(β_prev, w / Y);
+  viscous (b > 0): b (β - β_prev)/h = -[(β Y - w)⁺]^{1/p} solved implicitly for β ≤ β_prev.
+  Friction μ constant or μ(β) = (1 - β) μ_r. Dissipated (decohesion) energy w (β_prev - β) per unit area.
+* mixed (5) (mixed-mode softening): r_adh = (1 - D)(k_n⟨u_N⟩₊, k_s u_T) with Coulomb tan φ on r̃ (the
+  compressive part), so the shear strength is c + tan φ p and the residual tan φ p. Damage from the
+  normalised jump λ = sqrt((⟨u_N⟩₊/δ_I)² + (u_T/δ_II)²), δ_I = f_t/k_n, δ_II = c/k_s (quadratic
+  initiation criterion (σ/f_t)² + (τ/c)² = 1); linear softening D = λ_f(λ-1)/(λ(λ_f-1)) or exponential
+  D = 1 - exp(-(λ-1)/λ_e)/λ, with λ_f (λ_e) interpolated between modes I and II by the mode ratio
+  m = (u_T/δ_II)²/λ² so that pure modes dissipate G_I and G_II. Dissipation Y ΔD with Y = ½(k_n⟨u_N⟩₊² + k_s u_T²).
+
+Signorini (compression) is always kept: u_N = g - g_ref cannot make the joint penetrate beyond its
+reference state (g - g0 >= 0), so the cohesive springs act in tension and shear; compression is rigid.
+"""
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from .errors import InputError, check_range
+
+COULOMB, ELASTIC, BRITTLE, DUGDALE, FREMOND, MIXED = 0, 1, 2, 3, 4, 5
+LAW_NAMES = {"coulomb": COULOMB, "elastic": ELASTIC, "brittle": BRITTLE, "dugdale": DUGDALE,
+             "fremond": FREMOND, "mixed": MIXED}
+# parameter columns (per unit area)
+P_MU, P_CN, P_CT, P_RC, P_SC, P_LC, P_W, P_B, P_P, P_MUR, P_MUKIND, P_FT, P_C, P_GI, P_GII, P_SOFT = range(16)
+NPAR = 16
+# state columns
+S_BETA, S_UN, S_UT, S_DISS, S_HIST, S_BROKEN = range(6)
+NSTATE = 6
+
+LAW_KEYS = {
+    "coulomb": {"mu"},
+    "elastic": {"mu", "c_N", "c_T"},
+    "brittle": {"mu", "variant", "c_N", "c_T", "r_c", "s_c", "l_c"},
+    "fremond": {"mu", "mu_r", "friction", "c_N", "c_T", "w", "b", "p"},
+    "mixed": {"k_n", "k_s", "f_t", "c", "G_I", "G_II", "tan_phi", "softening"},
+}
+
+
+def law_parameters(law: str, params: dict, name: str) -> tuple[int, np.ndarray]:
+    """Validate a law's parameters (SI, per unit area) -> (law code, parameter row)."""
+    if law not in LAW_KEYS:
+        raise InputError(f"{name}.law = {law!r}: expected one of {sorted(LAW_KEYS)}")
+    unknown = set(params) - LAW_KEYS[law]
+    if unknown:
+        raise InputError(f"{name}.{sorted(unknown)[0]}: unknown parameter for law {law!r}; expected "
+                         f"{sorted(LAW_KEYS[law])}")
+    p = np.zeros(NPAR)
+
+    def get(k, default=None, lo=0.0, lo_open=False, expected=None):
+        if k not in params:
+            if default is None:
+                raise InputError(f"{name}.{k}: missing; law {law!r} needs {expected or k}")
+            return default
+        return check_range(f"{name}.{k}", params[k], lo, lo_open=lo_open, expected=expected)
+
+    if law != "mixed":
+        p[P_MU] = get("mu", None if law == "coulomb" else 0.0, expected="mu >= 0")
+    if law == "coulomb":
+        return COULOMB, p
+    if law == "elastic":
+        p[P_CN] = get("c_N", None, lo_open=True, expected="c_N > 0 [N/m^3]")
+        p[P_CT] = get("c_T", None, lo_open=True, expected="c_T > 0 [N/m^3]")
+        return ELASTIC, p
+    if law == "brittle":
+        variant = params.get("variant", "elastic")
+        if variant not in ("elastic", "dugdale"):
+            raise InputError(f"{name}.variant = {variant!r}: expected 'elastic' or 'dugdale'")
+        p[P_RC] = get("r_c", None, lo_open=True, expected="tensile strength r_c > 0 [Pa]")
+        if variant == "dugdale":
+            p[P_LC] = get("l_c", None, lo_open=True, expected="critical opening l_c > 0 [m]")
+            for k in ("c_N", "c_T", "s_c"):
+                if k in params:
+                    raise InputError(f"{name}.{k}: not a parameter of the Dugdale variant (r_c, l_c, mu)")
+            return DUGDALE, p
+        if "l_c" in params:
+            raise InputError(f"{name}.l_c: not a parameter of the elastic-brittle variant (c_N, c_T, r_c, s_c, mu)")
+        p[P_CN] = get("c_N", None, lo_open=True, expected="c_N > 0 [N/m^3]")
+        p[P_CT] = get("c_T", 0.0, expected="c_T >= 0 [N/m^3]")
+        p[P_SC] = get("s_c", 0.0, expected="shear strength s_c >= 0 [Pa] (0: none)")
+        return BRITTLE, p
+    if law == "fremond":
+        p[P_CN] = get("c_N", None, lo_open=True, expected="c_N > 0 [N/m^3]")
+        p[P_CT] = get("c_T", None, lo_open=True, expected="c_T > 0 [N/m^3]")
+        p[P_W] = get("w", None, lo_open=True, expected="adhesion energy w > 0 [J/m^2]")
+        p[P_B] = get("b", 0.0, expected="viscosity b >= 0 [J s/m^2]")
+        p[P_P] = get("p", 1.0, lo_open=True, expected="exponent p > 0")
+        friction = params.get("friction", "constant")
+        if friction not in ("constant", "damage"):
+            raise InputError(f"{name}.friction = {friction!r}: expected 'constant' (mu) or 'damage' "
+                             f"(mu(beta) = (1 - beta) mu_r)")
+        if friction == "damage":
+            p[P_MUR] = get("mu_r", None, expected="residual friction mu_r >= 0")
+            p[P_MUKIND] = 1.0
+        elif "mu_r" in params:
+            raise InputError(f"{name}.mu_r: only with friction = 'damage'")
+        return FREMOND, p
+    # mixed-mode softening
+    p[P_CN] = get("k_n", None, lo_open=True, expected="normal stiffness k_n > 0 [N/m^3]")
+    p[P_CT] = get("k_s", None, lo_open=True, expected="shear stiffness k_s > 0 [N/m^3]")
+    p[P_FT] = get("f_t", None, lo_open=True, expected="tensile strength f_t > 0 [Pa]")
+    p[P_C] = get("c", None, lo_open=True, expected="cohesion c > 0 [Pa]")
+    p[P_GI] = get("G_I", None, lo_open=True, expected="mode I fracture energy G_I > 0 [J/m^2]")
+    p[P_GII] = get("G_II", None, lo_open=True, expected="mode II fracture energy G_II > 0 [J/m^2]")
+    p[P_MU] = get("tan_phi", None, expected="friction tan_phi >= 0")
+    soft = params.get("softening", "linear")
+    if soft not in ("linear", "exponential"):
+        raise InputError(f"{name}.softening = {soft!r}: expected 'linear' or 'exponential'")
+    p[P_SOFT] = 0.0 if soft == "linear" else 1.0
+    eI = p[P_FT] ** 2 / (2 * p[P_CN])
+    eII = p[P_C] ** 2 / (2 * p[P_CT])
+    if p[P_GI] <= eI:
+        raise InputError(f"{name}.G_I = {p[P_GI]:g}: the peak f_t is not reachable; expected G_I > f_t^2/(2 k_n) "
+                         f"= {eI:g} J/m^2 (the elastic energy at the peak)")
+    if p[P_GII] <= eII:
+        raise InputError(f"{name}.G_II = {p[P_GII]:g}: the peak c is not reachable; expected G_II > c^2/(2 k_s) "
+                         f"= {eII:g} J/m^2")
+    return MIXED, p
+
+
+def initial_state(law: np.ndarray) -> np.ndarray:
+    st = np.zeros((law.size, NSTATE))
+    st[:, S_BETA] = np.where(law == MIXED, 0.0, 1.0)  # beta = 1 (intact); for MIXED the column holds D = 0
+    return st
+
+
+# ----------------------------------------------------------------------------- compiled law evaluation
+@njit(cache=True)
+def _fremond_beta(par, beta0, Y, h):
+    w = par[P_W]
+    b = par[P_B]
+    if Y <= 0.0:
+        return beta0
+    if b == 0.0:
+        return min(beta0, w / Y)
+    p = par[P_P]
+    # b (beta - beta0)/h = -((beta Y - w)+)^(1/p), beta in [0, beta0]: monotone -> bisection
+    if beta0 * Y <= w:
+        return beta0
+    lo, hi = 0.0, beta0
+    for _ in range(80):
+        mid = 0.5 * (lo + hi)
+        f = b * (mid - beta0) / h + max(mid * Y - w, 0.0) ** (1.0 / p)
+        if f > 0.0:
+            hi = mid
+        else:
+            lo = mid
+    return 0.5 * (lo + hi)
+
+
+@njit(cache=True)
+def _mixed_damage(par, D0, uN, uT):
+    kn, ks = par[P_CN], par[P_CT]
+    dI = par[P_FT] / kn
+    dII = par[P_C] / ks
+    un = max(uN, 0.0)
+    lam2 = (un / dI) ** 2 + (uT / dII) ** 2
+    if lam2 <= 1.0:
+        return D0
+    lam = np.sqrt(lam2)
+    m = (uT / dII) ** 2 / lam2  # mode ratio: 0 pure I, 1 pure II
+    if par[P_SOFT] == 0.0:
+        lfI = 2.0 * par[P_GI] * kn / par[P_FT] ** 2
+        lfII = 2.0 * par[P_GII] * ks / par[P_C] ** 2
+        lf = (1.0 - m) * lfI + m * lfII
+        D = 1.0 if lam >= lf else lf * (lam - 1.0) / (lam * (lf - 1.0))
+    else:
+        # G = f^2/(2k) + f * delta_e  ->  lambda_e = delta_e/delta_0 = (2 G k / f^2 - 1)/2
+        leI = (2.0 * par[P_GI] * kn / par[P_FT] ** 2 - 1.0) / 2.0
+        leII = (2.0 * par[P_GII] * ks / par[P_C] ** 2 - 1.0) / 2.0
+        le = (1.0 - m) * leI + m * leII
+        D = 1.0 - np.exp(-(lam - 1.0) / le) / lam
+    return max(D0, min(D, 1.0))
+
+
+@njit(cache=True)
+def adhesion(law, par, st, x_trial, uN, uT, h):
+    """Linearised adhesive force per unit area at the trial jump (uN, uT):
+    r_adh = (kN uN + fN, kT uT + fT). Returns (kN, kT, fN, fT, mu, x) with x the internal variable
+    (β, intact flag, or damage D for the mixed law), monotone with respect to the step's trial x_trial
+    (irreversibility holds within the Gauss–Seidel iterations too)."""
+    mu = par[P_MU]
+    if law == COULOMB or st[S_BROKEN] > 0.0:
+        if law == FREMOND and par[P_MUKIND] == 1.0:
+            mu = par[P_MUR]
+        return 0.0, 0.0, 0.0, 0.0, mu, x_trial
+    if law == ELASTIC:
+        return par[P_CN], par[P_CT], 0.0, 0.0, mu, 1.0
+    if law == BRITTLE:
+        kN, kT = par[P_CN], par[P_CT]
+        if x_trial == 0.0 or kN * uN > par[P_RC] or (par[P_SC] > 0.0 and abs(kT * uT) > par[P_SC]):
+            return 0.0, 0.0, 0.0, 0.0, mu, 0.0  # breaks in this step
+        return kN, kT, 0.0, 0.0, mu, 1.0
+    if law == DUGDALE:
+        if x_trial == 0.0 or uN >= par[P_LC]:
+            return 0.0, 0.0, 0.0, 0.0, mu, 0.0
+        return 0.0, 0.0, par[P_RC], 0.0, mu, 1.0
+    if law == FREMOND:
+        un = max(uN, 0.0)
+        Y = par[P_CN] * un * un + par[P_CT] * uT * uT
+        beta = min(x_trial, _fremond_beta(par, st[S_BETA], Y, h))
+        if par[P_MUKIND] == 1.0:
+            mu = (1.0 - beta) * par[P_MUR]
+        b2 = beta * beta
+        return b2 * par[P_CN], b2 * par[P_CT], 0.0, 0.0, mu, beta
+    # MIXED: the internal variable is the damage D
+    D = max(x_trial, _mixed_damage(par, st[S_BETA], uN, uT))
+    kN = (1.0 - D) * par[P_CN] if uN > 0.0 else 0.0
+    return kN, (1.0 - D) * par[P_CT], 0.0, 0.0, mu, D
+
+
+@njit(cache=True)
+def commit(law, par, st, x, uN, uT, area):
+    """End of step: store the jump, the internal variable x (β / intact flag / D, final trial value of the
+    converged iteration) and the dissipated energy [J]."""
+    if law != COULOMB and st[S_BROKEN] == 0.0:
+        if law == BRITTLE and x == 0.0:
+            st[S_DISS] += area * 0.5 * (par[P_CN] * st[S_UN] ** 2 * (st[S_UN] > 0) + par[P_CT] * st[S_UT] ** 2)
+            st[S_BROKEN] = 1.0
+            st[S_BETA] = 0.0
+        elif law == DUGDALE:
+            if uN > st[S_HIST]:
+                st[S_DISS] += area * par[P_RC] * (min(uN, par[P_LC]) - max(st[S_HIST], 0.0))
+                st[S_HIST] = min(uN, par[P_LC])
+            if x == 0.0:
+                st[S_BROKEN] = 1.0
+                st[S_BETA] = 0.0
+        elif law == FREMOND:
+            st[S_DISS] += area * par[P_W] * (st[S_BETA] - x)
+            st[S_BETA] = x
+            if x == 0.0:
+                st[S_BROKEN] = 1.0
+        elif law == MIXED:
+            un = max(uN, 0.0)
+            Y = 0.5 * (par[P_CN] * un * un + par[P_CT] * uT * uT)
+            un0 = max(st[S_UN], 0.0)
+            Y0 = 0.5 * (par[P_CN] * un0 * un0 + par[P_CT] * st[S_UT] * st[S_UT])
+            st[S_DISS] += area * 0.5 * (Y + Y0) * (x - st[S_BETA])  # trapezoidal ∫ Y dD
+            st[S_BETA] = x
+            if x >= 1.0:
+                st[S_BROKEN] = 1.0
+    st[S_UN] = uN
+    st[S_UT] = uT
