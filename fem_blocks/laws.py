@@ -191,39 +191,51 @@ def _mixed_damage(par, D0, uN, uT):
 
 
 @njit(cache=True)
-def adhesion(law, par, st, x_trial, uN, uT, h):
-    """Linearised adhesive force per unit area at the trial jump (uN, uT):
-    r_adh = (kN uN + fN, kT uT + fT). Returns (kN, kT, fN, fT, mu, x) with x the internal variable
-    (β, intact flag, or damage D for the mixed law), monotone with respect to the step's trial x_trial
-    (irreversibility holds within the Gauss–Seidel iterations too)."""
+def internal_update(law, par, st, uN, uT, h):
+    """Internal variable implied by the jump (uN, uT), irreversible with respect to the committed state:
+    β (Frémond), intact flag 1/0 (brittle, Dugdale), damage D (mixed), 1 otherwise."""
+    if law == COULOMB or law == ELASTIC:
+        return 1.0
+    if st[S_BROKEN] > 0.0:
+        return st[S_BETA]
+    if law == BRITTLE:
+        if par[P_CN] * uN > par[P_RC] or (par[P_SC] > 0.0 and abs(par[P_CT] * uT) > par[P_SC]):
+            return 0.0
+        return 1.0
+    if law == DUGDALE:
+        return 0.0 if uN >= par[P_LC] else 1.0
+    if law == FREMOND:
+        un = max(uN, 0.0)
+        return _fremond_beta(par, st[S_BETA], par[P_CN] * un * un + par[P_CT] * uT * uT, h)
+    return _mixed_damage(par, st[S_BETA], uN, uT)
+
+
+@njit(cache=True)
+def linear_part(law, par, st, x, tension):
+    """Adhesive force per unit area for a given internal variable x: r_adh = (kN uN + fN, kT uT + fT);
+    `tension` selects the branch of laws acting in tension only. Returns (kN, kT, fN, fT, mu)."""
     mu = par[P_MU]
     if law == COULOMB or st[S_BROKEN] > 0.0:
         if law == FREMOND and par[P_MUKIND] == 1.0:
             mu = par[P_MUR]
-        return 0.0, 0.0, 0.0, 0.0, mu, x_trial
+        return 0.0, 0.0, 0.0, 0.0, mu
     if law == ELASTIC:
-        return par[P_CN], par[P_CT], 0.0, 0.0, mu, 1.0
+        return par[P_CN], par[P_CT], 0.0, 0.0, mu
     if law == BRITTLE:
-        kN, kT = par[P_CN], par[P_CT]
-        if x_trial == 0.0 or kN * uN > par[P_RC] or (par[P_SC] > 0.0 and abs(kT * uT) > par[P_SC]):
-            return 0.0, 0.0, 0.0, 0.0, mu, 0.0  # breaks in this step
-        return kN, kT, 0.0, 0.0, mu, 1.0
+        if x == 0.0:
+            return 0.0, 0.0, 0.0, 0.0, mu
+        return par[P_CN], par[P_CT], 0.0, 0.0, mu
     if law == DUGDALE:
-        if x_trial == 0.0 or uN >= par[P_LC]:
-            return 0.0, 0.0, 0.0, 0.0, mu, 0.0
-        return 0.0, 0.0, par[P_RC], 0.0, mu, 1.0
+        if x == 0.0:
+            return 0.0, 0.0, 0.0, 0.0, mu
+        return 0.0, 0.0, par[P_RC], 0.0, mu
     if law == FREMOND:
-        un = max(uN, 0.0)
-        Y = par[P_CN] * un * un + par[P_CT] * uT * uT
-        beta = min(x_trial, _fremond_beta(par, st[S_BETA], Y, h))
         if par[P_MUKIND] == 1.0:
-            mu = (1.0 - beta) * par[P_MUR]
-        b2 = beta * beta
-        return b2 * par[P_CN], b2 * par[P_CT], 0.0, 0.0, mu, beta
-    # MIXED: the internal variable is the damage D
-    D = max(x_trial, _mixed_damage(par, st[S_BETA], uN, uT))
-    kN = (1.0 - D) * par[P_CN] if uN > 0.0 else 0.0
-    return kN, (1.0 - D) * par[P_CT], 0.0, 0.0, mu, D
+            mu = (1.0 - x) * par[P_MUR]
+        b2 = x * x
+        return b2 * par[P_CN], b2 * par[P_CT], 0.0, 0.0, mu
+    kN = (1.0 - x) * par[P_CN] if tension else 0.0
+    return kN, (1.0 - x) * par[P_CT], 0.0, 0.0, mu
 
 
 @njit(cache=True)

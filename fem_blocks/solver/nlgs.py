@@ -320,7 +320,66 @@ def fclib_residual(W, q, mu, r) -> tuple[float, float]:
 # u = u_eff + h θ v (u_eff = u_i + h(1-θ) v_i - h θ s e_N, s the Signorini shift of the normal velocity),
 # P̃ = P + P_adh satisfies Signorini–Coulomb with the exact local operator
 #   v = W' P̃ + q',  W' = A⁻¹ W_αα,  q' = A⁻¹ (v_loc - h W_αα (K u_eff + f)),  A = I + h² θ W_αα K.
-from ..laws import adhesion as _adhesion  # noqa: E402
+from ..laws import internal_update as _internal_update, linear_part as _linear_part  # noqa: E402
+
+
+@njit(cache=True)
+def _local_cohesive(w00, w01, w10, w11, v0, v1, law, par, st, x, ue0, ue1, area, h, theta):
+    """Exact local solve with an adhesive law at a fixed internal variable x (the tension/compression
+    branch of tension-only springs is iterated). Returns (P_N, P_T)."""
+    c = h * h * theta
+    tension = ue0 > 0.0
+    rn = 0.0
+    rt = 0.0
+    for it in range(4):
+        kN, kT, fN, fT, mue = _linear_part(law, par, st, x, tension)
+        kN *= area
+        kT *= area
+        fN *= area
+        fT *= area
+        a00 = 1.0 + c * w00 * kN
+        a01 = c * w01 * kT
+        a10 = c * w10 * kN
+        a11 = 1.0 + c * w11 * kT
+        det = a00 * a11 - a01 * a10
+        i00, i01, i10, i11 = a11 / det, -a01 / det, -a10 / det, a00 / det
+        g0 = h * (kN * ue0 + fN)
+        g1 = h * (kT * ue1 + fT)
+        b0 = v0 - (w00 * g0 + w01 * g1)
+        b1 = v1 - (w10 * g0 + w11 * g1)
+        q0 = i00 * b0 + i01 * b1
+        q1 = i10 * b0 + i11 * b1
+        m00 = i00 * w00 + i01 * w10
+        m01 = i00 * w01 + i01 * w11
+        m10 = i10 * w00 + i11 * w10
+        m11 = i10 * w01 + i11 * w11
+        pn, pt, case = local_2d(m00, m01, m10, m11, q0, q1, mue)
+        vn = m00 * pn + m01 * pt + q0
+        vtt = m10 * pn + m11 * pt + q1
+        uN = ue0 + h * theta * vn
+        uT = ue1 + h * theta * vtt
+        rn = pn - h * (kN * uN + fN)
+        rt = pt - h * (kT * uT + fT)
+        if (uN > 0.0) == tension:
+            break
+        tension = uN > 0.0
+    return rn, rt
+
+
+@njit(cache=True)
+def _update_internal(law, par, st, ueff, v, h, theta, x):
+    """x_α from the jumps u = u_eff + hθ v of a converged NLGS; returns the largest change."""
+    dmax = 0.0
+    for a in range(law.shape[0]):
+        if law[a] == 0:
+            continue
+        xn = _internal_update(law[a], par[a], st[a], ueff[a, 0] + h * theta * v[2 * a],
+                              ueff[a, 1] + h * theta * v[2 * a + 1], h)
+        d = abs(xn - x[a])
+        if d > dmax:
+            dmax = d
+        x[a] = xn
+    return dmax
 
 
 @njit(cache=True)
@@ -345,38 +404,8 @@ def _sweep_cohesive(indptr, indices, blocks, diag_pos, q, mu, r, order, omega, l
         if law[a] == 0:
             rn, rt, case = local_2d(w00, w01, w10, w11, v0, v1, mu[a])
         else:
-            vt0 = w00 * r[2 * a] + w01 * r[2 * a + 1] + v0
-            vt1 = w10 * r[2 * a] + w11 * r[2 * a + 1] + v1
-            uN = ueff[a, 0] + h * theta * vt0
-            uT = ueff[a, 1] + h * theta * vt1
-            kN, kT, fN, fT, mue, x = _adhesion(law[a], par[a], st[a], trial[a], uN, uT, h)
-            trial[a] = x
-            A = area[a]
-            kN *= A
-            kT *= A
-            fN *= A
-            fT *= A
-            a00 = 1.0 + c * w00 * kN
-            a01 = c * w01 * kT
-            a10 = c * w10 * kN
-            a11 = 1.0 + c * w11 * kT
-            det = a00 * a11 - a01 * a10
-            i00, i01, i10, i11 = a11 / det, -a01 / det, -a10 / det, a00 / det
-            g0 = h * (kN * ueff[a, 0] + fN)
-            g1 = h * (kT * ueff[a, 1] + fT)
-            b0 = v0 - (w00 * g0 + w01 * g1)
-            b1 = v1 - (w10 * g0 + w11 * g1)
-            q0 = i00 * b0 + i01 * b1
-            q1 = i10 * b0 + i11 * b1
-            m00 = i00 * w00 + i01 * w10
-            m01 = i00 * w01 + i01 * w11
-            m10 = i10 * w00 + i11 * w10
-            m11 = i10 * w01 + i11 * w11
-            pn, pt, case = local_2d(m00, m01, m10, m11, q0, q1, mue)
-            vn = m00 * pn + m01 * pt + q0
-            vtt = m10 * pn + m11 * pt + q1
-            rn = pn - h * (kN * (ueff[a, 0] + h * theta * vn) + fN)
-            rt = pt - h * (kT * (ueff[a, 1] + h * theta * vtt) + fT)
+            rn, rt = _local_cohesive(w00, w01, w10, w11, v0, v1, law[a], par[a], st[a], trial[a], ueff[a, 0],
+                                     ueff[a, 1], area[a], h, theta)
         if omega != 1.0:
             rn = omega * rn + (1.0 - omega) * r[2 * a]
             rt = omega * rt + (1.0 - omega) * r[2 * a + 1]
@@ -405,7 +434,7 @@ def natural_map_cohesive(indptr, indices, blocks, q, mu, r, law, par, st, trial,
         if law[a] != 0:
             uN = ueff[a, 0] + h * theta * v0
             uT = ueff[a, 1] + h * theta * v1
-            kN, kT, fN, fT, m, x = _adhesion(law[a], par[a], st[a], trial[a], uN, uT, h)
+            kN, kT, fN, fT, m = _linear_part(law[a], par[a], st[a], trial[a], uN > 0.0)
             p0 += h * area[a] * (kN * uN + fN)
             p1 += h * area[a] * (kT * uT + fT)
         x0 = p0 - (v0 + m * abs(v1))
@@ -452,7 +481,7 @@ def _run_cohesive(indptr, indices, blocks, diag_pos, q, mu, r, order_kind, omega
 
 def solve_cohesive(W: BlockCSR, q, mu, law, par, st, ueff, area, h: float, theta: float, r0=None,
                    tol: float = 1e-8, max_sweeps: int = 10000, omega: float = 1.0, order: str = "given",
-                   seed: int = 0):
+                   seed: int = 0, max_outer: int = 100):
     """NLGS with interface laws (laws.py) per contact. Returns (NLGSResult, trial internal variables).
     `q` includes the Signorini shift; `ueff` = u_i + h(1-θ)v_i - hθ shift e_N per contact (nc, 2)."""
     q, mu = _check(W, q, mu, tol, max_sweeps, omega, order, 1)
@@ -467,9 +496,25 @@ def solve_cohesive(W: BlockCSR, q, mu, law, par, st, ueff, area, h: float, theta
     area = np.ascontiguousarray(area, dtype=np.float64)
     if n == 0:
         return NLGSResult(r, q.copy(), 0, True, 0.0, 0.0, 0.0, "no contact"), trial
-    sweeps, change, converged = _run_cohesive(W.indptr, W.indices, W.blocks, W.diag_pos, q, mu, r, ORDERS[order],
-                                              float(omega), float(tol), int(max_sweeps), int(seed), law, par, st,
-                                              trial, ueff, area, float(h), float(theta))
+    # staggered: NLGS at fixed internal variables (starting from the committed, least damaged state), then
+    # update them from the converged jumps, until they stop changing (selects the least damaged solution)
+    total = 0
+    u = np.empty_like(q)
+    converged = False
+    change = np.inf
+    for outer in range(max_outer):
+        sweeps, change, converged = _run_cohesive(W.indptr, W.indices, W.blocks, W.diag_pos, q, mu, r,
+                                                  ORDERS[order], float(omega), float(tol),
+                                                  int(max_sweeps) - total, int(seed) + outer, law, par, st, trial,
+                                                  ueff, area, float(h), float(theta))
+        total += sweeps
+        matvec_bcsr(W.indptr, W.indices, W.blocks, r, u)
+        u += q
+        dx = _update_internal(law, par, st, ueff, u, float(h), float(theta), trial)
+        if dx <= 1e-12 or total >= max_sweeps:
+            converged = converged and dx <= 1e-12
+            break
+    sweeps = total
     u = np.empty_like(q)
     matvec_bcsr(W.indptr, W.indices, W.blocks, r, u)
     u += q
