@@ -286,6 +286,16 @@ class InterfaceCaseSpec:
     positions: tuple
     candidate: str | None
     orientation: str
+    params: dict = field(default_factory=dict)
+
+
+# interface-law parameters and their physical dimension (for unit conversion)
+LAW_PARAM_UNITS = {"c_N": "stiffness", "c_T": "stiffness", "k_n": "stiffness", "k_s": "stiffness",
+                   "r_c": "stress", "s_c": "stress", "f_t": "stress", "c": "stress", "l_c": "length",
+                   "w": "energy", "G_I": "energy", "G_II": "energy", "b": "viscosity", "p": None, "mu_r": None,
+                   "tan_phi": None, "variant": None, "friction": None, "softening": None}
+DERIVED = {"stiffness": lambda U: U["stress"] / U["length"], "energy": lambda U: U["force"] / U["length"],
+           "viscosity": lambda U: U["force"] / U["length"] * U["time"]}
 
 
 @dataclass
@@ -494,9 +504,24 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
         if (not isinstance(pos, list) or not pos or
                 not all(isinstance(x, NUMBER) and not isinstance(x, bool) and 0 < x < 1 for x in pos)):
             raise t.error("positions", f"= {pos!r}: expected a list of relative positions strictly between 0 and 1")
-        law = t.string("law", "coulomb", choices=("coulomb",))
+        law = t.string("law", "coulomb", choices=("coulomb", "elastic", "brittle", "fremond", "mixed"))
+        params = {}
+        for key, dim in LAW_PARAM_UNITS.items():
+            if key in t.data:
+                if key in ("variant", "friction", "softening"):
+                    params[key] = t.string(key)
+                else:
+                    params[key] = t.number(key, dim=dim if dim in U else None)
+                    if dim in DERIVED:
+                        params[key] *= DERIVED[dim](U)
+        mu = t.number("mu", 0.0 if law == "mixed" else None, lo=0, required=law != "mixed")
+        try:
+            from .laws import law_parameters
+            law_parameters(law, dict(params, **({} if law == "mixed" else {"mu": mu})), t.path)
+        except InputError as e:
+            raise InputError(f"{source}: {e}") from None
         interfaces.append(InterfaceCaseSpec(
-            name=iname, groups=tuple(between), law=law, mu=t.number("mu", required=True, lo=0),
+            name=iname, groups=tuple(between), law=law, mu=mu, params=params,
             g0=t.number("g0", 0.0, lo=0, dim="length"),
             alert=t.number("alert", 1e-3, lo=0, lo_open=True, dim="length"),
             placement=t.string("placement", "positions", choices=("positions", "nodes")),
@@ -516,10 +541,11 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
                        seed=0, on_nonconvergence="warn")
 
     out = root.table("output")
-    output = {"paraview": True, "stress": True}
+    output = {"paraview": True, "stress": True, "checkpoint_every": 0}
     if out is not None:
         output["paraview"] = out.boolean("paraview", True)
         output["stress"] = out.boolean("stress", True)
+        output["checkpoint_every"] = out.integer("checkpoint_every", 0, lo=0)
         out.done()
     root.done()
     return Case(source=source, name=name, units=units, gravity=gravity, materials=materials,

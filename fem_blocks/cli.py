@@ -21,17 +21,27 @@ def list_demos() -> dict[str, str]:
     out = {}
     if os.path.isdir(DEMO_DIR):
         for f in sorted(os.listdir(DEMO_DIR)):
-            if f.endswith(".toml"):
-                out[f[:-5]] = os.path.join(DEMO_DIR, f)
+            if f.endswith(".toml") or (f.endswith(".py") and not f.startswith("_")):
+                out[os.path.splitext(f)[0]] = os.path.join(DEMO_DIR, f)
     return out
 
 
 def _first_line(path: str) -> str:
     with open(path, encoding="utf-8") as f:
         for line in f:
-            if line.startswith("#"):
+            if line.startswith("#") and not line.startswith("#!"):
                 return line.lstrip("# ").strip()
+            if line.startswith('"""'):
+                return line.strip().strip('"').strip()
     return ""
+
+
+def _run_script(path: str, out: str) -> int:
+    """A Python demo: a module with main(out_dir)."""
+    import runpy
+    mod = runpy.run_path(path, run_name="fem_blocks_demo")
+    mod["main"](out)
+    return 0
 
 
 def _run(case_path: str, out: str, quiet: bool) -> int:
@@ -77,7 +87,10 @@ def main(argv=None) -> int:
         name = DEFAULT_DEMO if args.name == "default" else args.name
         if name not in demos:
             raise InputError(f"demo {name!r} not found; expected one of {sorted(demos)} (fem-blocks demo --list)")
-        return _run(demos[name], args.out or os.path.join("out", f"demo-{name}"), args.quiet)
+        out = args.out or os.path.join("out", f"demo-{name}")
+        if demos[name].endswith(".py"):
+            return _run_script(demos[name], out)
+        return _run(demos[name], out, args.quiet)
     except InputError as e:
         print(f"fem-blocks: error: {e}", file=sys.stderr)
         return 2

@@ -79,6 +79,6 @@ def build_model(case: Case) -> Model:
         from .contact.step import ContactOptions, ContactStep, InterfaceSpec
         specs = [InterfaceSpec(name=i.name, groups=i.groups, law=i.law, mu=i.mu, g0=i.g0, alert=i.alert,
                                placement=i.placement, positions=i.positions, candidate=i.candidate,
-                               orientation=i.orientation) for i in case.interfaces]
+                               orientation=i.orientation, params=i.params) for i in case.interfaces]
         contact = ContactStep(specs, groups, ContactOptions(**case.contact), body_names=names)
     return Model(bodies, block_types, names, np.asarray(case.gravity, dtype=float), groups, contact)

@@ -16,6 +16,7 @@ from .case import Case
 from .dynamics import Simulation
 from .model import Model, build_model
 from .output.history import HistoryWriter
+from .output.checkpoint import write_checkpoint
 from .output.contacts import ContactsWriter
 from .output.paraview import BodiesWriter
 from .output.summary import write_summary
@@ -96,6 +97,7 @@ def run_case(case: Case, out_dir: str, progress: bool = True) -> dict:
         if case.output["paraview"] else None
     pc = ContactsWriter(model.contact, os.path.join(out_dir, "paraview")) \
         if case.output["paraview"] and model.contact is not None else None
+    ckpt_every = case.output.get("checkpoint_every", 0)
     cstats = dict(steps=0, sweeps=0, max_sweeps=0, unconverged=0, max_residual=0.0, max_change=0.0)
     hist = HistoryWriter(os.path.join(out_dir, "history.csv"), history_columns(model), flush_every=50)
     bar = Progress(progress)
@@ -140,6 +142,8 @@ def run_case(case: Case, out_dir: str, progress: bool = True) -> dict:
                 extra = f" sweeps {c['sweeps']}" if c else ""
                 bar.update(f"[{si + 1}/{len(case.stages)} {st.name}] step {k}/{n_steps} t = {sim.time:.6g} s "
                            f"E = {info.total_energy:.6g} J vmax = {info.max_velocity:.3g} m/s{extra}", force=last)
+                if ckpt_every and (sim.step_count % ckpt_every == 0 or last):
+                    write_checkpoint(os.path.join(out_dir, "checkpoint.npz"), sim, si)
                 if at_eq:
                     stopped = f"equilibrium (max velocity {info.max_velocity:.3g} m/s) after {k} steps"
                     break

@@ -102,3 +102,48 @@ def test_contact_case_errors(tmp_path, edit, message):
     case.write_text(CASE.replace(*edit))
     with pytest.raises(InputError, match=message):
         load_case(str(case))
+
+
+def test_interface_law_keys_validated_with_units(tmp_path):
+    base = CASE.replace('name = "bed"\nbetween = ["bricks", "bricks"]\nmu = 0.6',
+                        'name = "bed"\nbetween = ["bricks", "bricks"]\nlaw = "fremond"\nmu = 0.6\nc_N = 1e10\n'
+                        'c_T = 5e9\nw = 20.0')
+    case = tmp_path / "c.toml"
+    case.write_text(base)
+    c = load_case(str(case))
+    assert c.interfaces[0].law == "fremond" and c.interfaces[0].params == {"c_N": 1e10, "c_T": 5e9, "w": 20.0}
+    case.write_text(base.replace("w = 20.0", "w = -2.0"))
+    with pytest.raises(InputError, match=r"c\.toml: interfaces\[0\]\.w = -2\.0: expected adhesion energy w > 0"):
+        load_case(str(case))
+    case.write_text(base.replace("w = 20.0", "w = 20.0\nG_I = 3.0"))
+    with pytest.raises(InputError, match=r"interfaces\[0\]\.G_I: unknown parameter for law 'fremond'"):
+        load_case(str(case))
+    mm = base.replace('name = "prism"', 'name = "prism"\nunits = "mm-N-MPa"').replace("c_N = 1e10", "c_N = 10.0")
+    mm = mm.replace("c_T = 5e9", "c_T = 5.0").replace("w = 20.0", "w = 0.02")
+    case.write_text(mm)
+    c = load_case(str(case))
+    assert c.interfaces[0].params["c_N"] == pytest.approx(1e10)  # 10 MPa/mm = 1e10 N/m^3
+    assert c.interfaces[0].params["w"] == pytest.approx(20.0)    # 0.02 N/mm = 20 J/m^2
+
+
+def test_cohesive_case_writes_law_state_to_paraview_and_checkpoint(tmp_path):
+    from fem_blocks.output.checkpoint import read_checkpoint
+    text = CASE.replace('name = "bed"\nbetween = ["bricks", "bricks"]\nmu = 0.6',
+                        'name = "bed"\nbetween = ["bricks", "bricks"]\nlaw = "fremond"\nmu = 0.6\nc_N = 1e10\n'
+                        'c_T = 5e9\nw = 20.0').replace("[[stages]]", "[output]\ncheckpoint_every = 5\n\n[[stages]]")
+    case = tmp_path / "c.toml"
+    case.write_text(text)
+    out = tmp_path / "out"
+    p = subprocess.run([sys.executable, "-m", "fem_blocks.cli", "run", str(case), "--out", str(out), "--quiet"],
+                       capture_output=True, text=True, cwd=ROOT, timeout=600)
+    assert p.returncode == 0, p.stderr
+    ck = read_checkpoint(out / "checkpoint.npz")
+    h = read_history(out / "history.csv")
+    assert int(ck["step"]) == int(h["step"][-1])  # written at the end of the stage
+    assert ck["contact_state"].shape == (24, 6) and np.array_equal(np.unique(ck["contact_law"]), [0, 4])
+    assert np.allclose(ck["contact_state"][ck["contact_law"] == 4, 0], 1.0)  # beta intact under gravity
+    files = sorted(f for f in os.listdir(out / "paraview") if f.startswith("contacts_"))
+    m = meshio.read(out / "paraview" / files[-1])
+    for field in ("law", "damage", "opening", "slip", "dissipated"):
+        assert field in m.point_data
+    assert np.allclose(np.asarray(m.point_data["damage"]).ravel(), 0.0)

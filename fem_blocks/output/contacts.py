@@ -2,7 +2,9 @@
 
 Point data: reaction (force of the antagonist on the candidate, global frame, N), r_N, r_T (local, N),
 normal, gap (joint-corrected gap g - g0 at the end of the step, m), status (0 open, 1 stick, 2 slip),
-interface (interface/law id), area (tributary area, m²)."""
+interface (interface/law id), area (tributary area, m²), and the interface-law state: law (code), damage
+(1 - β for Frémond–Cangémi, 1 - intact for brittle laws, D for the mixed-mode law, 0 for elastic and dry
+joints), opening u_N and slip u_T (jumps since the reference state, m), dissipated (J)."""
 from __future__ import annotations
 
 import os
@@ -36,6 +38,13 @@ class ContactsWriter:
                 "normal": cs.n.copy(), "gap": np.asarray(c.gt_end, dtype=float),
                 "status": np.asarray(c.status, dtype=np.int64), "interface": cs.interface.astype(np.int64),
                 "area": cs.area.copy()}
+        st = getattr(c, "state", None)
+        if st is not None and len(st) == len(cs.gap):
+            from ..laws import MIXED, S_BETA, S_DISS, S_UN, S_UT
+            law = c.law
+            damage = np.where(law == MIXED, st[:, S_BETA], np.where(law >= 2, 1.0 - st[:, S_BETA], 0.0))
+            data.update(law=law.astype(np.int64), damage=damage, opening=st[:, S_UN].copy(),
+                        slip=st[:, S_UT].copy(), dissipated=st[:, S_DISS].copy())
         return x, data
 
     def write(self, time: float) -> str:
