@@ -25,8 +25,10 @@ contact's tributary area A), with u = (u_N, u_T) the displacement jump since the
   D = 1 - exp(-(λ-1)/λ_e)/λ, with λ_f (λ_e) interpolated between modes I and II by the mode ratio
   m = (u_T/δ_II)²/λ² so that pure modes dissipate G_I and G_II. Dissipation Y ΔD with Y = ½(k_n⟨u_N⟩₊² + k_s u_T²).
 
-Signorini (compression) is always kept: u_N = g - g_ref cannot make the joint penetrate beyond its
-reference state (g - g0 >= 0), so the cohesive springs act in tension and shear; compression is rigid.
+Compression: Signorini is always kept on r̃. For coulomb, brittle and fremond it is rigid (g - g0 >= 0); the
+elastic and mixed laws have a compliant joint in compression (stiffness c_N, k_n): g̃ + r̃_N/(k A) >= 0 ⊥
+r̃_N >= 0, so the normal spring acts in tension through r_adh and in compression through r̃ (on which
+friction acts).
 """
 from __future__ import annotations
 
@@ -220,7 +222,7 @@ def linear_part(law, par, st, x, tension):
             mu = par[P_MUR]
         return 0.0, 0.0, 0.0, 0.0, mu
     if law == ELASTIC:
-        return par[P_CN], par[P_CT], 0.0, 0.0, mu
+        return (par[P_CN] if tension else 0.0), par[P_CT], 0.0, 0.0, mu
     if law == BRITTLE:
         if x == 0.0:
             return 0.0, 0.0, 0.0, 0.0, mu
@@ -236,6 +238,17 @@ def linear_part(law, par, st, x, tension):
         return b2 * par[P_CN], b2 * par[P_CT], 0.0, 0.0, mu
     kN = (1.0 - x) * par[P_CN] if tension else 0.0
     return kN, (1.0 - x) * par[P_CT], 0.0, 0.0, mu
+
+
+@njit(cache=True)
+def compression_stiffness(law, par):
+    """Normal stiffness in compression per unit area (0: rigid, Signorini). The elastic and mixed-mode laws
+    model a compliant mortar joint: Signorini with compliance, g̃ + r̃_N/(k A) >= 0 ⊥ r̃_N >= 0."""
+    if law == ELASTIC:
+        return par[P_CN]
+    if law == MIXED:
+        return par[P_CN]
+    return 0.0
 
 
 @njit(cache=True)

@@ -280,3 +280,23 @@ def test_hanging_weight_held_below_strength_released_above(law, params, strength
 def test_bad_law_parameters(law, params, match):
     with pytest.raises(InputError, match=r"interfaces\.j\." + match):
         law_parameters(law, params, "interfaces.j")
+
+
+@pytest.mark.parametrize("law, params", [("elastic", dict(c_N=1e10, c_T=1e10, mu=0.5)),
+                                         ("mixed", dict(MIXED, k_n=1e10))])
+def test_compliant_joint_in_compression(law, params):
+    """Elastic and mixed-mode joints are compliant in compression: a block pressed by F on one contact point
+    (area A) shortens the joint by F / (k_n A); friction acts on the compressive force."""
+    F = 1e4
+    blk = RigidBody([(0, 0), (L, 0), (L, 0.1), (0, 0.1)], rho=2000.0, thickness=T,
+                    drivers={"x": Driver("velocity", 0.0), "rz": Driver("velocity", 0.0)}, forces={"y": -F})
+    base = RigidBody([(-0.1, -0.1), (0.3, -0.1), (0.3, 0), (-0.1, 0)], drivers=FIX(), thickness=T)
+    cs = ContactStep([InterfaceSpec("j", ("b", "g"), law=law, params=params, positions=(0.5,))], ["b", "g"],
+                     ContactOptions(tol=1e-14, max_sweeps=100))
+    sim = Simulation([blk, base], h=1e-2, theta=1.0, contact=cs, gravity=(0.0, 0.0), velocity_reset=True)
+    for _ in range(3):
+        sim.step()
+    kn = params.get("c_N", params.get("k_n"))
+    assert blk.q[1] == pytest.approx(-F / (kn * A), rel=1e-10)
+    assert cs.r[0, 0] == pytest.approx(F, rel=1e-10)
+    assert cs.gt_end[0] == pytest.approx(-F / (kn * A), rel=1e-10)

@@ -265,7 +265,7 @@ class ContactStep:
         imp = kin.accumulate_impulse(self.G, P, s.n_udof, s.U_offset)
         s.apply_impulse(imp)
         tm["correction"] += perf_counter() - c3
-        self.gt_end = gbar + h * th * v[:, 0]
+        self.gt_end = h * th * v[:, 0]  # v is the shifted normal velocity: g~_{i+1} = gbar + h theta v_N
         self.v = v
         self.r = P / h
         status = np.zeros(nc, dtype=np.int64)

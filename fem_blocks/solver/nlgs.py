@@ -320,7 +320,7 @@ def fclib_residual(W, q, mu, r) -> tuple[float, float]:
 # u = u_eff + h θ v (u_eff = u_i + h(1-θ) v_i - h θ s e_N, s the Signorini shift of the normal velocity),
 # P̃ = P + P_adh satisfies Signorini–Coulomb with the exact local operator
 #   v = W' P̃ + q',  W' = A⁻¹ W_αα,  q' = A⁻¹ (v_loc - h W_αα (K u_eff + f)),  A = I + h² θ W_αα K.
-from ..laws import internal_update as _internal_update, linear_part as _linear_part  # noqa: E402
+from ..laws import compression_stiffness as _kcomp, internal_update as _internal_update, linear_part as _linear_part  # noqa: E402,E501
 
 
 @njit(cache=True)
@@ -328,7 +328,8 @@ def _local_cohesive(w00, w01, w10, w11, v0, v1, law, par, st, x, ue0, ue1, area,
     """Exact local solve with an adhesive law at a fixed internal variable x (the tension/compression
     branch of tension-only springs is iterated). Returns (P_N, P_T)."""
     c = h * h * theta
-    tension = ue0 > 0.0
+    eps = 1e-15  # m: a jump of round-off size is "closed" (compression branch), not tension
+    tension = ue0 > eps
     rn = 0.0
     rt = 0.0
     for it in range(4):
@@ -353,16 +354,21 @@ def _local_cohesive(w00, w01, w10, w11, v0, v1, law, par, st, x, ue0, ue1, area,
         m01 = i00 * w01 + i01 * w11
         m10 = i10 * w00 + i11 * w10
         m11 = i10 * w01 + i11 * w11
-        pn, pt, case = local_2d(m00, m01, m10, m11, q0, q1, mue)
+        cmp = 0.0
+        if not tension:
+            kc = _kcomp(law, par) * area
+            if kc > 0.0:
+                cmp = 1.0 / (h * h * theta * kc)  # compliant Signorini: v_N + cmp P_N >= 0
+        pn, pt, case = local_2d(m00 + cmp, m01, m10, m11, q0, q1, mue)
         vn = m00 * pn + m01 * pt + q0
         vtt = m10 * pn + m11 * pt + q1
         uN = ue0 + h * theta * vn
         uT = ue1 + h * theta * vtt
         rn = pn - h * (kN * uN + fN)
         rt = pt - h * (kT * uT + fT)
-        if (uN > 0.0) == tension:
+        if (uN > eps) == tension:
             break
-        tension = uN > 0.0
+        tension = uN > eps
     return rn, rt
 
 
@@ -437,6 +443,10 @@ def natural_map_cohesive(indptr, indices, blocks, q, mu, r, law, par, st, trial,
             kN, kT, fN, fT, m = _linear_part(law[a], par[a], st[a], trial[a], uN > 0.0)
             p0 += h * area[a] * (kN * uN + fN)
             p1 += h * area[a] * (kT * uT + fT)
+        if law[a] != 0 and v0 * h * theta + ueff[a, 0] <= 0.0:
+            kc = _kcomp(law[a], par[a]) * area[a]
+            if kc > 0.0:
+                v0 += p0 / (h * h * theta * kc)
         x0 = p0 - (v0 + m * abs(v1))
         x1 = p1 - v1
         ax1 = abs(x1)
