@@ -391,6 +391,25 @@ class RigidBody:
             return int(k)
         raise InputError(f"{self.name}: dof {k!r}: expected one of {DOF_NAMES}")
 
+    def set_driver(self, dof, driver: "Driver | None"):
+        """Drive a dof (removing any applied force on it) or free it (driver None) — e.g. between load stages."""
+        i = self._dof(dof)
+        if driver is None:
+            self.drivers.pop(i, None)
+            if self.mass[i] == 0.0:
+                raise InputError(f"{self.name}: dof {DOF_NAMES[i]!r} cannot be freed: the body has no mass "
+                                 f"(give rho or mass)")
+        else:
+            self.drivers[i] = driver
+            self.forces.pop(i, None)
+
+    def set_force(self, dof, history):
+        """Apply a force history on a free dof (a driven dof is freed first)."""
+        i = self._dof(dof)
+        if i in self.drivers:
+            self.set_driver(dof, None)
+        self.forces[i] = as_history(history, f"{self.name}.forces.{DOF_NAMES[i]}")
+
     @property
     def driven(self) -> np.ndarray:
         m = np.zeros(3, dtype=bool)

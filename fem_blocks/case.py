@@ -309,6 +309,12 @@ class StageSpec:
     stop_at_equilibrium: bool = False
     equilibrium_velocity: float = 1e-6
     min_steps: int = 1
+    tol: float | None = None          # contact solver overrides for this stage
+    max_sweeps: int | None = None
+    stop_displacement: tuple | None = None  # (body, dof, |value| [m])
+    drivers: dict = field(default_factory=dict)  # body -> dof -> (kind, history) | None (free)
+    forces: dict = field(default_factory=dict)   # body -> dof -> history
+    stop_after_peak: tuple | None = None    # (body, reaction dof, relative drop)
 
 
 @dataclass
@@ -462,6 +468,52 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
                        theta=t.number("theta", 0.5, lo=0.5, hi=1.0),
                        velocity_reset=t.boolean("velocity_reset", False),
                        output_every=t.integer("output_every", 1, lo=1))
+        dtab = t.table("drivers")
+        if dtab is not None:
+            for body in list(dtab.data):
+                bt_ = dtab.table(body)
+                st.drivers[body] = {}
+                for dof in list(bt_.data):
+                    if dof not in ("x", "y", "rz"):
+                        raise bt_.error(dof, "unknown dof; expected x, y or rz")
+                    if bt_.data[dof] == "free":
+                        bt_.used.add(dof)
+                        st.drivers[body][dof] = None
+                        continue
+                    d = bt_.table(dof)
+                    st.drivers[body][dof] = (d.string("kind", required=True, choices=("velocity", "displacement")),
+                                             d.history("history", None if dof == "rz" else "length", required=True))
+                    d.done()
+                bt_.done()
+            dtab.done()
+        ftab = t.table("forces")
+        if ftab is not None:
+            for body in list(ftab.data):
+                bt_ = ftab.table(body)
+                st.forces[body] = {}
+                for dof in list(bt_.data):
+                    if dof not in ("x", "y", "rz"):
+                        raise bt_.error(dof, "unknown dof; expected x, y or rz")
+                    if dof in st.drivers.get(body, {}) and st.drivers[body][dof] is not None:
+                        raise bt_.error(dof, "this dof is driven in this stage; a driven dof cannot also carry a force")
+                    st.forces[body][dof] = bt_.history(dof, "force" if dof != "rz" else None)
+                bt_.done()
+            ftab.done()
+        st.tol = t.number("tol", None, lo=0, lo_open=True)
+        st.max_sweeps = t.integer("max_sweeps", None, lo=1)
+        sd = t.table("stop_at_displacement")
+        if sd is not None:
+            body = sd.string("body", required=True)
+            dof = sd.string("dof", required=True, choices=("x", "y", "rz"))
+            st.stop_displacement = (body, dof, abs(sd.number("value", required=True, dim=None if dof == "rz"
+                                                             else "length")))
+            sd.done()
+        sp = t.table("stop_after_peak")
+        if sp is not None:
+            st.stop_after_peak = (sp.string("body", required=True), sp.string("dof", required=True,
+                                                                              choices=("x", "y", "rz")),
+                                  sp.number("drop", 0.2, lo=0, hi=1, lo_open=True, hi_open=True))
+            sp.done()
         eq = t.table("stop_at_equilibrium")
         if eq is not None:
             st.stop_at_equilibrium = True
@@ -541,13 +593,38 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
                        seed=0, on_nonconvergence="warn")
 
     out = root.table("output")
-    output = {"paraview": True, "stress": True, "checkpoint_every": 0}
+    output = {"paraview": True, "stress": True, "checkpoint_every": 0, "crack_pattern": True}
     if out is not None:
         output["paraview"] = out.boolean("paraview", True)
         output["stress"] = out.boolean("stress", True)
         output["checkpoint_every"] = out.integer("checkpoint_every", 0, lo=0)
+        cv = out.table("curve")
+        if cv is not None:
+            output["curve"] = dict(body=cv.string("body", required=True),
+                                   force=cv.string("force", "x", choices=("x", "y", "rz")),
+                                   displacement=cv.string("displacement", "x", choices=("x", "y", "rz")))
+            cv.done()
+        output["crack_pattern"] = out.boolean("crack_pattern", True)
         out.done()
     root.done()
+    rigid_names = {r.name: r for r in rigid}
+    for i, st in enumerate(stages):
+        for key in ("drivers", "forces"):
+            for body in getattr(st, key):
+                if body not in rigid_names:
+                    raise InputError(f"{source}: stages[{i}].{key}.{body}: expected a rigid body among "
+                                     f"{sorted(rigid_names)}")
+        for key, ref in (("stop_at_displacement", st.stop_displacement), ("stop_after_peak", st.stop_after_peak)):
+            if ref is not None and ref[0] not in rigid_names:
+                raise InputError(f"{source}: stages[{i}].{key}.body = {ref[0]!r}: expected a rigid body among "
+                                 f"{sorted(rigid_names)}")
+        if st.stop_after_peak is not None and st.stop_after_peak[1] not in rigid_names[st.stop_after_peak[0]].drivers:
+            raise InputError(f"{source}: stages[{i}].stop_after_peak.dof = {st.stop_after_peak[1]!r}: expected a "
+                             f"driven dof of {st.stop_after_peak[0]!r} (its reaction is the force)")
+    if "curve" in output:
+        cb = output["curve"]["body"]
+        if cb not in rigid_names:
+            raise InputError(f"{source}: output.curve.body = {cb!r}: expected a rigid body among {sorted(rigid_names)}")
     return Case(source=source, name=name, units=units, gravity=gravity, materials=materials,
                 block_types=block_types, blocks=blocks, rigid_bodies=rigid, stages=stages, output=output,
                 contact=contact, interfaces=interfaces)
@@ -683,6 +760,8 @@ def _parse_wall(w: Table, U: dict, materials, block_types, blocks, rigid, names)
         over = bt.number("overhang", 0.0, lo=0, dim="length")
         bot = ytop + gap
         verts = [(xs0 - over, bot), (xs1 + over, bot), (xs1 + over, bot + depth), (xs0 - over, bot + depth)]
+        if "thickness" not in bt.data:  # the beam is as thick as the wall
+            bt.data = dict(bt.data, thickness=materials[mat].thickness / U["length"])
         r = _parse_rigid(bt, U, "beam", verts)
         r.group = "beam"
         names.add("beam")

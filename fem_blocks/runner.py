@@ -13,6 +13,7 @@ import numpy as np
 
 from . import __version__
 from .case import Case
+from .bodies import Driver
 from .dynamics import Simulation
 from .model import Model, build_model
 from .output.history import HistoryWriter
@@ -59,7 +60,7 @@ def history_columns(model: Model) -> list[str]:
         if b.kind == 1:
             name = model.names[i]
             cols += [f"{name}.u{d}" for d in DOFS]
-            cols += [f"{name}.R{DOFS[k]}" for k in sorted(b.drivers)]
+            cols += [f"{name}.R{d}" for d in DOFS]  # 0 on free dofs; stages may drive or free dofs
     if model.contact is not None:
         cols += ["contacts", "closed", "slip", "sweeps", "change", "residual", "converged"]
     return cols
@@ -74,8 +75,8 @@ def history_row(model: Model, info, stage_index: int) -> dict:
             name = model.names[i]
             for k, d in enumerate(DOFS):
                 row[f"{name}.u{d}"] = b.q[k]
-            for k in sorted(b.drivers):
-                row[f"{name}.R{DOFS[k]}"] = b.reaction[k]
+            for k, d in enumerate(DOFS):
+                row[f"{name}.R{d}"] = b.reaction[k]
     if model.contact is not None:
         c = info.contact or {}
         row.update(contacts=c.get("contacts", 0), closed=c.get("active", 0), slip=c.get("slip", 0),
@@ -112,8 +113,31 @@ def run_case(case: Case, out_dir: str, progress: bool = True) -> dict:
     stages_done = []
     try:
         for si, st in enumerate(case.stages):
+            changed = False
+            for bname, dofs in st.drivers.items():
+                b = model.bodies[model.index(bname)]
+                for dof, spec in dofs.items():
+                    b.set_driver(dof, None if spec is None else Driver(*spec, name=f"stages[{si}].drivers.{bname}"))
+                    changed = True
+            for bname, dofs in st.forces.items():
+                b = model.bodies[model.index(bname)]
+                for dof, hist in dofs.items():
+                    b.set_force(dof, hist)
+                    changed = True
+            if changed and model.contact is not None:
+                model.contact.W_dirty = True  # rigid W (driven dofs) changed
             sim.set_step(st.h, st.theta)
             sim.velocity_reset = st.velocity_reset
+            if model.contact is not None:
+                o = model.contact.opts
+                o.tol = st.tol if st.tol is not None else case.contact.get("tol", o.tol)
+                o.max_sweeps = st.max_sweeps if st.max_sweeps is not None else case.contact.get("max_sweeps",
+                                                                                              o.max_sweeps)
+            stop_body = {}
+            for key, ref in (("disp", st.stop_displacement), ("peak", st.stop_after_peak)):
+                if ref is not None:
+                    stop_body[key] = (model.bodies[model.index(ref[0])], DOFS.index(ref[1]), ref[2])
+            peak_force = 0.0
             n_steps = max(1, int(round(st.duration / st.h)))
             t_stage = _time.perf_counter()
             unconv0 = cstats["unconverged"]
@@ -133,7 +157,18 @@ def run_case(case: Case, out_dir: str, progress: bool = True) -> dict:
                     raise FloatingPointError(f"stage {st.name!r}, step {k}: the state became NaN/Inf")
                 at_eq = (st.stop_at_equilibrium and k >= st.min_steps
                          and info.max_velocity <= st.equilibrium_velocity)
-                last = k == n_steps or at_eq
+                reason = None
+                if "disp" in stop_body:
+                    b, d, val = stop_body["disp"]
+                    if abs(b.q[d]) >= val * (1 - 1e-12):
+                        reason = f"target displacement {val:g} reached after {k} steps"
+                if "peak" in stop_body:
+                    b, d, drop = stop_body["peak"]
+                    f = abs(b.reaction[d])
+                    peak_force = max(peak_force, f)
+                    if peak_force > 0 and f < (1 - drop) * peak_force:
+                        reason = f"force dropped by {drop:.0%} after its peak {peak_force:.6g} N ({k} steps)"
+                last = k == n_steps or at_eq or reason is not None
                 if pv and (k % st.output_every == 0 or last):
                     pv.write(sim.time)
                     if pc:
@@ -146,6 +181,9 @@ def run_case(case: Case, out_dir: str, progress: bool = True) -> dict:
                     write_checkpoint(os.path.join(out_dir, "checkpoint.npz"), sim, si)
                 if at_eq:
                     stopped = f"equilibrium (max velocity {info.max_velocity:.3g} m/s) after {k} steps"
+                    break
+                if reason is not None:
+                    stopped = reason
                     break
             n_unconv = cstats["unconverged"] - unconv0
             if n_unconv:
@@ -171,5 +209,42 @@ def run_case(case: Case, out_dir: str, progress: bool = True) -> dict:
                    outputs=dict(paraview=os.path.join("paraview", "blocks.pvd") if pv else None,
                                 contacts=os.path.join("paraview", "contacts.pvd") if pc else None,
                                 history="history.csv"))
+    if model.contact is not None and getattr(model.contact, "state", None) is not None:
+        from .laws import S_DISS
+        summary["dissipated_energy_J"] = float(model.contact.state[:, S_DISS].sum())
+    summary.update(_figures(case, sim, model, out_dir))
     write_summary(os.path.join(out_dir, "summary.json"), summary)
     return summary
+
+
+def _figures(case, sim, model, out_dir) -> dict:
+    """force_displacement.png and crack_pattern.png, and the curve's peak figures for summary.json."""
+    from .output.figures import write_crack_pattern, write_curve
+    from .output.history import read_history
+    out = {}
+    if case.output.get("crack_pattern", True) and any(b.kind == 0 for b in model.bodies):
+        write_crack_pattern(os.path.join(out_dir, "crack_pattern.png"), sim, model.contact, title=case.name)
+        out["crack_pattern"] = "crack_pattern.png"
+    cv = case.output.get("curve")
+    if cv:
+        hist = read_history(os.path.join(out_dir, "history.csv"))
+        body, fk, dk = cv["body"], f"R{cv['force']}", f"u{cv['displacement']}"
+        if f"{body}.{fk}" not in hist:
+            return out
+        write_curve(os.path.join(out_dir, "force_displacement.png"), hist, body, fk, dk, title=case.name)
+        F = np.abs(hist[f"{body}.{fk}"])
+        D = np.abs(hist[f"{body}.{dk}"])
+        k = int(np.argmax(F))
+        out["peak_force_kN"] = float(F[k] / 1e3)
+        out["displacement_at_peak_mm"] = float(D[k] * 1e3)
+        other = [c for c in hist if c.startswith(f"{body}.R") and c != f"{body}.{fk}"]
+        out["other_reactions_at_peak_kN"] = {c: float(hist[c][k] / 1e3) for c in other}
+        sel = (F > 0) & (F <= 0.4 * F[k]) & (D > 0)
+        out["initial_stiffness_kN_per_mm"] = float(np.polyfit(D[sel] * 1e3, F[sel] / 1e3, 1)[0]) \
+            if sel.sum() >= 3 else None
+        if cv["force"] == "x":
+            out["peak_horizontal_force_kN"] = out["peak_force_kN"]
+            out["vertical_force_at_peak_kN"] = float(hist.get(f"{body}.Ry", np.zeros_like(F))[k] / 1e3) \
+                if f"{body}.Ry" in hist else None
+        out["force_displacement"] = "force_displacement.png"
+    return out
