@@ -512,7 +512,8 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
         if sp is not None:
             st.stop_after_peak = (sp.string("body", required=True), sp.string("dof", required=True,
                                                                               choices=("x", "y", "rz")),
-                                  sp.number("drop", 0.2, lo=0, hi=1, lo_open=True, hi_open=True))
+                                  sp.number("drop", 0.2, lo=0, hi=1, lo_open=True, hi_open=True),
+                                  sp.integer("min_steps", 20, lo=1))
             sp.done()
         eq = t.table("stop_at_equilibrium")
         if eq is not None:

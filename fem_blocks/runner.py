@@ -136,7 +136,7 @@ def run_case(case: Case, out_dir: str, progress: bool = True) -> dict:
             stop_body = {}
             for key, ref in (("disp", st.stop_displacement), ("peak", st.stop_after_peak)):
                 if ref is not None:
-                    stop_body[key] = (model.bodies[model.index(ref[0])], DOFS.index(ref[1]), ref[2])
+                    stop_body[key] = (model.bodies[model.index(ref[0])], DOFS.index(ref[1])) + tuple(ref[2:])
             peak_force = 0.0
             n_steps = max(1, int(round(st.duration / st.h)))
             t_stage = _time.perf_counter()
@@ -163,10 +163,10 @@ def run_case(case: Case, out_dir: str, progress: bool = True) -> dict:
                     if abs(b.q[d]) >= val * (1 - 1e-12):
                         reason = f"target displacement {val:g} reached after {k} steps"
                 if "peak" in stop_body:
-                    b, d, drop = stop_body["peak"]
+                    b, d, drop, min_steps = stop_body["peak"]
                     f = abs(b.reaction[d])
                     peak_force = max(peak_force, f)
-                    if peak_force > 0 and f < (1 - drop) * peak_force:
+                    if k >= min_steps and peak_force > 0 and f < (1 - drop) * peak_force:
                         reason = f"force dropped by {drop:.0%} after its peak {peak_force:.6g} N ({k} steps)"
                 last = k == n_steps or at_eq or reason is not None
                 if pv and (k % st.output_every == 0 or last):
