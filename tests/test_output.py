@@ -1,6 +1,11 @@
-"""Output writers: VTU/PVD read back with meshio, history CSV exact round trip, resume, atomicity."""
+"""Output writers: VTU read back with meshio (bit-exact float64), PVD validity/resume, history CSV exact round trip
+and resume, summary JSON, atomic writes, PNG plots, input validation."""
+import base64
+import datetime
 import json
 import os
+import pathlib
+import xml.etree.ElementTree as ET
 
 import meshio
 import numpy as np
@@ -9,109 +14,350 @@ import pytest
 from fem_blocks.errors import InputError
 from fem_blocks.output import atomic
 from fem_blocks.output.history import HistoryWriter, read_history
+from fem_blocks.output.plots import plot_crack_pattern, plot_curve
 from fem_blocks.output.pvd import PvdSeries
 from fem_blocks.output.summary import write_summary
 from fem_blocks.output.vtu import write_vtu
 
 
-def test_vtu_mixed_cells_round_trip(tmp_path):
+def _decode_arrays(path):
+    """Independent decoder of our inline-binary VTU: name -> (numpy array, header byte count, payload bytes)."""
+    root = ET.parse(path).getroot()
+    assert root.get("header_type") == "UInt64" and root.get("byte_order") == "LittleEndian"
+    dt = {"Float64": "<f8", "Int64": "<i8", "Int32": "<i4", "UInt8": "u1"}
+    out = {}
+    for da in root.iter("DataArray"):
+        raw = base64.b64decode(da.text.strip())
+        nbytes = int(np.frombuffer(raw[:8], "<u8")[0])
+        out[da.get("Name")] = (np.frombuffer(raw[8:], dt[da.get("type")]), nbytes, len(raw) - 8)
+    return root, out
+
+
+def _mixed_grid():
     rng = np.random.default_rng(0)
     P = rng.random((7, 2))
     tri = np.array([[0, 1, 2], [2, 3, 0]])
-    quad = np.array([[1, 4, 5, 2]])
-    poly = [np.array([3, 5, 6]), np.array([0, 2, 5, 6, 4])]
-    vel = rng.random((7, 2))
-    stress = rng.random((5, 3))
-    ids = np.arange(5, dtype=np.int64)
+    quad = np.array([[1, 4, 5, 2], [3, 2, 5, 6]])
+    return rng, P, tri, quad
+
+
+def test_vtu_mixed_triangle_quad_round_trip_bit_exact(tmp_path):
+    rng, P, tri, quad = _mixed_grid()
+    vel = rng.standard_normal((7, 2)) * 1e-7
+    stress = rng.standard_normal((4, 3)) * 1e6  # (sxx, syy, sxy) per cell
+    ids = np.array([3, -1, 2**40, 7], dtype=np.int64)
     f = tmp_path / "a.vtu"
-    write_vtu(f, P, [("triangle", tri), ("quad", quad), ("polygon", poly)],
-              point_data={"velocity": vel, "scalar": P[:, 0]}, cell_data={"stress": stress, "id": ids})
+    assert write_vtu(f, P, [("triangle", tri), ("quad", quad)],
+                     point_data={"velocity": vel, "x": P[:, 0]}, cell_data={"stress": stress, "id": ids},
+                     field_data={"TimeValue": 0.25}) == f
     m = meshio.read(f)
-    assert np.array_equal(m.points[:, :2], P) and np.all(m.points[:, 2] == 0)
-    assert np.array_equal(m.point_data["velocity"][:, :2], vel)
-    assert np.array_equal(m.point_data["scalar"], P[:, 0])
-    types = [c.type for c in m.cells]
-    assert types[:2] == ["triangle", "quad"]
+    assert np.array_equal(m.points[:, :2], P) and np.all(m.points[:, 2] == 0.0)
+    assert m.point_data["velocity"].shape == (7, 3)  # padded to a 3-vector for ParaView
+    assert np.array_equal(m.point_data["velocity"][:, :2], vel) and np.all(m.point_data["velocity"][:, 2] == 0)
+    assert np.array_equal(m.point_data["x"], P[:, 0])
+    assert [c.type for c in m.cells] == ["triangle", "quad"]
     assert np.array_equal(m.cells[0].data, tri) and np.array_equal(m.cells[1].data, quad)
-    got = np.concatenate([np.asarray(a).reshape(len(a), -1) for a in m.cell_data["stress"]])
-    assert np.array_equal(got, stress)
-    assert np.array_equal(np.concatenate(m.cell_data["id"]).ravel(), ids)
+    got = np.concatenate(m.cell_data["stress"])
+    assert got.shape == (4, 3) and np.array_equal(got, stress)
+    got_ids = np.concatenate(m.cell_data["id"]).ravel()
+    assert got_ids.dtype == np.int64 and np.array_equal(got_ids, ids)
+    assert np.array_equal(np.ravel(m.field_data["TimeValue"]), [0.25])
+    # format conformance independent of meshio: byte-count headers, offsets, VTK type codes
+    root, arr = _decode_arrays(f)
+    for name, (a, nbytes, payload) in arr.items():
+        assert nbytes == payload == a.nbytes, name
+    assert np.array_equal(arr["offsets"][0], [3, 6, 10, 14])
+    assert np.array_equal(arr["types"][0], [5, 5, 9, 9])
+    piece = root.find("UnstructuredGrid/Piece")
+    assert piece.get("NumberOfPoints") == "7" and piece.get("NumberOfCells") == "4"
 
 
-def test_vtu_vertex_cloud(tmp_path):
+def test_vtu_polygon_grid(tmp_path):
+    # a unit square split into a triangle and two pentagons (ragged list)
+    P = np.array([[0, 0], [1, 0], [1, 1], [0, 1], [0.5, 0], [1, 0.5], [0.5, 0.5]], float)
+    polys = [[0, 4, 6], np.array([4, 1, 5, 6, 6][:4]), [6, 5, 2, 3, 0]]
+    damage = np.array([0.0, 0.5, 1.0])
+    f = tmp_path / "p.vtu"
+    write_vtu(f, P, [("polygon", polys)], cell_data={"damage": damage})
+    m = meshio.read(f)
+    assert all(c.type == "polygon" for c in m.cells)
+    got = [list(row) for c in m.cells for row in c.data]
+    assert sorted(got) == sorted([list(map(int, p)) for p in polys])
+    by_cell = {tuple(row): d for c, dd in zip(m.cells, m.cell_data["damage"]) for row, d in zip(c.data, dd)}
+    for p, d in zip(polys, damage):
+        assert by_cell[tuple(int(i) for i in p)] == d
+    _, arr = _decode_arrays(f)
+    assert np.array_equal(arr["types"][0], [7, 7, 7]) and np.array_equal(arr["offsets"][0], [3, 7, 12])
+
+
+def test_vtu_vertex_cloud_contact_points(tmp_path):
     P = np.array([[0.0, 0.0], [1.0, 0.5], [2.0, 1.0]])
     f = tmp_path / "c.vtu"
-    write_vtu(f, P, [("vertex", np.arange(3))], point_data={"r_N": np.array([1.0, 2.0, 3.0])},
-              cell_data={"status": np.array([0, 1, 2])})
+    status = np.array([0, 1, 2], dtype=np.int64)
+    write_vtu(f, P, [("vertex", np.arange(3))],
+              point_data={"r_N": np.array([1.0, 2.0, 3.0]), "status": status, "open": np.array([1, 0, 0], bool)},
+              cell_data={"status": status})
     m = meshio.read(f)
-    assert m.cells[0].type == "vertex" and len(m.cells[0].data) == 3
+    assert m.cells[0].type == "vertex" and np.array_equal(m.cells[0].data.ravel(), [0, 1, 2])
     assert np.array_equal(m.point_data["r_N"], [1.0, 2.0, 3.0])
+    assert m.point_data["status"].dtype == np.int64 and np.array_equal(m.point_data["status"], status)
+    assert np.array_equal(m.point_data["open"], [1, 0, 0])
 
 
-def test_vtu_bad_field_named(tmp_path):
+def test_vtu_3d_tetra_hexahedron(tmp_path):
+    P = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1],
+                  [0.5, 0.5, 2.0]], float)
+    hexa = np.arange(8)[None]
+    tet = np.array([[4, 5, 6, 8]])
+    u = np.arange(27, dtype=float).reshape(9, 3)
+    write_vtu(tmp_path / "h.vtu", P, [("hexahedron", hexa), ("tetra", tet)], point_data={"u": u})
+    m = meshio.read(tmp_path / "h.vtu")
+    assert [c.type for c in m.cells] == ["hexahedron", "tetra"]
+    assert np.array_equal(m.points, P) and np.array_equal(m.point_data["u"], u)
+
+
+def test_vtu_invalid_inputs_name_the_field(tmp_path):
+    f = tmp_path / "x.vtu"
+    P3 = np.zeros((3, 2))
     with pytest.raises(InputError, match=r"point_data\['velocity'\]: expected 3 rows"):
-        write_vtu(tmp_path / "x.vtu", np.zeros((3, 2)), [("vertex", np.arange(3))],
-                  point_data={"velocity": np.zeros((4, 2))})
+        write_vtu(f, P3, [("vertex", np.arange(3))], point_data={"velocity": np.zeros((4, 2))})
+    with pytest.raises(InputError, match=r"cell_data\['stress'\]: expected 1 rows"):
+        write_vtu(f, P3, [("triangle", [[0, 1, 2]])], cell_data={"stress": np.zeros((3, 3))})
+    with pytest.raises(InputError, match=r"point_data\['name'\]: expected numeric"):
+        write_vtu(f, P3, [("vertex", np.arange(3))], point_data={"name": np.array(["a", "b", "c"])})
     with pytest.raises(InputError, match="unknown cell type 'pyramid'"):
-        write_vtu(tmp_path / "x.vtu", np.zeros((3, 2)), [("pyramid", np.arange(3))])
-    with pytest.raises(InputError, match="does not exist"):
-        write_vtu(tmp_path / "x.vtu", np.zeros((3, 2)), [("triangle", np.array([[0, 1, 3]]))])
+        write_vtu(f, P3, [("pyramid", np.arange(3))])
+    with pytest.raises(InputError, match=r"cells\[0\] \('triangle'\).*does not exist"):
+        write_vtu(f, P3, [("triangle", np.array([[0, 1, 3]]))])
+    # 3 quads given as "triangle" have 12 = 4 x 3 indices: must not be silently reshaped
+    with pytest.raises(InputError, match=r"cells\[1\] \('triangle'\): expected connectivity of shape \(m, 3\)"):
+        write_vtu(f, np.zeros((8, 2)), [("vertex", [0]), ("triangle", np.zeros((3, 4), int))])
+    with pytest.raises(InputError, match="at least 3 nodes"):
+        write_vtu(f, P3, [("polygon", [[0, 1]])])
+    with pytest.raises(InputError, match="points: expected an"):
+        write_vtu(f, np.zeros((3, 4)), [])
+    assert not f.exists()  # nothing written on bad input
 
 
-def test_pvd_series_valid_after_each_add_and_resume(tmp_path):
-    import xml.etree.ElementTree as ET
+def test_vtu_failed_write_keeps_previous_frame(tmp_path, monkeypatch):
+    f = tmp_path / "a.vtu"
+    write_vtu(f, np.zeros((1, 2)), [("vertex", [0])], point_data={"v": [1.0]})
+    before = f.read_bytes()
+
+    def boom(src, dst):
+        raise OSError("no space left on device")
+    monkeypatch.setattr(os, "replace", boom)
+    with pytest.raises(OSError):
+        write_vtu(f, np.ones((1, 2)), [("vertex", [0])], point_data={"v": [2.0]})
+    monkeypatch.undo()
+    assert f.read_bytes() == before and sorted(p.name for p in tmp_path.iterdir()) == ["a.vtu"]
+    assert meshio.read(f).point_data["v"][0] == 1.0
+
+
+def _pvd_entries(path):
+    return [(float(d.get("timestep")), d.get("file")) for d in ET.parse(path).getroot().iter("DataSet")]
+
+
+def test_pvd_valid_after_each_add_and_resume_drops_later_frames(tmp_path):
     path = tmp_path / "s.pvd"
     s = PvdSeries(path)
-    for k in range(4):
+    assert _pvd_entries(path) == []  # a valid empty series before the first frame
+    times = [0.1 * k for k in range(5)]
+    for k, t in enumerate(times):
         name = f"f{k}.vtu"
         write_vtu(tmp_path / name, np.zeros((1, 2)), [("vertex", [0])])
-        s.add(0.1 * k, name)
-        ds = list(ET.parse(path).getroot().iter("DataSet"))  # valid XML after each frame
-        assert len(ds) == k + 1 and ds[-1].get("file") == name
-    r = PvdSeries.open_existing(path, keep_until_time=0.1)
-    assert [e[2] for e in r.entries] == ["f0.vtu", "f1.vtu"]
-    assert not (tmp_path / "f3.vtu").exists() and (tmp_path / "f1.vtu").exists()
-    r.add(0.2, "g2.vtu")
-    assert [d.get("file") for d in ET.parse(path).getroot().iter("DataSet")] == ["f0.vtu", "f1.vtu", "g2.vtu"]
+        s.add(t, name)
+        assert _pvd_entries(path) == [(times[j], f"f{j}.vtu") for j in range(k + 1)]  # exact times
+    r = PvdSeries.open_existing(path, keep_until_time=times[2])
+    assert r.files == ["f0.vtu", "f1.vtu", "f2.vtu"] and r.times == times[:3]
+    assert _pvd_entries(path) == [(times[j], f"f{j}.vtu") for j in range(3)]  # rewritten at once
+    assert [(tmp_path / f"f{k}.vtu").exists() for k in range(5)] == [True, True, True, False, False]
+    r.add(times[3], "g3.vtu")
+    assert [e[1] for e in _pvd_entries(path)] == ["f0.vtu", "f1.vtu", "f2.vtu", "g3.vtu"]
+    # append=True continues without truncation; open_existing without a time keeps everything
+    a = PvdSeries(path, append=True)
+    a.add(0.5, "g4.vtu")
+    assert len(PvdSeries.open_existing(path).entries) == 5
+    # a fresh series (append=False) starts empty
+    assert PvdSeries(path).entries == [] and _pvd_entries(path) == []
 
 
-def test_history_exact_round_trip_and_resume(tmp_path):
+def test_pvd_resume_never_deletes_shared_or_outside_files(tmp_path):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "mesh.vtu").write_text("x")
+    (tmp_path / "precious.vtu").write_text("x")
+    s = PvdSeries(out / "s.pvd")
+    s.add(0.0, "mesh.vtu")
+    s.add(1.0, "mesh.vtu", part=1)
+    s.add(2.0, "../precious.vtu")
+    s.add(3.0, "a&b <1>.vtu")  # XML escaping
+    assert _pvd_entries(out / "s.pvd")[-1] == (3.0, "a&b <1>.vtu")
+    r = PvdSeries.open_existing(out / "s.pvd", keep_until_time=0.0)
+    assert r.entries == [(0.0, 0, "mesh.vtu")]
+    assert (out / "mesh.vtu").exists() and (tmp_path / "precious.vtu").exists()
+    (out / "bad.pvd").write_text("<VTKFile type='Collection'><Collection><DataSet")
+    with pytest.raises(InputError, match="bad.pvd: cannot read"):
+        PvdSeries.open_existing(out / "bad.pvd", keep_until_time=1.0)
+    with pytest.raises(InputError, match="time = nan"):
+        r.add(float("nan"), "x.vtu")
+
+
+def test_history_exact_17_digit_round_trip(tmp_path):
+    rng = np.random.default_rng(1)
+    vals = np.concatenate([[0.1, 1 / 3, np.pi * 1e-17, -2.5e300, 5e-324, np.inf, -0.0],
+                           rng.standard_normal(50) * 10.0 ** rng.integers(-300, 300, 50)])
     path = tmp_path / "h.csv"
-    vals = [0.1, 1 / 3, np.pi * 1e-17, -2.5e300]
-    with HistoryWriter(path, ["step", "time", "x"]) as h:
+    with HistoryWriter(path, ["step", "time", "x", "label"]) as h:
         for k, v in enumerate(vals):
-            h.write({"step": k, "time": v, "x": np.float64(v) * 2})
+            h.write({"step": np.int64(k), "time": v, "x": np.float64(v) * 2, "label": "a,b" if k == 0 else None})
     d = read_history(path)
-    assert list(d["step"]) == [0, 1, 2, 3]
-    assert np.array_equal(d["time"], vals) and np.array_equal(d["x"], np.array(vals) * 2)
-    h = HistoryWriter.resume(path, ["step", "time", "x"], last_step=1)
-    h.write([2, 9.0, 9.0])
+    assert np.array_equal(d["step"], np.arange(len(vals)))
+    assert np.array_equal(d["time"], vals) and np.array_equal(d["x"], vals * 2)  # bit-exact
+    assert np.signbit(d["time"][6])
+    lines = path.read_text().splitlines()
+    assert lines[0] == "step,time,x,label" and lines[2].startswith("1,0.33333333333333331,")  # %.17g, int step
+    assert lines[1].endswith('"a,b"')
+
+
+def test_history_resume_truncates_and_checks_columns(tmp_path):
+    path = tmp_path / "h.csv"
+    cols = ["step", "time", "x"]
+    with HistoryWriter(path, cols) as h:
+        for k in range(6):
+            h.write([k, 0.1 * k, k * k])
+    with open(path, "a") as f:
+        f.write("6,0.6000")  # a row torn by a crash
+    h = HistoryWriter.resume(path, last_step=3)
+    h.write({"step": 4, "time": 9.5, "x": 1.25})
     h.close()
     d = read_history(path)
-    assert list(d["step"]) == [0, 1, 2] and d["time"][2] == 9.0
+    assert list(d["step"]) == [0, 1, 2, 3, 4] and d["time"][4] == 9.5 and d["x"][4] == 1.25
+    assert d["time"][3] == 0.1 * 3
     with pytest.raises(InputError, match="columns differ"):
-        HistoryWriter.resume(path, ["step", "t"], last_step=1)
+        HistoryWriter.resume(path, last_step=1, columns=["step", "t"])
+    with pytest.raises(InputError, match="columns differ"):
+        HistoryWriter(path, ["step", "t"], append=True)
+    with pytest.raises(InputError, match="step_column 'it' not in the header"):
+        HistoryWriter.resume(path, last_step=1, step_column="it")
     with pytest.raises(InputError, match="unknown history column"):
         HistoryWriter(tmp_path / "k.csv", ["a"]).write({"b": 1})
+    with pytest.raises(InputError, match="expected 2 values"):
+        HistoryWriter(tmp_path / "k.csv", ["a", "b"]).write([1.0])
+    with pytest.raises(InputError, match="flush_every"):
+        HistoryWriter(tmp_path / "k.csv", ["a"], flush_every=0)
+    # append=True after a torn line: the torn row is dropped, the rest kept
+    with open(path, "a") as f:
+        f.write("5,0.5")
+    with HistoryWriter(path, cols, append=True) as h:
+        h.write([5, 0.5, 25])
+    assert list(read_history(path)["step"]) == [0, 1, 2, 3, 4, 5]
 
 
-def test_summary_numpy_types(tmp_path):
-    d = write_summary(tmp_path / "s.json", {"a": np.float64(1.5), "b": np.arange(3), "c": np.nan,
-                                            "d": {"e": np.int64(4), "f": np.bool_(True)}})
+def test_history_flushes_every_n_rows(tmp_path):
+    path = tmp_path / "h.csv"
+    h = HistoryWriter(path, ["step", "v"], flush_every=2)
+    h.write([0, 1.5])
+    h.write([1, 2.5])  # second row: flushed to disk while still open
+    assert len(read_history(path)["step"]) == 2
+    h.write([2, 3.5])
+    h.close()
+    d = read_history(path)
+    assert list(d["v"]) == [1.5, 2.5, 3.5]
+
+
+def test_summary_json_with_numpy_types(tmp_path):
+    data = {"a": np.float64(1.5), "b": np.arange(3), "c": np.nan, "i": -np.inf, "m": np.eye(2, dtype=np.float32),
+            "d": {"e": np.int64(4), "f": np.bool_(True), "p": pathlib.Path("x/y")}, "s": np.str_("ok")}
+    d = write_summary(tmp_path / "s.json", data)
     got = json.loads((tmp_path / "s.json").read_text())
-    assert got["a"] == 1.5 and got["b"] == [0, 1, 2] and got["c"] is None and got["d"] == {"e": 4, "f": True}
-    assert "versions" in got and got["versions"]["fem_blocks"] == d["versions"]["fem_blocks"]
+    assert got["a"] == 1.5 and got["b"] == [0, 1, 2] and got["c"] is None and got["i"] is None
+    assert got["m"] == [[1.0, 0.0], [0.0, 1.0]] and got["s"] == "ok"
+    assert got["d"] == {"e": 4, "f": True, "p": "x/y"}
+    v = got["versions"]
+    assert v["numpy"] == np.__version__ and v["fem_blocks"] == d["versions"]["fem_blocks"]
+    assert {"python", "scipy", "numba", "dolfinx", "petsc4py", "gmsh"} <= set(v)
+    ts = datetime.datetime.fromisoformat(got["timestamp"])
+    assert ts.utcoffset() == datetime.timedelta(0)
+    assert abs((datetime.datetime.now(datetime.timezone.utc) - ts).total_seconds()) < 3600
+    with pytest.raises(InputError, match=r"summary\[d.obj\]"):
+        write_summary(tmp_path / "t.json", {"d": {"obj": object()}})
+    assert not (tmp_path / "t.json").exists()
 
 
-def test_atomic_write_keeps_old_file_on_failure(tmp_path, monkeypatch):
+def test_atomic_write_keeps_old_file_when_writer_raises_midway(tmp_path, monkeypatch):
     path = tmp_path / "keep.txt"
     atomic.atomic_write_text(path, "old")
+    real_fdopen = os.fdopen
+
+    class HalfWriter:
+        def __init__(self, f):
+            self.f = f
+
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *exc):
+            self.f.close()
+
+        def write(self, data):
+            self.f.write(data[: len(data) // 2])
+            self.f.flush()
+            raise OSError("crash midway")
+
+    monkeypatch.setattr(os, "fdopen", lambda fd, mode: HalfWriter(real_fdopen(fd, mode)))
+    with pytest.raises(OSError, match="crash midway"):
+        atomic.atomic_write_text(path, "new content that is long")
+    monkeypatch.undo()
+    assert path.read_text() == "old"
+    assert [p.name for p in tmp_path.iterdir()] == ["keep.txt"]  # no temporary left behind
 
     def boom(fd):
         raise OSError("disk failure")
     monkeypatch.setattr(os, "fsync", boom)
-    with pytest.raises(OSError):
+    with pytest.raises(OSError, match="disk failure"):
         atomic.atomic_write_text(path, "new content")
     monkeypatch.undo()
-    assert path.read_text() == "old"
-    assert [p.name for p in tmp_path.iterdir()] == ["keep.txt"]  # no temporary left behind
+    assert path.read_text() == "old" and [p.name for p in tmp_path.iterdir()] == ["keep.txt"]
+
+
+def test_atomic_write_file_mode_follows_umask_not_mkstemp(tmp_path):
+    old = os.umask(0o022)
+    try:
+        atomic.atomic_write_text(tmp_path / "n.txt", "x")
+    finally:
+        os.umask(old)
+    assert (tmp_path / "n.txt").stat().st_mode & 0o777 == 0o644
+    os.chmod(tmp_path / "n.txt", 0o640)
+    atomic.atomic_write_text(tmp_path / "n.txt", "y")  # replacing keeps the file's mode
+    assert (tmp_path / "n.txt").stat().st_mode & 0o777 == 0o640
+
+
+def _png_size(path):
+    b = pathlib.Path(path).read_bytes()
+    assert b[:8] == b"\x89PNG\r\n\x1a\n"
+    return int.from_bytes(b[16:20], "big"), int.from_bytes(b[20:24], "big"), len(b)
+
+
+def test_plots_write_png_and_survive_empty_data(tmp_path):
+    d = np.linspace(0, 2e-3, 50)
+    f = 1e4 * d / (1 + (d / 5e-4) ** 2)
+    assert plot_curve(tmp_path / "c.png", d, f, "u [m]", "F [N]", "curve") == tmp_path / "c.png"
+    w, h, n = _png_size(tmp_path / "c.png")
+    assert (w, h) == (768, 504) and n > 5000
+    plot_curve(tmp_path / "e.png", [], [], "u", "F", "empty")
+    assert _png_size(tmp_path / "e.png")[2] > 1000
+    plot_curve(tmp_path / "nan.png", [0, 1], [np.nan, np.nan], "u", "F", "all NaN")
+    polys = [np.array([[0, 0], [1, 0], [1, 0.5], [0, 0.5]]), np.array([[0, 0.5], [1, 0.5], [1, 1], [0, 1.0]])]
+    seg = np.array([[[0, 0.5], [0.5, 0.5]], [[0.5, 0.5], [1, 0.5]]])
+    out = plot_crack_pattern(tmp_path / "k.png", polys, seg, [0.2, 1.0], 50.0, "crack")
+    w, h, n = _png_size(out)
+    assert (w, h) == (975, 780) and n > 5000
+    plot_crack_pattern(tmp_path / "k0.png", [], np.zeros((0, 2, 2)), [], 1.0, "empty")
+    assert _png_size(tmp_path / "k0.png")[2] > 1000
+    plot_crack_pattern(tmp_path / "k1.png", polys, [], [], 1.0, "blocks only")
+    with pytest.raises(InputError, match="values: expected 2 values"):
+        plot_crack_pattern(tmp_path / "z.png", polys, seg, [0.5], 1.0, "bad")
+    with pytest.raises(InputError, match="x and y must have the same length"):
+        plot_curve(tmp_path / "z.png", [0, 1], [0], "u", "F", "bad")
+    assert not (tmp_path / "z.png").exists()

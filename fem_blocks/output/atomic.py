@@ -1,21 +1,37 @@
-"""Atomic file writes: temporary file in the same directory, flush, fsync, rename, fsync the directory.
+"""Atomic file writes: temporary file in the same directory, write, flush, os.fsync, os.replace, fsync the
+directory.
 
-A crash leaves either the old file or the new one, never a truncated file."""
+A crash (or an exception while writing) leaves either the complete old file or the complete new one, never a
+truncated file, and no temporary file is left behind by an exception. The new file gets the permissions of
+the file it replaces, or 0o666 minus the umask for a new file (not mkstemp's 0o600)."""
 from __future__ import annotations
 
 import os
+import stat
 import tempfile
 
 
-def atomic_write_bytes(path: str, data: bytes) -> None:
+def _umask() -> int:
+    old = os.umask(0o022)
+    os.umask(old)
+    return old
+
+
+def atomic_write_bytes(path, data: bytes) -> None:
+    """Replace `path` by `data` atomically (same-directory temporary + fsync + os.replace + directory fsync)."""
     path = os.fspath(path)
     d = os.path.dirname(os.path.abspath(path))
-    fd, tmp = tempfile.mkstemp(prefix=".tmp-", dir=d)
+    try:
+        mode = stat.S_IMODE(os.stat(path).st_mode)
+    except FileNotFoundError:
+        mode = 0o666 & ~_umask()
+    fd, tmp = tempfile.mkstemp(prefix=".tmp-" + os.path.basename(path) + "-", dir=d)
     try:
         with os.fdopen(fd, "wb") as f:
             f.write(data)
             f.flush()
             os.fsync(f.fileno())
+        os.chmod(tmp, mode)
         os.replace(tmp, path)
     except BaseException:
         try:
@@ -26,13 +42,15 @@ def atomic_write_bytes(path: str, data: bytes) -> None:
     fsync_dir(d)
 
 
-def atomic_write_text(path: str, text: str) -> None:
+def atomic_write_text(path, text: str) -> None:
+    """atomic_write_bytes of `text` encoded as UTF-8."""
     atomic_write_bytes(path, text.encode("utf-8"))
 
 
-def fsync_dir(d: str) -> None:
+def fsync_dir(d) -> None:
+    """fsync a directory so a rename in it survives a power loss (no-op where directories cannot be opened)."""
     try:
-        fd = os.open(d, os.O_RDONLY)
+        fd = os.open(os.fspath(d), os.O_RDONLY)
     except OSError:
         return
     try:

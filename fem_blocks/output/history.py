@@ -1,83 +1,163 @@
-"""history.csv: one row per step, floats with 17 significant digits, flushed and fsynced as it goes."""
+"""history.csv: header line, then one row per step; floats written with `%.17g` (exact float64 round trip),
+integers as integers; flushed and fsynced every `flush_every` rows and at close, so a crash loses at most
+`flush_every - 1` rows. `HistoryWriter.resume` truncates the rows written after a checkpoint's step."""
 from __future__ import annotations
 
 import csv
+import io
 import math
 import os
 
 import numpy as np
 
 from ..errors import InputError
+from .atomic import atomic_write_text
 
 
 def _fmt(v) -> str:
+    if v is None:
+        return ""
     if isinstance(v, (bool, np.bool_)):
         return str(int(v))
     if isinstance(v, (int, np.integer)):
         return str(int(v))
+    if isinstance(v, (str, np.str_)):
+        return str(v)
     try:
         f = float(v)
     except (TypeError, ValueError):
-        return str(v)
+        raise InputError(f"history value {v!r}: expected a number, a string or None") from None
     if math.isnan(f):
         return "nan"
-    return f"{f:.17g}"
+    return "%.17g" % f
+
+
+def _line(values) -> str:
+    buf = io.StringIO()
+    csv.writer(buf, lineterminator="\n").writerow(values)
+    return buf.getvalue()
+
+
+def _read_rows(path: str):
+    """Header and complete rows; a last line without its newline (cut by a crash) is dropped."""
+    try:
+        with open(path, newline="") as f:
+            text = f.read()
+    except OSError as e:
+        raise InputError(f"{path}: cannot read the history ({e})") from None
+    if text and not text.endswith("\n"):
+        text = text[: text.rfind("\n") + 1]
+    rows = list(csv.reader(io.StringIO(text)))
+    if not rows:
+        raise InputError(f"{path}: empty history file (expected a header line)")
+    return rows[0], [r for r in rows[1:] if len(r) == len(rows[0])]
+
+
+def _drop_torn_line(path: str) -> None:
+    """Truncate a last line without its newline (a row cut by a crash) so appended rows start clean."""
+    with open(path, "rb+") as f:
+        f.seek(0, os.SEEK_END)
+        size = f.tell()
+        if size == 0:
+            return
+        f.seek(size - 1)
+        if f.read(1) == b"\n":
+            return
+        f.seek(0)
+        data = f.read()
+        f.truncate(data.rfind(b"\n") + 1)
+        f.flush()
+        os.fsync(f.fileno())
 
 
 class HistoryWriter:
-    def __init__(self, path: str, columns, append: bool = False, flush_every: int = 1):
+    """CSV writer with a fixed list of columns; `.write(dict)` (missing keys -> empty) or `.write(sequence)`."""
+
+    def __init__(self, path, columns, append: bool = False, flush_every: int = 1):
         self.path = os.fspath(path)
-        self.columns = list(columns)
-        self.flush_every = max(1, int(flush_every))
-        self._since_flush = 0
-        if append and os.path.exists(self.path):
+        self.columns = [str(c) for c in columns]
+        if not self.columns:
+            raise InputError(f"{self.path}: columns: expected at least one column name")
+        if len(set(self.columns)) != len(self.columns):
+            dup = sorted({c for c in self.columns if self.columns.count(c) > 1})
+            raise InputError(f"{self.path}: columns: duplicate column name(s) {dup}")
+        bad = [c for c in self.columns if not c or any(ch in c for ch in ',"\n\r')]
+        if bad:
+            raise InputError(f"{self.path}: columns: names must be non-empty without comma, quote or newline, "
+                             f"got {bad}")
+        try:
+            self.flush_every = int(flush_every)
+        except (TypeError, ValueError):
+            self.flush_every = 0
+        if self.flush_every < 1:
+            raise InputError(f"flush_every = {flush_every!r}: expected an integer >= 1")
+        self._index = {c: i for i, c in enumerate(self.columns)}
+        self._pending = 0
+        if append and os.path.exists(self.path) and os.path.getsize(self.path) > 0:
             with open(self.path, newline="") as f:
-                header = next(csv.reader(f), None)
+                header = next(csv.reader(f), [])
             if header != self.columns:
-                raise InputError(f"{self.path}: columns differ from this run's; cannot append")
+                raise InputError(f"{self.path}: columns differ from this run's (file {header}, run {self.columns});"
+                                 " cannot append")
+            _drop_torn_line(self.path)
             self.f = open(self.path, "a", newline="")
         else:
             self.f = open(self.path, "w", newline="")
-            self.f.write(",".join(self.columns) + "\n")
+            self.f.write(_line(self.columns))
             self.flush()
 
     @classmethod
-    def resume(cls, path: str, columns, last_step: int, step_column: str = "step", flush_every: int = 1):
-        """Drop rows after `last_step`, then reopen for appending (rows of a run resumed from a checkpoint)."""
-        with open(path, newline="") as f:
-            rows = list(csv.reader(f))
-        if not rows or rows[0] != list(columns):
-            raise InputError(f"{path}: columns differ from this run's; cannot resume")
-        k = rows[0].index(step_column)
-        keep = [rows[0]] + [r for r in rows[1:] if len(r) == len(rows[0]) and int(float(r[k])) <= last_step]
-        from .atomic import atomic_write_text
-        atomic_write_text(path, "".join(",".join(r) + "\n" for r in keep))
-        return cls(path, columns, append=True, flush_every=flush_every)
+    def resume(cls, path, last_step: int, step_column: str = "step", columns=None,
+               flush_every: int = 1) -> "HistoryWriter":
+        """Keep the header and the rows with step <= last_step (dropping a torn last line), rewrite the file
+        atomically and reopen it for appending. `columns`, if given, must equal the file's header."""
+        path = os.fspath(path)
+        header, rows = _read_rows(path)
+        if columns is not None and header != [str(c) for c in columns]:
+            raise InputError(f"{path}: columns differ from this run's (file {header}, run {list(columns)}); "
+                             "cannot resume")
+        if step_column not in header:
+            raise InputError(f"{path}: step_column {step_column!r} not in the header {header}")
+        k = header.index(step_column)
+        keep = []
+        for r in rows:
+            try:
+                s = float(r[k])
+            except ValueError:
+                raise InputError(f"{path}: non-numeric {step_column} {r[k]!r}") from None
+            if s <= last_step:
+                keep.append(r)
+        atomic_write_text(path, "".join(_line(r) for r in [header] + keep))
+        return cls(path, header, append=True, flush_every=flush_every)
 
     def write(self, row) -> None:
         if isinstance(row, dict):
-            unknown = set(row) - set(self.columns)
+            unknown = [c for c in row if c not in self._index]
             if unknown:
-                raise InputError(f"{self.path}: unknown history column(s) {sorted(unknown)}")
-            vals = [row.get(c, "") for c in self.columns]
+                raise InputError(f"{self.path}: unknown history column(s) {sorted(map(str, unknown))}; "
+                                 f"expected a subset of {self.columns}")
+            vals = [row.get(c) for c in self.columns]
         else:
             vals = list(row)
             if len(vals) != len(self.columns):
-                raise InputError(f"{self.path}: expected {len(self.columns)} values, got {len(vals)}")
-        self.f.write(",".join(_fmt(v) for v in vals) + "\n")
-        self._since_flush += 1
-        if self._since_flush >= self.flush_every:
+                raise InputError(f"{self.path}: expected {len(self.columns)} values ({self.columns}), "
+                                 f"got {len(vals)}")
+        self.f.write(_line([_fmt(v) for v in vals]))
+        self._pending += 1
+        if self._pending >= self.flush_every:
             self.flush()
 
-    def flush(self):
+    def flush(self) -> None:
         self.f.flush()
         os.fsync(self.f.fileno())
-        self._since_flush = 0
+        self._pending = 0
 
-    def close(self):
+    def close(self) -> None:
         if not self.f.closed:
-            self.flush()
-            self.f.close()
+            try:
+                self.flush()
+            finally:
+                self.f.close()
 
     def __enter__(self):
         return self
@@ -87,16 +167,15 @@ class HistoryWriter:
         return False
 
 
-def read_history(path: str) -> dict:
-    """Columns of a history.csv as float arrays (non-numeric columns kept as strings)."""
-    with open(path, newline="") as f:
-        rows = list(csv.reader(f))
-    header, data = rows[0], rows[1:]
+def read_history(path) -> dict:
+    """Columns of a history.csv: name -> float64 array (empty cells -> NaN), or a str array for a column
+    with non-numeric entries. A torn last line is ignored."""
+    header, rows = _read_rows(os.fspath(path))
     out = {}
     for j, name in enumerate(header):
-        col = [r[j] for r in data]
+        col = [r[j] for r in rows]
         try:
-            out[name] = np.array([float(x) if x != "" else np.nan for x in col])
+            out[name] = np.array([float(x) if x != "" else np.nan for x in col], dtype=np.float64)
         except ValueError:
             out[name] = np.array(col)
     return out

@@ -1,64 +1,110 @@
-"""PNG figures of a run (matplotlib, Agg backend: never opens a window)."""
+"""PNG figures of a run, drawn with matplotlib's Agg canvas (`matplotlib.figure.Figure`, no pyplot: never
+opens a window and does not touch the global backend), written atomically. Empty data gives a figure that
+says "no data" instead of an error."""
 from __future__ import annotations
+
+import io
 
 import numpy as np
 
-
-def _plt():
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    return plt
+from ..errors import InputError
+from .atomic import atomic_write_bytes
 
 
-def plot_curve(path, x, y, xlabel, ylabel, title="", mark_peak=True):
-    """Force–displacement curve with the peak marked; writes a figure saying 'no data' when empty."""
-    plt = _plt()
-    fig, ax = plt.subplots(figsize=(6.4, 4.2))
-    x, y = np.asarray(x, float), np.asarray(y, float)
-    if x.size == 0:
-        ax.text(0.5, 0.5, "no data", ha="center", va="center", transform=ax.transAxes)
-    else:
-        ax.plot(x, y, "-", lw=1.5)
-        if mark_peak:
-            k = int(np.argmax(np.abs(y)))
-            ax.plot(x[k], y[k], "o", color="C3")
-            ax.annotate(f"peak {y[k]:.4g} at {x[k]:.4g}", (x[k], y[k]), textcoords="offset points", xytext=(8, -14))
-    ax.set(xlabel=xlabel, ylabel=ylabel, title=title)
-    ax.grid(alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+def _figure(size):
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+    fig = Figure(figsize=size)
+    FigureCanvasAgg(fig)
+    return fig
+
+
+def _save(fig, path, dpi):
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=dpi)
+    atomic_write_bytes(path, buf.getvalue())
     return path
+
+
+def _no_data(ax):
+    ax.text(0.5, 0.5, "no data", ha="center", va="center", fontsize=16, color="0.4", transform=ax.transAxes)
+
+
+def plot_curve(path, x, y, xlabel, ylabel, title="", peak=True):
+    """Curve y(x) (e.g. force–displacement); with peak=True the point of largest |y| is marked and annotated
+    "peak y at x". Non-finite points are skipped. Returns `path`."""
+    x = np.asarray(x, dtype=float).ravel()
+    y = np.asarray(y, dtype=float).ravel()
+    if x.shape != y.shape:
+        raise InputError(f"plot_curve: x and y must have the same length, got {x.size} and {y.size}")
+    ok = np.isfinite(x) & np.isfinite(y)
+    fig = _figure((6.4, 4.2))
+    ax = fig.add_subplot()
+    if not ok.any():
+        _no_data(ax)
+    else:
+        ax.plot(x, y, "-", lw=1.5, color="C0")
+        if peak:
+            k = int(np.flatnonzero(ok)[np.argmax(np.abs(y[ok]))])
+            ax.plot([x[k]], [y[k]], "o", color="C3", ms=7, zorder=3)
+            ax.annotate(f"peak {y[k]:.4g} at {x[k]:.4g}", (x[k], y[k]), textcoords="offset points",
+                        xytext=(8, -14), color="C3")
+        ax.grid(alpha=0.3)
+    ax.set(xlabel=xlabel, ylabel=ylabel, title=title)
+    fig.tight_layout()
+    return _save(fig, path, 120)
 
 
 def plot_crack_pattern(path, polygons, segments, values, amplification, title="", value_label="damage"):
-    """Deformed block outlines (displacements amplified) and joint segments coloured by `values` in [0, 1]."""
-    plt = _plt()
+    """Deformed block outlines (displacements already amplified by `amplification`) and joint/contact
+    segments (m, 2, 2) coloured by `values` (m,) clipped to [0, 1] (NaN drawn grey), with a colourbar and the
+    text "displacements x{amplification:g}". Returns `path`."""
+    try:
+        amp = float(amplification)
+    except (TypeError, ValueError):
+        raise InputError(f"amplification = {amplification!r}: expected a number") from None
+    polys = []
+    for i, p in enumerate(polygons if polygons is not None else []):
+        p = np.asarray(p, dtype=float)
+        if p.ndim != 2 or p.shape[1] != 2:
+            raise InputError(f"polygons[{i}]: expected a (k, 2) array of outline points, got shape {p.shape}")
+        if len(p):
+            polys.append(p)
+    seg = np.asarray(segments if segments is not None else np.zeros((0, 2, 2)), dtype=float)
+    if seg.size == 0:
+        seg = np.zeros((0, 2, 2))
+    if seg.ndim != 3 or seg.shape[1:] != (2, 2):
+        raise InputError(f"segments: expected an (m, 2, 2) array, got shape {seg.shape}")
+    val = np.asarray(values if values is not None else [], dtype=float).ravel()
+    if len(val) != len(seg):
+        raise InputError(f"values: expected {len(seg)} values (one per segment), got {len(val)}")
+
+    from matplotlib import colormaps
+    from matplotlib.cm import ScalarMappable
     from matplotlib.collections import LineCollection, PolyCollection
-    fig, ax = plt.subplots(figsize=(7.5, 6.0))
-    if len(polygons) == 0:
-        ax.text(0.5, 0.5, "no data", ha="center", va="center", transform=ax.transAxes)
-    else:
-        ax.add_collection(PolyCollection(polygons, facecolors="#e8d5c0", edgecolors="#7a5c3e", linewidths=0.4))
-        if len(segments):
-            lc = LineCollection(segments, array=np.clip(np.asarray(values, float), 0, 1), cmap="inferno_r",
-                                linewidths=2.2, norm=_norm())
-            ax.add_collection(lc)
-            fig.colorbar(lc, ax=ax, shrink=0.7, label=value_label)
-        allp = np.concatenate(polygons)
-        ax.set_xlim(allp[:, 0].min() - 0.02 * np.ptp(allp[:, 0]), allp[:, 0].max() + 0.02 * np.ptp(allp[:, 0]))
-        ax.set_ylim(allp[:, 1].min() - 0.02 * np.ptp(allp[:, 1]), allp[:, 1].max() + 0.02 * np.ptp(allp[:, 1]))
-    ax.set_aspect("equal")
-    ax.set_title(title)
-    ax.text(0.01, 0.01, f"displacements x{amplification:g}", transform=ax.transAxes, fontsize=10,
-            bbox=dict(facecolor="white", alpha=0.8, edgecolor="none"))
-    fig.tight_layout()
-    fig.savefig(path, dpi=130)
-    plt.close(fig)
-    return path
-
-
-def _norm():
     from matplotlib.colors import Normalize
-    return Normalize(0.0, 1.0)
+    fig = _figure((7.5, 6.0))
+    ax = fig.add_subplot()
+    norm = Normalize(0.0, 1.0)
+    cmap = colormaps["inferno_r"].with_extremes(bad="0.6")
+    if not polys and not len(seg):
+        _no_data(ax)
+    else:
+        if polys:
+            ax.add_collection(PolyCollection(polys, facecolors="#e8d5c0", edgecolors="#7a5c3e", linewidths=0.4))
+        if len(seg):
+            ax.add_collection(LineCollection(seg, array=np.clip(val, 0.0, 1.0), cmap=cmap, norm=norm,
+                                             linewidths=2.2))
+        pts = np.concatenate(polys + [seg.reshape(-1, 2)])
+        pts = pts[np.all(np.isfinite(pts), axis=1)]
+        if len(pts):
+            lo, hi = pts.min(axis=0), pts.max(axis=0)
+            pad = 0.03 * max(float((hi - lo).max()), 1e-300) if (hi - lo).max() > 0 else max(abs(lo).max(), 1.0)
+            ax.set_xlim(lo[0] - pad, hi[0] + pad)
+            ax.set_ylim(lo[1] - pad, hi[1] + pad)
+        ax.set_aspect("equal")
+    fig.colorbar(ScalarMappable(norm=norm, cmap=cmap), ax=ax, shrink=0.7, label=value_label)
+    ax.set_title(title)
+    fig.text(0.01, 0.01, f"displacements x{amp:g}", fontsize=10)
+    fig.tight_layout(rect=(0, 0.03, 1, 1))
+    return _save(fig, path, 130)

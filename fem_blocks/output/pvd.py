@@ -1,51 +1,106 @@
 """ParaView collection (.pvd) of time frames, rewritten atomically after every frame.
 
-A crash leaves a valid series of all frames written so far; `open_existing` reloads a series to
-append to it after a restart, dropping frames later than the restart time."""
+A crash leaves a valid series listing every frame added so far. `PvdSeries.open_existing(path,
+keep_until_time)` reloads a series to continue it after a restart: entries with time > keep_until_time
+are dropped (and their .vtu files deleted), so the resumed run appends without duplicate times."""
 from __future__ import annotations
 
+import math
 import os
 import xml.etree.ElementTree as ET
+from xml.sax.saxutils import quoteattr
 
 from ..errors import InputError
 from .atomic import atomic_write_text
 
 
+def _read_entries(path: str) -> list:
+    try:
+        root = ET.parse(path).getroot()
+    except (OSError, ET.ParseError) as e:
+        raise InputError(f"{path}: cannot read the ParaView series ({e})") from None
+    if root.tag != "VTKFile" or root.get("type") != "Collection":
+        raise InputError(f"{path}: expected a ParaView collection (<VTKFile type=\"Collection\">)")
+    entries = []
+    for ds in root.iter("DataSet"):
+        f = ds.get("file")
+        try:
+            t, part = float(ds.get("timestep", "0")), int(ds.get("part", "0"))
+        except ValueError:
+            t = part = None
+        if f is None or t is None:
+            raise InputError(f"{path}: DataSet {ET.tostring(ds, encoding='unicode').strip()} "
+                             "has no file or a non-numeric timestep/part")
+        entries.append((t, part, f))
+    return entries
+
+
 class PvdSeries:
-    def __init__(self, path: str, entries=None):
+    """Time series `<DataSet timestep=t part=p file=relative.vtu/>`; `.entries` = [(time, part, file)].
+
+    append=False starts a new (empty, valid) series at `path`; append=True continues an existing one."""
+
+    def __init__(self, path, append: bool = False):
         self.path = os.fspath(path)
-        self.entries: list[tuple[float, int, str]] = list(entries or [])  # (time, part, relative file)
+        self.entries: list[tuple[float, int, str]] = []
+        if append and os.path.exists(self.path):
+            self.entries = _read_entries(self.path)
         self._write()
 
     @classmethod
-    def open_existing(cls, path: str, keep_until_time: float | None = None) -> "PvdSeries":
-        try:
-            root = ET.parse(path).getroot()
-        except (OSError, ET.ParseError) as e:
-            raise InputError(f"{path}: cannot read the ParaView series ({e})") from None
-        entries = []
+    def open_existing(cls, path, keep_until_time: float | None = None) -> "PvdSeries":
+        """Reload `path`; drop entries with time > keep_until_time and delete their files (files inside the
+        series' directory that no kept entry refers to). The rewritten series is saved at once."""
+        path = os.fspath(path)
+        if not os.path.exists(path):
+            raise InputError(f"{path}: ParaView series not found; cannot resume it")
+        entries = _read_entries(path)
+        if keep_until_time is not None:
+            tk = float(keep_until_time)
+            if not math.isfinite(tk):
+                raise InputError(f"keep_until_time = {keep_until_time!r}: expected a finite time")
+            kept = [e for e in entries if e[0] <= tk]
+            dropped = [e for e in entries if e[0] > tk]
+        else:
+            kept, dropped = entries, []
+        s = cls.__new__(cls)
+        s.path, s.entries = path, kept
+        s._write()  # first the series without the dropped frames, then delete their files
         d = os.path.dirname(os.path.abspath(path))
-        for ds in root.iter("DataSet"):
-            t = float(ds.get("timestep", "0"))
-            f = ds.get("file")
-            part = int(ds.get("part", "0"))
-            if keep_until_time is not None and t > keep_until_time * (1 + 1e-12) + 1e-300:
-                try:
-                    os.unlink(os.path.join(d, f))
-                except FileNotFoundError:
-                    pass
-                continue
-            entries.append((t, part, f))
-        return cls(path, entries)
+        kept_files = {os.path.normpath(os.path.join(d, e[2])) for e in kept}
+        for _, _, f in dropped:
+            full = os.path.normpath(os.path.join(d, f))
+            if full in kept_files or os.path.commonpath([d, full]) != d:
+                continue  # still referenced, or outside the output directory: never delete
+            try:
+                os.unlink(full)
+            except FileNotFoundError:
+                pass
+        return s
 
-    def add(self, time: float, relative_file: str, part: int = 0) -> None:
-        self.entries.append((float(time), int(part), relative_file))
+    @property
+    def times(self) -> list:
+        return [e[0] for e in self.entries]
+
+    @property
+    def files(self) -> list:
+        return [e[2] for e in self.entries]
+
+    def add(self, time: float, vtu_relative_path, part: int = 0) -> None:
+        """Append a frame and rewrite the .pvd atomically."""
+        t = float(time)
+        if not math.isfinite(t):
+            raise InputError(f"time = {time!r}: expected a finite number")
+        f = os.fspath(vtu_relative_path)
+        if not f:
+            raise InputError("vtu_relative_path: expected a non-empty file name")
+        self.entries.append((t, int(part), f.replace(os.sep, "/")))
         self._write()
 
-    def _write(self):
+    def _write(self) -> None:
         lines = ['<?xml version="1.0"?>', '<VTKFile type="Collection" version="0.1" byte_order="LittleEndian">',
                  "<Collection>"]
         for t, part, f in self.entries:
-            lines.append(f'<DataSet timestep="{t:.17g}" group="" part="{part}" file="{f}"/>')
+            lines.append(f'<DataSet timestep="{t!r}" group="" part="{part}" file={quoteattr(f)}/>')
         lines += ["</Collection>", "</VTKFile>", ""]
         atomic_write_text(self.path, "\n".join(lines))

@@ -1,50 +1,99 @@
-"""summary.json: run summary with versions and a UTC timestamp, written atomically."""
+"""summary.json: run summary plus `versions` of the software stack and a UTC ISO `timestamp`, written atomically.
+
+numpy scalars and arrays become JSON numbers and lists, non-finite floats (NaN, ±inf) become null, paths
+become strings; any other non-JSON object raises InputError naming its key."""
 from __future__ import annotations
 
 import datetime
+import importlib.metadata
+import importlib.util
 import json
 import math
+import os
 import platform
 import sys
 
 import numpy as np
 
+from ..errors import InputError
 from .atomic import atomic_write_text
 
+# module name -> distribution name (for the version without importing the module)
+_STACK = {"numpy": "numpy", "scipy": "scipy", "numba": "numba", "dolfinx": "fenics-dolfinx",
+          "petsc4py": "petsc4py", "gmsh": "gmsh", "meshio": "meshio"}
 
-def _clean(v):
+
+def _clean(v, where: str):
     if isinstance(v, dict):
-        return {str(k): _clean(x) for k, x in v.items()}
+        return {str(k): _clean(x, f"{where}.{k}" if where else str(k)) for k, x in v.items()}
     if isinstance(v, (list, tuple)):
-        return [_clean(x) for x in v]
+        return [_clean(x, f"{where}[{i}]") for i, x in enumerate(v)]
     if isinstance(v, np.ndarray):
-        return _clean(v.tolist())
-    if isinstance(v, (np.bool_, bool)):
+        return _clean(v.tolist(), where)
+    if v is None or isinstance(v, (str, np.str_)):
+        return None if v is None else str(v)
+    if isinstance(v, (bool, np.bool_)):
         return bool(v)
-    if isinstance(v, (np.integer,)):
+    if isinstance(v, (int, np.integer)):
         return int(v)
     if isinstance(v, (float, np.floating)):
         f = float(v)
         return f if math.isfinite(f) else None
-    return v
+    if isinstance(v, np.generic):  # e.g. complex: not JSON
+        raise InputError(f"summary[{where}]: cannot write a {type(v).__name__} to JSON")
+    if isinstance(v, os.PathLike):
+        return os.fspath(v)
+    raise InputError(f"summary[{where}]: cannot write a {type(v).__name__} to JSON; expected a number, string, "
+                     "bool, None, list, dict or numpy array")
+
+
+def _version(mod: str):
+    m = sys.modules.get(mod)
+    if m is not None:
+        v = getattr(m, "__version__", None) or getattr(m, "GMSH_API_VERSION", None)
+        if v:
+            return str(v)
+    try:
+        return importlib.metadata.version(_STACK[mod])
+    except importlib.metadata.PackageNotFoundError:
+        pass
+    try:
+        if importlib.util.find_spec(mod) is None:
+            return None  # not importable
+    except (ImportError, ValueError):
+        return None
+    if mod == "gmsh":  # gmsh imports quickly (no MPI/JIT): ask it
+        try:
+            import gmsh
+            return str(getattr(gmsh, "__version__", None) or gmsh.GMSH_API_VERSION)
+        except Exception:
+            return None
+    return "unknown"  # importable, version not found without importing it (importing dolfinx costs seconds)
 
 
 def versions() -> dict:
-    out = {"python": platform.python_version()}
+    """Versions of python, fem_blocks and the stack; a module that is not importable maps to None.
+
+    Read from the imported module when the run imported it, else from the package metadata, so this never
+    imports dolfinx/petsc4py (seconds of MPI start-up) and never fails."""
     from .. import __version__
-    out["fem_blocks"] = __version__
-    for mod in ("numpy", "scipy", "numba", "petsc4py", "gmsh", "meshio", "dolfinx"):
-        m = sys.modules.get(mod)
-        if m is None:
-            continue  # report only what this run imported (importing dolfinx here would cost seconds)
-        out[mod] = getattr(m, "__version__", None) or getattr(m, "GMSH_API_VERSION", None)
+    out = {"fem_blocks": __version__, "python": platform.python_version()}
+    for mod in _STACK:
+        try:
+            out[mod] = _version(mod)
+        except Exception:  # a broken installation must not stop the summary
+            out[mod] = None
     return out
 
 
-def write_summary(path: str, data: dict) -> dict:
+def write_summary(path, data: dict) -> dict:
+    """Write `data` + {"versions": versions(), "timestamp": UTC ISO 8601} to `path` as JSON, atomically;
+    returns the dict written (keys given in `data` win)."""
+    if not isinstance(data, dict):
+        raise InputError(f"summary data: expected a dict, got {type(data).__name__}")
     d = dict(data)
     d.setdefault("versions", versions())
-    d.setdefault("written_at", datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"))
-    d = _clean(d)
-    atomic_write_text(path, json.dumps(d, indent=2, sort_keys=False, allow_nan=False) + "\n")
+    d.setdefault("timestamp", datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"))
+    d = _clean(d, "")
+    atomic_write_text(path, json.dumps(d, indent=2, allow_nan=False) + "\n")
     return d
