@@ -168,10 +168,13 @@ def test_pvd_valid_after_each_add_and_resume_drops_later_frames(tmp_path):
         write_vtu(tmp_path / name, np.zeros((1, 2)), [("vertex", [0])])
         s.add(t, name)
         assert _pvd_entries(path) == [(times[j], f"f{j}.vtu") for j in range(k + 1)]  # exact times
-    r = PvdSeries.open_existing(path, keep_until_time=times[2])
-    assert r.files == ["f0.vtu", "f1.vtu", "f2.vtu"] and r.times == times[:3]
-    assert _pvd_entries(path) == [(times[j], f"f{j}.vtu") for j in range(3)]  # rewritten at once
-    assert [(tmp_path / f"f{k}.vtu").exists() for k in range(5)] == [True, True, True, False, False]
+    # resume at t = 0.3: the frame stored at 0.1 * 3 = 0.30000000000000004 is the same instant (kept), 0.4 dropped
+    r = PvdSeries.open_existing(path, keep_until_time=0.3)
+    assert r.files == ["f0.vtu", "f1.vtu", "f2.vtu", "f3.vtu"] and r.times == times[:4]
+    assert _pvd_entries(path) == [(times[j], f"f{j}.vtu") for j in range(4)]  # rewritten at once
+    assert [(tmp_path / f"f{k}.vtu").exists() for k in range(5)] == [True, True, True, True, False]
+    r = PvdSeries.open_existing(path, keep_until_time=0.25)
+    assert r.files == ["f0.vtu", "f1.vtu", "f2.vtu"] and not (tmp_path / "f3.vtu").exists()
     r.add(times[3], "g3.vtu")
     assert [e[1] for e in _pvd_entries(path)] == ["f0.vtu", "f1.vtu", "f2.vtu", "g3.vtu"]
     # append=True continues without truncation; open_existing without a time keeps everything
@@ -361,3 +364,22 @@ def test_plots_write_png_and_survive_empty_data(tmp_path):
     with pytest.raises(InputError, match="x and y must have the same length"):
         plot_curve(tmp_path / "z.png", [0, 1], [0], "u", "F", "bad")
     assert not (tmp_path / "z.png").exists()
+
+
+def test_vtu_dtypes_and_empty_grid(tmp_path):
+    P = np.array([[0.0, 0.0], [1.0, 0.0]])
+    be = np.array([1.25, -3.5], dtype=">f8")  # big-endian input is written little-endian
+    f32 = np.array([0.1, 0.2], dtype=np.float32)
+    write_vtu(tmp_path / "d.vtu", P, [("line", [[0, 1]])],
+              point_data={"be": be, "f32": f32, "i32": np.array([7, -8], np.int32), "u16": np.array([1, 2], "u2")})
+    m = meshio.read(tmp_path / "d.vtu")
+    assert np.array_equal(m.point_data["be"], [1.25, -3.5])
+    assert m.point_data["f32"].dtype == np.float32 and np.array_equal(m.point_data["f32"], f32)
+    assert m.point_data["i32"].dtype == np.int32 and np.array_equal(m.point_data["i32"], [7, -8])
+    assert np.array_equal(m.point_data["u16"], [1, 2]) and m.cells[0].type == "line"
+    # zero contacts: a valid empty grid (meshio 5.0 cannot read cell-less grids, so decode it directly)
+    write_vtu(tmp_path / "e.vtu", np.zeros((0, 2)), [("vertex", np.arange(0))], point_data={"r_N": np.zeros(0)})
+    root, arr = _decode_arrays(tmp_path / "e.vtu")
+    piece = root.find("UnstructuredGrid/Piece")
+    assert piece.get("NumberOfPoints") == "0" and piece.get("NumberOfCells") == "0"
+    assert all(nbytes == 0 for _, nbytes, _ in arr.values()) and set(arr) >= {"Points", "types", "r_N"}

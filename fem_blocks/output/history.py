@@ -175,7 +175,10 @@ def read_history(path) -> dict:
     for j, name in enumerate(header):
         col = [r[j] for r in rows]
         try:
-            out[name] = np.array([float(x) if x != "" else np.nan for x in col], dtype=np.float64)
+            out[name] = np.array(col, dtype=np.float64)  # C-level parse; exact for the %.17g text
         except ValueError:
-            out[name] = np.array(col)
+            try:
+                out[name] = np.array([float(x) if x != "" else np.nan for x in col], dtype=np.float64)
+            except ValueError:
+                out[name] = np.array(col)
     return out

@@ -47,8 +47,11 @@ def plot_curve(path, x, y, xlabel, ylabel, title="", peak=True):
         if peak:
             k = int(np.flatnonzero(ok)[np.argmax(np.abs(y[ok]))])
             ax.plot([x[k]], [y[k]], "o", color="C3", ms=7, zorder=3)
+            xs = x[ok]
+            right = x[k] > 0.5 * (xs.min() + xs.max())  # put the label on the side with room
             ax.annotate(f"peak {y[k]:.4g} at {x[k]:.4g}", (x[k], y[k]), textcoords="offset points",
-                        xytext=(8, -14), color="C3")
+                        xytext=(-10 if right else 10, -16 if y[k] >= 0 else 12), ha="right" if right else "left",
+                        color="C3", bbox=dict(facecolor="white", alpha=0.8, edgecolor="none", pad=1))
         ax.grid(alpha=0.3)
     ax.set(xlabel=xlabel, ylabel=ylabel, title=title)
     fig.tight_layout()

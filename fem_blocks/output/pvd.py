@@ -49,7 +49,7 @@ class PvdSeries:
 
     @classmethod
     def open_existing(cls, path, keep_until_time: float | None = None) -> "PvdSeries":
-        """Reload `path`; drop entries with time > keep_until_time and delete their files (files inside the
+        """Reload `path`; drop entries with time > keep_until_time * (1 + 1e-12) and delete their files (inside the
         series' directory that no kept entry refers to). The rewritten series is saved at once."""
         path = os.fspath(path)
         if not os.path.exists(path):
@@ -59,6 +59,7 @@ class PvdSeries:
             tk = float(keep_until_time)
             if not math.isfinite(tk):
                 raise InputError(f"keep_until_time = {keep_until_time!r}: expected a finite time")
+            tk += 1e-12 * abs(tk)  # the checkpoint time recomputed in another order may differ by ulps
             kept = [e for e in entries if e[0] <= tk]
             dropped = [e for e in entries if e[0] > tk]
         else:
