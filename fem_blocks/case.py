@@ -768,3 +768,20 @@ def _parse_wall(w: Table, U: dict, materials, block_types, blocks, rigid, names)
         names.add("beam")
         rigid.append(r)
         bt.done()
+
+
+def quick(case: Case, factor: float = 2.0) -> Case:
+    """Reduced-resolution variant of a case (`--quick`): element sizes and time steps multiplied by `factor`
+    (durations, loads and stop criteria unchanged). For smoke tests and a first look."""
+    for bt in case.block_types.values():
+        if bt.mesh_size is not None and bt.geometry != "file":
+            bt.mesh_size *= factor
+    for st in case.stages:
+        st.h = min(st.h * factor, st.duration)
+        st.output_every = max(1, int(round(st.output_every / factor)))
+        if st.stop_after_peak is not None:
+            body, dof, drop, n = st.stop_after_peak
+            st.stop_after_peak = (body, dof, drop, max(1, int(round(n / factor))))
+        st.min_steps = max(1, int(round(st.min_steps / factor)))
+    case.name += " (quick)"
+    return case

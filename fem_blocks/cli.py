@@ -13,7 +13,7 @@ from . import __version__
 from .errors import ConvergenceError, InputError
 
 DEMO_DIR = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "demos")
-DEFAULT_DEMO = "vibrating_block"
+DEFAULT_DEMO = "shear_wall"
 
 
 def list_demos() -> dict[str, str]:
@@ -44,9 +44,12 @@ def _run_script(path: str, out: str) -> int:
     return 0
 
 
-def _run(case_path: str, out: str, quiet: bool) -> int:
+def _run(case_path: str, out: str, quiet: bool, quick: bool = False) -> int:
     from .case import load_case
+    from .case import quick as make_quick
     case = load_case(case_path)  # validate before importing the heavy stages
+    if quick:
+        case = make_quick(case)
     from .runner import run_case
     summary = run_case(case, out, progress=not quiet)
     pv = summary["outputs"].get("paraview")
@@ -55,6 +58,12 @@ def _run(case_path: str, out: str, quiet: bool) -> int:
         print(f"ParaView files: {os.path.join(os.path.abspath(out), pv)}")
     print(f"history: {os.path.join(os.path.abspath(out), 'history.csv')}; "
           f"summary: {os.path.join(os.path.abspath(out), 'summary.json')}")
+    figs = [summary[k] for k in ("force_displacement", "crack_pattern") if summary.get(k)]
+    if figs:
+        print("figures: " + ", ".join(os.path.join(os.path.abspath(out), f) for f in figs))
+    if "peak_horizontal_force_kN" in summary:
+        print(f"peak horizontal force {summary['peak_horizontal_force_kN']:.3f} kN at "
+              f"{summary['displacement_at_peak_mm']:.3f} mm (vertical force {summary['vertical_force_at_peak_kN']:.3f} kN)")
     return 0
 
 
@@ -66,19 +75,21 @@ def main(argv=None) -> int:
     r.add_argument("case", help="TOML case file")
     r.add_argument("--out", required=True, help="output directory")
     r.add_argument("--quiet", action="store_true", help="no progress line")
+    r.add_argument("--quick", action="store_true", help="reduced resolution: element sizes and time steps x2")
     d = sub.add_parser("demo", help="run a shipped demo")
     d.add_argument("name", nargs="?", default="default", help="demo name (see --list); 'default' = "
                                                               + DEFAULT_DEMO)
     d.add_argument("--list", action="store_true", help="list the demos")
     d.add_argument("--out", default=None, help="output directory (default out/demo-NAME)")
     d.add_argument("--quiet", action="store_true")
+    d.add_argument("--quick", action="store_true", help="reduced resolution (smoke test, first look)")
     args = p.parse_args(argv)
     if args.command is None:
         p.print_help()
         return 2
     try:
         if args.command == "run":
-            return _run(args.case, args.out, args.quiet)
+            return _run(args.case, args.out, args.quiet, args.quick)
         demos = list_demos()
         if args.list:
             for name, path in demos.items():
@@ -90,7 +101,7 @@ def main(argv=None) -> int:
         out = args.out or os.path.join("out", f"demo-{name}")
         if demos[name].endswith(".py"):
             return _run_script(demos[name], out)
-        return _run(demos[name], out, args.quiet)
+        return _run(demos[name], out, args.quiet, args.quick)
     except InputError as e:
         print(f"fem-blocks: error: {e}", file=sys.stderr)
         return 2
