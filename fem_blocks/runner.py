@@ -99,6 +99,8 @@ def run_case(case: Case, out_dir: str, progress: bool = True) -> dict:
     pc = ContactsWriter(model.contact, os.path.join(out_dir, "paraview")) \
         if case.output["paraview"] and model.contact is not None else None
     ckpt_every = case.output.get("checkpoint_every", 0)
+    cv = case.output.get("curve")
+    curve_body = model.bodies[model.index(cv["body"])] if cv else None
     cstats = dict(steps=0, sweeps=0, max_sweeps=0, unconverged=0, max_residual=0.0, max_change=0.0)
     hist = HistoryWriter(os.path.join(out_dir, "history.csv"), history_columns(model), flush_every=50)
     bar = Progress(progress)
@@ -175,6 +177,8 @@ def run_case(case: Case, out_dir: str, progress: bool = True) -> dict:
                         pc.write(sim.time)
                     n_frames += 1
                 extra = f" sweeps {c['sweeps']}" if c else ""
+                if curve_body is not None:
+                    extra += f" F{cv['force']} = {curve_body.reaction[DOFS.index(cv['force'])] / 1e3:.4g} kN"
                 bar.update(f"[{si + 1}/{len(case.stages)} {st.name}] step {k}/{n_steps} t = {sim.time:.6g} s "
                            f"E = {info.total_energy:.6g} J vmax = {info.max_velocity:.3g} m/s{extra}", force=last)
                 if ckpt_every and (sim.step_count % ckpt_every == 0 or last):
