@@ -110,21 +110,28 @@ def local_2d(w00, w01, w10, w11, q0, q1, mu):
     return best_rn, best_rt, best_case
 
 
+@njit(cache=True, inline="always")
+def _local_free(indptr, indices, blocks, q, r, a):
+    """v_loc^α = q_α + Σ_{β≠α} W_αβ r_β."""
+    v0 = q[2 * a]
+    v1 = q[2 * a + 1]
+    for k in range(indptr[a], indptr[a + 1]):
+        b = indices[k]
+        if b != a:
+            rb0 = r[2 * b]
+            rb1 = r[2 * b + 1]
+            v0 += blocks[k, 0, 0] * rb0 + blocks[k, 0, 1] * rb1
+            v1 += blocks[k, 1, 0] * rb0 + blocks[k, 1, 1] * rb1
+    return v0, v1
+
+
 @njit(cache=True)
 def _sweep(indptr, indices, blocks, diag_pos, q, mu, r, order, omega):
     dr2 = 0.0
     r2 = 0.0
     for ii in range(order.shape[0]):
         a = order[ii]
-        v0 = q[2 * a]
-        v1 = q[2 * a + 1]
-        for k in range(indptr[a], indptr[a + 1]):
-            b = indices[k]
-            if b != a:
-                rb0 = r[2 * b]
-                rb1 = r[2 * b + 1]
-                v0 += blocks[k, 0, 0] * rb0 + blocks[k, 0, 1] * rb1
-                v1 += blocks[k, 1, 0] * rb0 + blocks[k, 1, 1] * rb1
+        v0, v1 = _local_free(indptr, indices, blocks, q, r, a)
         d = diag_pos[a]
         if d < 0:
             rn, rt = 0.0, 0.0
@@ -393,18 +400,9 @@ def _sweep_cohesive(indptr, indices, blocks, diag_pos, q, mu, r, order, omega, l
                     h, theta):
     dr2 = 0.0
     r2 = 0.0
-    c = h * h * theta
     for ii in range(order.shape[0]):
         a = order[ii]
-        v0 = q[2 * a]
-        v1 = q[2 * a + 1]
-        for k in range(indptr[a], indptr[a + 1]):
-            b = indices[k]
-            if b != a:
-                rb0 = r[2 * b]
-                rb1 = r[2 * b + 1]
-                v0 += blocks[k, 0, 0] * rb0 + blocks[k, 0, 1] * rb1
-                v1 += blocks[k, 1, 0] * rb0 + blocks[k, 1, 1] * rb1
+        v0, v1 = _local_free(indptr, indices, blocks, q, r, a)
         d = diag_pos[a]
         w00, w01, w10, w11 = blocks[d, 0, 0], blocks[d, 0, 1], blocks[d, 1, 0], blocks[d, 1, 1]
         if law[a] == 0:
