@@ -534,7 +534,9 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
                        omega=ct.number("omega", 1.0, lo=0, hi=2, lo_open=True, hi_open=True),
                        order=ct.string("order", "given", choices=("given", "reversed", "shuffled")),
                        seed=ct.integer("seed", 0, lo=0),
-                       on_nonconvergence=ct.string("on_nonconvergence", "warn", choices=("warn", "fail")))
+                       on_nonconvergence=ct.string("on_nonconvergence", "warn", choices=("warn", "fail")),
+                       criterion=ct.string("criterion", "change", choices=("change", "residual")),
+                       check_every=ct.integer("check_every", 10, lo=1))
         ct.done()
     all_groups = {b.group for b in blocks} | {r.group for r in rigid}
     interfaces = []
@@ -591,7 +593,7 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
                              f"interface (orientation 'any') or two ('bed' and 'head'), got {orients}")
     if interfaces and not contact:
         contact = dict(geometry="frozen", redetect_every=1, tol=1e-6, max_sweeps=2000, omega=1.0, order="given",
-                       seed=0, on_nonconvergence="warn")
+                       seed=0, on_nonconvergence="warn", criterion="change", check_every=10)
 
     out = root.table("output")
     output = {"paraview": True, "stress": True, "checkpoint_every": 0, "crack_pattern": True}

@@ -239,3 +239,17 @@ def test_updated_geometry_follows_large_sliding():
     assert s2.reaction[1] == pytest.approx(weight, rel=1e-6)
     assert abs(s1.reaction[1]) < 1e-9 * weight
     assert cs.gt_end.min() > -1e-9
+
+
+def test_residual_criterion_in_time_stepping():
+    """With criterion = 'residual' each step stops on the natural-map residual ‖F‖/‖q‖ <= tol, and the residual
+    reported (recomputed from the returned impulses) meets it."""
+    blocks, floor, cs, m = stack(3)
+    cs.opts = ContactOptions(tol=1e-10, max_sweeps=200000, criterion="residual", check_every=5)
+    sim = Simulation(blocks + [floor], h=1e-2, theta=1.0, contact=cs, velocity_reset=True)
+    for _ in range(5):
+        info = sim.step()
+        assert info.contact["converged"] and info.contact["residual"] <= 1e-10
+    assert floor.reaction[1] == pytest.approx(3 * m * G, rel=1e-8)
+    with pytest.raises(InputError, match="contact.criterion = 'energy'"):
+        ContactOptions(criterion="energy")

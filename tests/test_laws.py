@@ -300,3 +300,13 @@ def test_compliant_joint_in_compression(law, params):
     assert blk.q[1] == pytest.approx(-F / (kn * A), rel=1e-10)
     assert cs.r[0, 0] == pytest.approx(F, rel=1e-10)
     assert cs.gt_end[0] == pytest.approx(-F / (kn * A), rel=1e-10)
+
+
+def test_cohesive_residual_criterion():
+    uc = np.sqrt(W / CN)
+    blk, base, cs, sim = joint("fremond", dict(c_N=CN, c_T=CT, w=W, mu=0.5),
+                               drivers=driven({"y": ramp([0, 3 * uc], [0, 1])}))
+    cs.opts.criterion, cs.opts.tol, cs.opts.check_every = "residual", 1e-9, 1
+    for _ in range(50):
+        info = sim.step()
+        assert info.contact["converged"] and info.contact["residual"] <= 1e-9

@@ -77,6 +77,8 @@ class ContactOptions:
     order: str = "given"
     seed: int = 0
     on_nonconvergence: str = "warn"
+    criterion: str = "change"   # "change": ‖ΔP‖/‖P‖ between sweeps; "residual": natural-map residual ‖F‖/‖q‖
+    check_every: int = 10
 
     def __post_init__(self):
         if self.geometry not in ("frozen", "updated"):
@@ -86,6 +88,9 @@ class ContactOptions:
         check_range("contact.omega", self.omega, 0.0, 2.0, lo_open=True, hi_open=True, expected="0 < omega < 2")
         if self.order not in ("given", "reversed", "shuffled"):
             raise InputError(f"contact.order = {self.order!r}: expected 'given', 'reversed' or 'shuffled'")
+        if self.criterion not in ("change", "residual"):
+            raise InputError(f"contact.criterion = {self.criterion!r}: expected 'change' or 'residual'")
+        check_range("contact.check_every", self.check_every, 1, expected="check_every >= 1")
         if self.on_nonconvergence not in ("warn", "fail"):
             raise InputError(f"contact.on_nonconvergence = {self.on_nonconvergence!r}: expected 'warn' or 'fail'")
 
@@ -245,14 +250,16 @@ class ContactStep:
             res, trial = nlgs.solve_cohesive(self.Wdel, q.ravel(), self.mu, self.law, self.par, self.state, ueff,
                                              cs.area, h, th, r0=self.P.ravel(), tol=self.opts.tol,
                                              max_sweeps=self.opts.max_sweeps, omega=self.opts.omega,
-                                             order=self.opts.order, seed=self.opts.seed + self.steps)
+                                             order=self.opts.order, seed=self.opts.seed + self.steps,
+                                             criterion=self.opts.criterion, check_every=self.opts.check_every)
             vs = res.u.reshape(-1, 2)
             u_new = ueff + h * th * vs
             _commit_all(self.law, self.par, self.state, trial, u_new, cs.area)
         else:
             res = nlgs.solve_block_csr(self.Wdel, q.ravel(), self.mu, r0=self.P.ravel(), tol=self.opts.tol,
                                        max_sweeps=self.opts.max_sweeps, omega=self.opts.omega,
-                                       order=self.opts.order, seed=self.opts.seed + self.steps)
+                                       order=self.opts.order, seed=self.opts.seed + self.steps,
+                                       criterion=self.opts.criterion, check_every=self.opts.check_every)
             from ..laws import S_UN, S_UT
             vs = res.u.reshape(-1, 2)
             self.state[:, S_UN] += h * ((1 - th) * vi[:, 0] + th * (vs[:, 0] - gbar / (h * th)))

@@ -221,7 +221,7 @@ def _run(indptr, indices, blocks, diag_pos, q, mu, r, order_kind, omega, tol, ma
                 for i in range(q.shape[0]):
                     u[i] += q[i]
                 res = natural_map_2d(r, u, mu) / qnorm
-                if res <= tol:
+                if res <= tol or (change == 0.0 and sweeps > 1):  # stationary Gauss-Seidel point = solution
                     converged = True
                     break
         elif change <= tol:
@@ -464,7 +464,7 @@ def natural_map_cohesive(indptr, indices, blocks, q, mu, r, law, par, st, trial,
 
 @njit(cache=True)
 def _run_cohesive(indptr, indices, blocks, diag_pos, q, mu, r, order_kind, omega, tol, max_sweeps, seed,
-                  law, par, st, trial, ueff, area, h, theta):
+                  law, par, st, trial, ueff, area, h, theta, use_residual, check_every, qnorm):
     n = mu.shape[0]
     order = np.arange(n)
     if order_kind == 1:
@@ -481,7 +481,14 @@ def _run_cohesive(indptr, indices, blocks, diag_pos, q, mu, r, order_kind, omega
                                   ueff, area, h, theta)
         sweeps += 1
         change = np.sqrt(dr2 / r2) if r2 > 0.0 else np.sqrt(dr2)
-        if change <= tol and sweeps > 1:
+        if use_residual:
+            if sweeps % check_every == 0 or sweeps == max_sweeps:
+                res = natural_map_cohesive(indptr, indices, blocks, q, mu, r, law, par, st, trial, ueff, area, h,
+                                           theta) / qnorm
+                if res <= tol or (change == 0.0 and sweeps > 1):  # stationary Gauss-Seidel point = solution
+                    converged = True
+                    break
+        elif change <= tol and sweeps > 1:
             converged = True
             break
     return sweeps, change, converged
@@ -489,10 +496,12 @@ def _run_cohesive(indptr, indices, blocks, diag_pos, q, mu, r, order_kind, omega
 
 def solve_cohesive(W: BlockCSR, q, mu, law, par, st, ueff, area, h: float, theta: float, r0=None,
                    tol: float = 1e-8, max_sweeps: int = 10000, omega: float = 1.0, order: str = "given",
-                   seed: int = 0, max_outer: int = 100):
+                   seed: int = 0, max_outer: int = 100, criterion: str = "change", check_every: int = 10):
     """NLGS with interface laws (laws.py) per contact. Returns (NLGSResult, trial internal variables).
     `q` includes the Signorini shift; `ueff` = u_i + h(1-θ)v_i - hθ shift e_N per contact (nc, 2)."""
-    q, mu = _check(W, q, mu, tol, max_sweeps, omega, order, 1)
+    if criterion not in ("change", "residual"):
+        raise InputError(f"criterion = {criterion!r}: expected 'change' or 'residual'")
+    q, mu = _check(W, q, mu, tol, max_sweeps, omega, order, check_every)
     n = W.n
     r = np.zeros(2 * n) if r0 is None else np.array(r0, dtype=np.float64).ravel()
     law = np.ascontiguousarray(law, dtype=np.int64)
@@ -514,7 +523,8 @@ def solve_cohesive(W: BlockCSR, q, mu, law, par, st, ueff, area, h: float, theta
         sweeps, change, converged = _run_cohesive(W.indptr, W.indices, W.blocks, W.diag_pos, q, mu, r,
                                                   ORDERS[order], float(omega), float(tol),
                                                   int(max_sweeps) - total, int(seed) + outer, law, par, st, trial,
-                                                  ueff, area, float(h), float(theta))
+                                                  ueff, area, float(h), float(theta), criterion == "residual",
+                                                  int(check_every), float(np.linalg.norm(q)) or 1.0)
         total += sweeps
         matvec_bcsr(W.indptr, W.indices, W.blocks, r, u)
         u += q
