@@ -1,0 +1,79 @@
+"""Benchmark 1 of the speed issue: LMGC90's deformable-brick wall with a window under gravity.
+
+Full bricks 0.10 x 0.05 m, half bricks 0.05 x 0.05 m, lintel 0.30 x 0.05 m, no joint thickness; 9 courses
+(bottom first) [1/2,1,1,1,1,1/2], [1]*5, [1/2,1,1,1,1,1/2], [1]*5, [1/2,1,gap 0.2,1,1/2], [1,1/2,gap 0.2,1/2,1],
+[1/2,1,gap 0.2,1,1/2], [1,lintel,1], [1/2,1,1,1,1,1/2]; E = 1e10 Pa, nu = 0.15, rho = 1800 kg/m^3, plane strain,
+Q4 of 0.025 m, lumped mass; rigid fixed floor; mu = 0.3 between bricks, 0.5 on the floor; gravity 9.81;
+h = 1e-4 s, theta = 0.505, 2000 steps; Gauss-Seidel tolerance 1e-4.
+
+Usage: .venv/bin/python bench/bench_lmgc90_wall.py [steps]
+"""
+import os
+import resource
+import sys
+import time
+
+import numpy as np
+
+sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
+from fem_blocks import builders  # noqa: E402
+from fem_blocks.bodies import BlockType, DeformableBody, Driver, Material, RigidBody  # noqa: E402
+from fem_blocks.contact.step import ContactOptions, ContactStep, InterfaceSpec  # noqa: E402
+from fem_blocks.dynamics import Simulation  # noqa: E402
+from fem_blocks.meshing import mesh_rectangle  # noqa: E402
+
+G = {"gap": 0.2}
+ROWS = [[0.5, 1, 1, 1, 1, 0.5], [1] * 5, [0.5, 1, 1, 1, 1, 0.5], [1] * 5, [0.5, 1, G, 1, 0.5], [1, 0.5, G, 0.5, 1],
+        [0.5, 1, G, 1, 0.5], [1, 3, 1], [0.5, 1, 1, 1, 1, 0.5]]
+
+
+def main(steps=2000):
+    t0 = time.perf_counter()
+    blocks = builders.courses(ROWS, 0.10, 0.05)
+    mat = Material(E=1e10, nu=0.15, rho=1800.0, thickness=1.0, plane="strain")
+    types, bodies = {}, []
+    for b in blocks:
+        if b.size_key not in types:
+            types[b.size_key] = BlockType(mesh_rectangle(b.length, b.height, 0.025, cell="quad"), mat, mass="lumped")
+        bodies.append(DeformableBody(types[b.size_key], (b.x, b.y)))
+    floor = RigidBody([(-0.1, -0.1), (0.6, -0.1), (0.6, 0.0), (-0.1, 0.0)],
+                      drivers={k: Driver("velocity", 0.0) for k in ("x", "y", "rz")})
+    cs = ContactStep([InterfaceSpec("bricks", ("b", "b"), mu=0.3), InterfaceSpec("floor", ("b", "f"), mu=0.5)],
+                     ["b"] * len(bodies) + ["f"], ContactOptions(tol=1e-4, max_sweeps=10000))
+    sim = Simulation(bodies + [floor], h=1e-4, theta=0.505, contact=cs, gravity=(0.0, -9.81))
+    sim.step()
+    t_setup = time.perf_counter() - t0
+    for k in cs.timers:
+        cs.timers[k] = 0.0
+    t_free = 0.0
+    sweeps = []
+    t1 = time.perf_counter()
+    orig = sim.free_velocities
+
+    def timed_free(a, b):
+        nonlocal t_free
+        c = time.perf_counter()
+        orig(a, b)
+        t_free += time.perf_counter() - c
+    sim.free_velocities = timed_free
+    for _ in range(steps - 1):
+        info = sim.step()
+        sweeps.append(info.contact["sweeps"])
+    wall = time.perf_counter() - t1
+    n = steps - 1
+    weight = sum(1800.0 * b.length * b.height for b in blocks) * 9.81
+    tm = cs.timers
+    print(f"bricks {len(blocks)}, block types {len(types)}, dofs {sum(b.type.ndof for b in bodies)}, "
+          f"contacts {info.contact['contacts']}")
+    print(f"setup {t_setup:.2f} s (incl. first step and numba compilation)")
+    print(f"per step {wall / n * 1e3:.2f} ms: free velocity {t_free / n * 1e3:.2f}, detection+Delassus "
+          f"{tm['detection'] / n * 1e3:.3f}, local {tm['local'] / n * 1e3:.2f}, NLGS {tm['nlgs'] / n * 1e3:.2f}, "
+          f"correction {tm['correction'] / n * 1e3:.2f} (output: none)")
+    print(f"sweeps per step mean {np.mean(sweeps):.1f} max {np.max(sweeps)}; NLGS "
+          f"{tm['nlgs'] / max(np.sum(sweeps) * info.contact['contacts'], 1) * 1e6:.3f} µs per contact update")
+    print(f"floor reaction {floor.reaction[1]:.3f} N vs weight {weight:.3f} N (ratio {floor.reaction[1] / weight:.5f}); "
+          f"peak RSS {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MB")
+
+
+if __name__ == "__main__":
+    main(int(sys.argv[1]) if len(sys.argv) > 1 else 2000)
