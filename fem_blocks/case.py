@@ -17,6 +17,8 @@ import tomllib
 from dataclasses import dataclass, field
 from typing import Any
 
+import numpy as np
+
 from .errors import InputError
 
 NUMBER = (int, float)
@@ -448,6 +450,10 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
     if wall is not None:
         _parse_wall(wall, U, materials, block_types, blocks, rigid, names)
         wall.done()
+    arch = root.table("arch")
+    if arch is not None:
+        _parse_arch(arch, U, materials, block_types, blocks, rigid, names)
+        arch.done()
     if not blocks and not rigid:
         raise root.error("blocks", "missing; expected at least one [[blocks]] or [[rigid_bodies]] entry")
 
@@ -787,3 +793,37 @@ def quick(case: Case, factor: float = 2.0) -> Case:
         st.min_steps = max(1, int(round(st.min_steps / factor)))
     case.name += " (quick)"
     return case
+
+
+def _parse_arch(a: Table, U: dict, materials, block_types, blocks, rigid, names):
+    """[arch]: semicircular arch of identical voussoirs (one block type, rotated instances) on two rigid piers."""
+    from . import builders
+    mat = a.string("material", required=True)
+    if mat not in materials:
+        raise a.error("material", f"= {mat!r}: expected one of the [materials] {sorted(materials)}")
+    span = a.number("span", required=True, lo=0, lo_open=True, dim="length")
+    depth = a.number("ring_depth", required=True, lo=0, lo_open=True, dim="length")
+    n = a.integer("voussoirs", required=True, lo=3)
+    ph = a.number("pier_height", required=True, lo=0, lo_open=True, dim="length")
+    pw = a.number("pier_width", required=True, lo=0, lo_open=True, dim="length")
+    joint = a.number("joint", 0.0, lo=0, dim="length")
+    size = a.number("mesh_size", required=True, lo=0, lo_open=True, dim="length")
+    cell = a.string("cell", "triangle", choices=("quad", "triangle"))
+    mass = a.string("mass", "lumped", choices=("lumped", "consistent"))
+    group = a.string("group", "voussoirs")
+    polys, piers = builders.semicircular_arch(span, depth, n, ph, pw, joint, name=f"{a.source}: arch")
+    c = np.array([0.5 * span, ph])
+    tname = "arch_voussoir"
+    block_types[tname] = BlockTypeSpec(name=tname, geometry="polygon", material=mat, mesh_size=size, cell=cell,
+                                       mass=mass, vertices=[tuple(p) for p in (polys[0] - c)])
+    dth = math.pi / n
+    for k in range(n):
+        bname = f"voussoir{k}"
+        names.add(bname)
+        blocks.append(BlockSpec(name=bname, type=tname, position=(float(c[0]), float(c[1])), angle=-k * dth,
+                                group=group))
+    for k, P in enumerate(piers):
+        pname = f"pier{k}"
+        names.add(pname)
+        rigid.append(RigidSpec(name=pname, vertices=[tuple(p) for p in P], rho=None, mass=None, inertia=None,
+                               thickness=1.0, drivers=dict(FIXED), forces={}, group="piers"))
