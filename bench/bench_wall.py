@@ -18,7 +18,7 @@ from fem_blocks.dynamics import Simulation  # noqa: E402
 from fem_blocks.meshing import mesh_rectangle  # noqa: E402
 
 
-def wall(n_bricks, steps=50, h=1e-3):
+def wall(n_bricks, steps=int(os.environ.get("BENCH_STEPS", 50)), h=1e-3):
     per = max(2, int(round(np.sqrt(n_bricks * 0.25 / 0.5))))  # about twice as wide as high (in bricks)
     courses = max(1, int(round(n_bricks / per)))
     t0 = time.perf_counter()
