@@ -619,10 +619,16 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
     rigid_names = {r.name: r for r in rigid}
     for i, st in enumerate(stages):
         for key in ("drivers", "forces"):
-            for body in getattr(st, key):
+            for body, dofs in getattr(st, key).items():
                 if body not in rigid_names:
                     raise InputError(f"{source}: stages[{i}].{key}.{body}: expected a rigid body among "
                                      f"{sorted(rigid_names)}")
+                r = rigid_names[body]
+                for dof, spec in dofs.items():
+                    frees = key == "forces" or spec is None
+                    if frees and r.rho is None and r.mass is None:
+                        raise InputError(f"{source}: stages[{i}].{key}.{body}.{dof}: body {body!r} has no mass "
+                                         f"(no rho or mass), so its dof {dof!r} cannot be freed or loaded")
         for key, ref in (("stop_at_displacement", st.stop_displacement), ("stop_after_peak", st.stop_after_peak)):
             if ref is not None and ref[0] not in rigid_names:
                 raise InputError(f"{source}: stages[{i}].{key}.body = {ref[0]!r}: expected a rigid body among "

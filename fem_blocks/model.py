@@ -67,7 +67,7 @@ def build_model(case: Case) -> Model:
         names.append(b.name)
         groups.append(b.group)
     for i, r in enumerate(case.rigid_bodies):
-        label = f"{case.source}: rigid_bodies[{i}]"
+        label = f"{case.source}: body {r.name!r}"
         drivers = {dof: Driver(kind, hist, name=f"{label}.drivers.{dof}") for dof, (kind, hist) in r.drivers.items()}
         body = RigidBody(r.vertices, rho=r.rho, thickness=r.thickness, mass=r.mass, inertia=r.inertia,
                          drivers=drivers, forces=r.forces, name=label)

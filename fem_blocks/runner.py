@@ -123,8 +123,8 @@ def run_case(case: Case, out_dir: str, progress: bool = True) -> dict:
                     changed = True
             for bname, dofs in st.forces.items():
                 b = model.bodies[model.index(bname)]
-                for dof, hist in dofs.items():
-                    b.set_force(dof, hist)
+                for dof, force_hist in dofs.items():
+                    b.set_force(dof, force_hist)
                     changed = True
             if changed and model.contact is not None:
                 model.contact.W_dirty = True  # rigid W (driven dofs) changed

@@ -163,3 +163,45 @@ def test_arch_case_stands_under_gravity(tmp_path):
     assert h["max_velocity"][-1] < 1e-4  # at rest: the arch stands
     weight = 2000.0 * 9.81 * 15 * 0.5 * (np.pi / 15) * (1.3 ** 2 - 1.0 ** 2)
     assert h["pier0.Ry"][-1] + h["pier1.Ry"][-1] == pytest.approx(weight, rel=0.01)  # polygonal arcs: ~0.1 %
+
+
+def test_stage_forces_and_drivers(tmp_path):
+    """A later stage applies a force on a previously driven dof of the beam (freed), and freeing a dof of a
+    massless body is a clear error."""
+    text = CASE.replace("[wall.foundation]\ndepth = 0.05", "[wall.foundation]\ndepth = 0.05\n[wall.beam]\ndepth = 0.05\n"
+                        "rho = 7800.0\n[wall.beam.drivers]\nx = {kind = \"velocity\", history = 0.0}\n"
+                        "y = {kind = \"velocity\", history = 0.0}\nrz = {kind = \"velocity\", history = 0.0}")
+    text = text.replace('''[[interfaces]]
+name = "base"''', '''[[interfaces]]
+name = "top"
+between = ["bricks", "beam"]
+mu = 0.6
+
+[[interfaces]]
+name = "base"''')
+    text += '''
+[[stages]]
+name = "load"
+duration = 0.05
+h = 1e-3
+theta = 1.0
+velocity_reset = true
+[stages.forces.beam]
+y = -500.0
+'''
+    case = tmp_path / "c.toml"
+    case.write_text(text)
+    out = tmp_path / "out"
+    p = subprocess.run([sys.executable, "-m", "fem_blocks.cli", "run", str(case), "--out", str(out), "--quiet"],
+                       capture_output=True, text=True, cwd=ROOT, timeout=600)
+    assert p.returncode == 0, p.stderr
+    h = read_history(out / "history.csv")
+    weight = 2000.0 * 3 * 0.2 * 0.05 * 0.1 * 9.81 + 7800.0 * 0.05 * 0.2 * 0.1 * 9.81
+    assert h["beam.Ry"][-1] == 0.0  # y is free in stage 2: no driver reaction
+    assert h["foundation.Ry"][-1] == pytest.approx(weight + 500.0, rel=1e-4)
+    bad = text.replace("[stages.forces.beam]", "[stages.forces.foundation]")
+    case.write_text(bad)
+    p = subprocess.run([sys.executable, "-m", "fem_blocks.cli", "run", str(case), "--out", str(out), "--quiet"],
+                       capture_output=True, text=True, cwd=ROOT, timeout=600)
+    assert p.returncode == 2 and len(p.stderr.strip().splitlines()) == 1
+    assert "stages[1].forces.foundation.y: body 'foundation' has no mass" in p.stderr
