@@ -13,35 +13,57 @@ from .solver.nlgs import BlockCSR
 
 
 @njit(cache=True)
-def _pair_blocks(order, ent_contact, ent_side, ent_body, starts, side_dofs, side_G, W_flat, W_offset, W_size):
-    nb = starts.shape[0] - 1
-    total = 0
-    for b in range(nb):
-        m = starts[b + 1] - starts[b]
-        total += m * m
-    rows = np.empty(total, dtype=np.int64)
-    cols = np.empty(total, dtype=np.int64)
-    blocks = np.zeros((total, 2, 2))
-    k = 0
+def _assemble_rows(nc, order, ent_contact, ent_side, starts, side_body, side_dofs, side_G, W_flat, W_offset, W_size):
+    """Row-by-row block-CSR assembly: row α holds every contact sharing a body with α (duplicates summed in
+    place), columns sorted; memory is the final number of blocks only."""
+    marker = -np.ones(nc, dtype=np.int64)
+    counts = np.zeros(nc, dtype=np.int64)
+    for a in range(nc):
+        for s in range(2):
+            b = side_body[a, s]
+            for e in range(starts[b], starts[b + 1]):
+                c = ent_contact[order[e]]
+                if marker[c] != a:
+                    marker[c] = a
+                    counts[a] += 1
+    indptr = np.zeros(nc + 1, dtype=np.int64)
+    for a in range(nc):
+        indptr[a + 1] = indptr[a] + counts[a]
+    nnz = indptr[nc]
+    indices = np.empty(nnz, dtype=np.int64)
+    blocks = np.zeros((nnz, 2, 2))
+    diag_pos = np.empty(nc, dtype=np.int64)
+    pos_of = -np.ones(nc, dtype=np.int64)
+    marker[:] = -1
     GW = np.zeros((2, 4))
-    for b in range(nb):
-        off = W_offset[b]
-        sz = W_size[b]
-        for ia in range(starts[b], starts[b + 1]):
-            ea = order[ia]
-            a = ent_contact[ea]
-            sa = ent_side[ea]
-            # GW = G_a W[dofs_a, :] restricted later to dofs_c
-            for ic in range(starts[b], starts[b + 1]):
-                ec = order[ic]
-                c = ent_contact[ec]
-                sc = ent_side[ec]
+    for a in range(nc):
+        k = indptr[a]
+        for s in range(2):
+            b = side_body[a, s]
+            for e in range(starts[b], starts[b + 1]):
+                c = ent_contact[order[e]]
+                if marker[c] != a:
+                    marker[c] = a
+                    indices[k] = c
+                    k += 1
+        row = indices[indptr[a]:indptr[a + 1]]
+        row.sort()
+        for kk in range(indptr[a], indptr[a + 1]):
+            pos_of[indices[kk]] = kk
+        diag_pos[a] = pos_of[a]
+        for s in range(2):
+            b = side_body[a, s]
+            off = W_offset[b]
+            sz = W_size[b]
+            for e in range(starts[b], starts[b + 1]):
+                ee = order[e]
+                c = ent_contact[ee]
+                sc = ent_side[ee]
                 for r in range(2):
                     for j in range(4):
                         GW[r, j] = 0.0
-                # (G_a W G_c^T)[r, q] = sum_i sum_j G_a[r, i] W[d_a[i], d_c[j]] G_c[q, j]
                 for i in range(4):
-                    di = side_dofs[a, sa, i]
+                    di = side_dofs[a, s, i]
                     if di < 0:
                         continue
                     for j in range(4):
@@ -52,20 +74,19 @@ def _pair_blocks(order, ent_contact, ent_side, ent_body, starts, side_dofs, side
                         if w == 0.0:
                             continue
                         for r in range(2):
-                            GW[r, j] += side_G[a, sa, r, i] * w
+                            GW[r, j] += side_G[a, s, r, i] * w
+                kk = pos_of[c]
                 for r in range(2):
                     for q in range(2):
                         acc = 0.0
                         for j in range(4):
                             acc += GW[r, j] * side_G[c, sc, q, j]
-                        blocks[k, r, q] = acc
-                rows[k] = a
-                cols[k] = c
-                k += 1
-    return rows, cols, blocks
+                        blocks[kk, r, q] += acc
+    return indptr, indices, blocks, diag_pos
 
 
 def assemble(G, W_flat, W_offset, W_size, nb: int) -> BlockCSR:
+    """Block-CSR Delassus operator from the G blocks and the per-body dense W (see module docstring)."""
     nc = G.side_body.shape[0]
     ent_body = G.side_body.ravel()
     ent_contact = np.repeat(np.arange(nc, dtype=np.int64), 2)
@@ -73,27 +94,12 @@ def assemble(G, W_flat, W_offset, W_size, nb: int) -> BlockCSR:
     order = np.argsort(ent_body, kind="stable").astype(np.int64)
     starts = np.zeros(nb + 1, dtype=np.int64)
     starts[1:] = np.cumsum(np.bincount(ent_body, minlength=nb))
-    rows, cols, blocks = _pair_blocks(order, ent_contact, ent_side, ent_body, starts, G.side_dofs, G.side_G,
-                                      np.ascontiguousarray(W_flat, dtype=float),
-                                      np.asarray(W_offset, dtype=np.int64), np.asarray(W_size, dtype=np.int64))
-    # ensure diagonal, then sum duplicates (contacts sharing two bodies) and sort by (row, col)
-    rows = np.concatenate([rows, np.arange(nc)])
-    cols = np.concatenate([cols, np.arange(nc)])
-    blocks = np.concatenate([blocks, np.zeros((nc, 2, 2))])
-    key = rows * max(nc, 1) + cols
-    o = np.argsort(key, kind="stable")
-    key, blocks = key[o], blocks[o]
-    first = np.ones(len(key), dtype=bool)
-    first[1:] = key[1:] != key[:-1]
-    starts_u = np.flatnonzero(first)
-    summed = np.add.reduceat(blocks, starts_u, axis=0) if len(key) else blocks
-    ukey = key[starts_u]
-    r = ukey // max(nc, 1)
-    c = ukey % max(nc, 1)
-    indptr = np.zeros(nc + 1, dtype=np.int64)
-    indptr[1:] = np.cumsum(np.bincount(r, minlength=nc))
-    diag_pos = np.flatnonzero(r == c).astype(np.int64)
-    return BlockCSR(indptr, c.astype(np.int64), np.ascontiguousarray(summed), diag_pos)
+    indptr, indices, blocks, diag_pos = _assemble_rows(
+        nc, order, ent_contact, ent_side, starts, np.ascontiguousarray(G.side_body, dtype=np.int64),
+        np.ascontiguousarray(G.side_dofs, dtype=np.int64), np.ascontiguousarray(G.side_G, dtype=np.float64),
+        np.ascontiguousarray(W_flat, dtype=float), np.asarray(W_offset, dtype=np.int64),
+        np.asarray(W_size, dtype=np.int64))
+    return BlockCSR(indptr, indices, blocks, diag_pos)
 
 
 def dense(B: BlockCSR) -> np.ndarray:
