@@ -22,8 +22,11 @@ GMSH_NAMES = {1: "2-node line", 2: "3-node triangle", 3: "4-node quadrangle", 4:
               15: "point", 16: "8-node quadrangle", 20: "9-node incomplete triangle", 21: "10-node triangle"}
 
 
-@dataclass
+@dataclass(eq=False)
 class BlockMesh:
+    """2D block mesh as plain arrays (see the module docstring). `node_ids`/`cell_ids` (optional) are the
+    gmsh node/element tags, used only to name nodes and elements in error messages."""
+
     points: np.ndarray
     cells: np.ndarray
     cell_type: str
@@ -31,25 +34,42 @@ class BlockMesh:
     edge_tags: np.ndarray
     tag_names: dict = field(default_factory=dict)
     source: str = "mesh"
+    node_ids: np.ndarray | None = field(default=None, repr=False)
+    cell_ids: np.ndarray | None = field(default=None, repr=False)
+
+    @classmethod
+    def from_cells(cls, points, cells, cell_type: str | None = None, source: str = "mesh") -> "BlockMesh":
+        """BlockMesh of given arrays: boundary edges from the cells, all untagged (tag 0)."""
+        P = np.asarray(points, dtype=np.float64)
+        C = np.asarray(cells, dtype=np.int64)
+        if cell_type is None:
+            cell_type = "triangle" if C.ndim == 2 and C.shape[1] == 3 else "quad"
+        be, _ = boundary_from_cells(C, source)
+        return cls(P, C, cell_type, be.astype(np.int64), np.zeros(len(be), dtype=np.int64), {"untagged": 0}, source)
 
     @property
     def n_nodes(self) -> int:
         return int(self.points.shape[0])
 
     def boundary_nodes(self) -> np.ndarray:
-        return np.unique(self.boundary_edges)
+        """Sorted unique node indices on the boundary (int64)."""
+        return np.unique(np.asarray(self.boundary_edges, dtype=np.int64))
 
     def translated(self, dx: float, dy: float) -> "BlockMesh":
-        return BlockMesh(self.points + np.array([dx, dy]), self.cells, self.cell_type, self.boundary_edges,
-                         self.edge_tags, dict(self.tag_names), self.source)
+        """Same mesh (same node order and connectivity) moved by (dx, dy)."""
+        return BlockMesh(self.points + np.array([dx, dy], dtype=np.float64), self.cells, self.cell_type,
+                         self.boundary_edges, self.edge_tags, dict(self.tag_names), self.source,
+                         self.node_ids, self.cell_ids)
 
     def cell_areas(self) -> np.ndarray:
+        """Signed area of each cell (shoelace), positive for counter-clockwise cells."""
         return _signed_areas(self.points, self.cells)
 
     def area(self) -> float:
         return float(self.cell_areas().sum())
 
     def bbox(self):
+        """(xmin, ymin, xmax, ymax)."""
         return (*self.points.min(axis=0), *self.points.max(axis=0))
 
 
@@ -77,30 +97,80 @@ def boundary_from_cells(cells: np.ndarray, source: str = "mesh"):
 
 # ----------------------------------------------------------------------------- gmsh helpers
 _GMSH_READY = False
+# options a .geo file or a previous call may change; restored to the gmsh defaults before every use
+_GMSH_OPTIONS = ("Mesh.ElementOrder", "Mesh.SecondOrderIncomplete", "Mesh.MeshSizeMin", "Mesh.MeshSizeMax",
+                 "Mesh.MeshSizeFactor", "Mesh.MeshSizeFromPoints", "Mesh.MeshSizeFromCurvature",
+                 "Mesh.MeshSizeExtendFromBoundary", "Mesh.MeshSizeFromParametricPoints", "Mesh.RecombineAll",
+                 "Mesh.RecombinationAlgorithm", "Mesh.SubdivisionAlgorithm", "Mesh.Algorithm", "Mesh.Smoothing",
+                 "Mesh.SaveAll", "Geometry.Tolerance")
+_GMSH_DEFAULTS: dict = {}
+
+
+def _import_gmsh():
+    """Import gmsh without letting it replace Python's SIGINT handler (gmsh.py sets SIG_DFL on import)."""
+    import signal
+    old = signal.getsignal(signal.SIGINT)
+    import gmsh
+    if signal.getsignal(signal.SIGINT) is not old and old is not None:
+        signal.signal(signal.SIGINT, old)
+    return gmsh
+
+
+def _finalize_gmsh():
+    global _GMSH_READY
+    if _GMSH_READY:
+        import signal
+        old = signal.getsignal(signal.SIGINT)
+        try:
+            _import_gmsh().finalize()
+        except Exception:
+            pass
+        if old is not None:
+            signal.signal(signal.SIGINT, old)
+        _GMSH_READY = False
 
 
 class _Gmsh:
-    """Context manager: initialise gmsh once per process, a fresh model per use, quiet."""
+    """Context manager around one gmsh use: gmsh initialised once per process (finalised at exit, re-initialised
+    if someone else finalised it or after a gmsh error), quiet, default meshing options, a fresh model, cleared
+    on exit."""
 
     def __enter__(self):
-        import gmsh
-        self.gmsh = gmsh
         global _GMSH_READY
+        gmsh = self.gmsh = _import_gmsh()
+        if _GMSH_READY:
+            try:
+                gmsh.clear()
+            except Exception:  # finalised behind our back
+                _GMSH_READY = False
         if not _GMSH_READY:
-            gmsh.initialize(["", "-nopopup"], readConfigFiles=False, interruptible=False) \
-                if "interruptible" in gmsh.initialize.__code__.co_varnames else gmsh.initialize(["", "-nopopup"])
+            import atexit
+            import signal
+            old = signal.getsignal(signal.SIGINT)
+            gmsh.initialize(["", "-nopopup"], readConfigFiles=False)
+            if old is not None:
+                signal.signal(signal.SIGINT, old)
+            gmsh.option.setNumber("General.Terminal", 0)
+            if not _GMSH_DEFAULTS:
+                _GMSH_DEFAULTS.update({o: gmsh.option.getNumber(o) for o in _GMSH_OPTIONS})
+                atexit.register(_finalize_gmsh)
             _GMSH_READY = True
         gmsh.option.setNumber("General.Terminal", 0)
         gmsh.option.setNumber("General.Verbosity", 0)
-        gmsh.clear()
-        for opt, val in (("Mesh.MeshSizeMax", 1e22), ("Mesh.RecombineAll", 0), ("Mesh.RecombinationAlgorithm", 1),
-                         ("Mesh.SubdivisionAlgorithm", 0), ("Mesh.Algorithm", 6)):
+        for opt, val in _GMSH_DEFAULTS.items():
             gmsh.option.setNumber(opt, val)
         gmsh.model.add("block")
         return gmsh
 
-    def __exit__(self, *exc):
-        self.gmsh.clear()
+    def __exit__(self, exc_type, exc, tb):
+        if exc_type is not None:
+            # after an error gmsh 4.8 can stay "busy" and silently refuse later files: start afresh next time
+            _finalize_gmsh()
+            return False
+        try:
+            self.gmsh.clear()
+        except Exception:
+            _finalize_gmsh()
         return False
 
 
@@ -117,7 +187,8 @@ def _extract(gmsh, source: str) -> BlockMesh:
         raise InputError(f"{source}: unsupported element type {GMSH_NAMES.get(bad[0], bad[0])!s} "
                          f"(gmsh type {bad[0]}); expected linear triangles (P1) or quadrangles (Q1)")
     if len(types) > 1:
-        raise InputError(f"{source}: mixed triangles and quadrangles; expected a single element type")
+        names = " and ".join(f"{GMSH_NAMES.get(t, t)} (gmsh type {t})" for t in types)
+        raise InputError(f"{source}: mixed element types {names}; expected a single element type")
     cell_type = GMSH_LINEAR[types[0]]
     nv = 3 if cell_type == "triangle" else 4
     cell_tags = np.asarray(etags[0], dtype=np.int64)
@@ -144,9 +215,10 @@ def _extract(gmsh, source: str) -> BlockMesh:
         raise InputError(f"{source}: element {cell_tags[neg[0]]} is inverted or degenerate "
                          f"(signed area {A[neg[0]]:.3g}); {neg.size} such element(s)")
     bedges, _ = boundary_from_cells(cells, source)
-    # physical curves -> tags
+    # physical curves -> tags (an edge in several physical curves gets the last one listed)
     tag_names = {}
-    key_to_tag = {}
+    keys, vals = [np.zeros(0, np.int64)], [np.zeros(0, np.int64)]
+    nn_ = np.int64(len(points))
     for dim, ptag in gmsh.model.getPhysicalGroups(dim=1):
         name = gmsh.model.getPhysicalName(dim, ptag) or f"curve{ptag}"
         tag_names[name] = int(ptag)
@@ -155,18 +227,23 @@ def _extract(gmsh, source: str) -> BlockMesh:
             for t, nodes in zip(lt, ln):
                 if t != 1:
                     continue
-                nn = np.asarray(nodes, dtype=np.int64).reshape(-1, 2)
-                ok = np.all(used[pos[nn]], axis=1)
-                for a, b in new[pos[nn[ok]]]:
-                    key_to_tag[(min(a, b), max(a, b))] = int(ptag)
-    edge_tags = np.array([key_to_tag.get((min(a, b), max(a, b)), 0) for a, b in bedges], dtype=np.int64)
+                nn = pos[np.asarray(nodes, dtype=np.int64).reshape(-1, 2)]
+                ab = new[nn[np.all(used[nn], axis=1)]]
+                keys.append(ab.min(axis=1) * nn_ + ab.max(axis=1))
+                vals.append(np.full(len(ab), ptag, dtype=np.int64))
+    keys, vals = np.concatenate(keys), np.concatenate(vals)
+    bkeys = bedges.min(axis=1) * nn_ + bedges.max(axis=1)
+    edge_tags = np.zeros(len(bedges), dtype=np.int64)
+    if keys.size:
+        order = np.argsort(keys, kind="stable")
+        ks, vs = keys[order], vals[order]
+        i = np.clip(np.searchsorted(ks, bkeys, side="right") - 1, 0, None)
+        hit = ks[i] == bkeys
+        edge_tags[hit] = vs[i[hit]]
     if np.any(edge_tags == 0):
         tag_names["untagged"] = 0
-    mesh = BlockMesh(points, cells.astype(np.int64), cell_type, bedges.astype(np.int64), edge_tags, tag_names,
-                     source)
-    mesh.node_ids = node_ids  # gmsh node tags, to name nodes in error messages
-    mesh.cell_ids = cell_tags
-    return mesh
+    return BlockMesh(points, cells.astype(np.int64), cell_type, bedges.astype(np.int64), edge_tags, tag_names,
+                     source, node_ids=node_ids, cell_ids=cell_tags)
 
 
 def _check_size(name, value):
@@ -310,25 +387,28 @@ def validate(mesh: BlockMesh, source: str = "mesh") -> None:
 
     Checks: array shapes/dtypes, finite coordinates, cell indices in range, every node used,
     inverted or degenerate elements (area <= 1e-10 x mean), non-convex quads, duplicate nodes
-    (closer than 1e-10 x block size), non-manifold edges and vertices, a single connected piece."""
+    (closer than 1e-12 x bounding-box size), non-manifold edges and vertices, a single connected piece."""
     P, C = mesh.points, mesh.cells
     node_id = getattr(mesh, "node_ids", None)
     cell_id = getattr(mesh, "cell_ids", None)
 
     def nid(i):
-        return int(node_id[i]) if node_id is not None else int(i)
+        return f"{int(node_id[i])} (gmsh tag)" if node_id is not None else f"{int(i)}"
 
     def cid(i):
-        return int(cell_id[i]) if cell_id is not None else int(i)
+        return f"{int(cell_id[i])} (gmsh tag)" if cell_id is not None else f"{int(i)}"
 
-    if not isinstance(P, np.ndarray) or P.ndim != 2 or P.shape[1] != 2 or P.shape[0] < 3:
-        raise InputError(f"{source}: points: expected an (n >= 3, 2) array")
+    if not isinstance(P, np.ndarray) or P.ndim != 2 or P.shape[1] != 2 or P.shape[0] < 3 \
+            or P.dtype != np.float64:
+        raise InputError(f"{source}: points: expected a float64 (n >= 3, 2) array, got "
+                         f"{getattr(P, 'dtype', type(P).__name__)} {getattr(P, 'shape', '')}")
     if mesh.cell_type not in ("triangle", "quad"):
         raise InputError(f"{source}: cell_type = {mesh.cell_type!r}: expected 'triangle' or 'quad'")
     nv = 3 if mesh.cell_type == "triangle" else 4
     if not isinstance(C, np.ndarray) or C.ndim != 2 or C.shape[1] != nv or C.shape[0] < 1 \
-            or not np.issubdtype(C.dtype, np.integer):
-        raise InputError(f"{source}: cells: expected an integer (nc >= 1, {nv}) array")
+            or C.dtype != np.int64:
+        raise InputError(f"{source}: cells: expected an int64 (nc >= 1, {nv}) array for {mesh.cell_type} "
+                         f"cells, got {getattr(C, 'dtype', type(C).__name__)} {getattr(C, 'shape', '')}")
     bad = np.flatnonzero(~np.all(np.isfinite(P), axis=1))
     if bad.size:
         raise InputError(f"{source}: node {nid(bad[0])} has a non-finite coordinate")
@@ -361,7 +441,7 @@ def validate(mesh: BlockMesh, source: str = "mesh") -> None:
             raise InputError(f"{source}: quadrangle {cid(bad[0])} is not convex")
     size = float(np.ptp(P, axis=0).max())
     from scipy.spatial import cKDTree
-    pairs = cKDTree(P).query_pairs(1e-10 * size, output_type="ndarray")
+    pairs = cKDTree(P).query_pairs(1e-12 * size, output_type="ndarray")
     if len(pairs):
         a, b = pairs[0]
         raise InputError(f"{source}: nodes {nid(a)} and {nid(b)} are duplicates (same position)")
@@ -374,8 +454,16 @@ def validate(mesh: BlockMesh, source: str = "mesh") -> None:
     from scipy.sparse.csgraph import connected_components
     rows = np.repeat(np.arange(len(C)), nv)
     inc = coo_matrix((np.ones(rows.size), (rows, C.ravel())), shape=(len(C), len(P))).tocsr()
-    ncomp, _ = connected_components(inc.T @ inc, directed=False)
+    ncomp, label = connected_components(inc.T @ inc, directed=False)
     if ncomp > 1:
-        raise InputError(f"{source}: the mesh has {ncomp} disconnected pieces; expected one block")
-    if mesh.boundary_edges.shape != bedges.shape or mesh.edge_tags.shape != (len(mesh.boundary_edges),):
-        raise InputError(f"{source}: boundary_edges/edge_tags do not match the cells")
+        e = int(np.flatnonzero(label[C[:, 0]] != label[C[0, 0]])[0])
+        raise InputError(f"{source}: the mesh has {ncomp} disconnected pieces (element {cid(e)} is not connected "
+                         f"to element {cid(0)}); expected one block")
+    be, et = mesh.boundary_edges, mesh.edge_tags
+    if not isinstance(be, np.ndarray) or not isinstance(et, np.ndarray) or be.dtype != np.int64 \
+            or et.dtype != np.int64 or be.shape != bedges.shape or et.shape != (len(bedges),):
+        raise InputError(f"{source}: boundary_edges/edge_tags: expected int64 arrays of shape {bedges.shape} and "
+                         f"({len(bedges)},) matching the cells")
+    if not np.array_equal(np.unique(be, axis=0), np.unique(bedges, axis=0)):
+        raise InputError(f"{source}: boundary_edges do not match the edges used by a single element, oriented "
+                         f"with the body on the left")
