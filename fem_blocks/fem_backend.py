@@ -7,6 +7,7 @@ Linear elasticity, small strain, P1 (triangles) / Q1 (quads), 2D:
     K = t ∫ sigma(u) : eps(v) dx,   sigma = lambda* tr(eps) I + 2 mu eps,
     plane strain lambda* = lambda, plane stress lambda* = 2 lambda mu / (lambda + 2 mu),
     M = t rho ∫ u . v dx  (consistent),  lumped: vertex quadrature on triangles, row sum on quads,
+    Q1 integrated with 2 x 2 Gauss points,
 
 with t the thickness. Returned as scipy CSR in the BlockMesh node order, dof `2*node + c`.
 The cell-centroid stress operator S (3 nc x 2n) is plain numpy (no dolfinx).
@@ -28,13 +29,18 @@ class FEOperators:
     M_lumped: sp.csr_matrix
 
 
-def check_material(E, nu, rho, thickness, plane):
+def check_elastic(E, nu, plane):
+    """E > 0, -1 < nu < 0.5, plane in {"stress", "strain"}; InputError naming the field otherwise."""
     check_range("E", E, 0.0, lo_open=True, expected="E > 0 [Pa]")
     check_range("nu", nu, -1.0, 0.5, lo_open=True, hi_open=True, expected="-1 < nu < 0.5")
-    check_range("rho", rho, 0.0, lo_open=True, expected="rho > 0 [kg/m^3]")
-    check_range("thickness", thickness, 0.0, lo_open=True, expected="thickness > 0 [m]")
     if plane not in ("stress", "strain"):
         raise InputError(f"plane = {plane!r}: expected 'stress' or 'strain'")
+
+
+def check_material(E, nu, rho, thickness, plane):
+    check_elastic(E, nu, plane)
+    check_range("rho", rho, 0.0, lo_open=True, expected="rho > 0 [kg/m^3]")
+    check_range("thickness", thickness, 0.0, lo_open=True, expected="thickness > 0 [m]")
 
 
 def lame(E, nu, plane):
@@ -89,8 +95,15 @@ def assemble_operators(mesh, E, nu, rho, thickness=1.0, plane="stress") -> FEOpe
     eps = lambda w: ufl.sym(ufl.grad(w))  # noqa: E731
     sig = lambda w: lam * ufl.tr(eps(w)) * ufl.Identity(2) + 2 * mu * eps(w)  # noqa: E731
     t = float(thickness)
-    k_form = fem.form(t * ufl.inner(sig(u), eps(v)) * ufl.dx)
-    m_form = fem.form(t * rho * ufl.inner(u, v) * ufl.dx)
+    if mesh.cell_type == "quad":
+        # Q1: standard 2x2 Gauss (basix degree 2 and 3 on quadrilaterals), exact for K on parallelograms and
+        # for M on any quadrilateral (N_a N_b det J is cubic per direction)
+        dx_k = ufl.dx(metadata={"quadrature_degree": 2})
+        dx_m = ufl.dx(metadata={"quadrature_degree": 3})
+    else:
+        dx_k = dx_m = ufl.dx  # P1: exact by the estimated degrees (0 and 2)
+    k_form = fem.form(t * ufl.inner(sig(u), eps(v)) * dx_k)
+    m_form = fem.form(t * rho * ufl.inner(u, v) * dx_m)
     K = assemble_matrix(k_form)
     K.assemble()
     M = assemble_matrix(m_form)
@@ -136,7 +149,8 @@ def centroid_gradients(mesh) -> np.ndarray:
 
 
 def stress_operator(mesh, E, nu, plane="stress") -> sp.csr_matrix:
-    """S (3 nc x 2n): cell-centroid Cauchy stress (sxx, syy, sxy) = D B q."""
+    """S (3 nc x 2n): cell-centroid Cauchy stress (sxx, syy, sxy) = D B(centroid) q."""
+    check_elastic(E, nu, plane)
     G = centroid_gradients(mesh)
     nc, nv = mesh.cells.shape
     B = np.zeros((nc, 3, 2 * nv))
