@@ -63,6 +63,24 @@ def _petsc_to_scipy(A, perm) -> sp.csr_matrix:
     return B
 
 
+class _quiet_jit:
+    """Drop the INFO records ("running build_ext", gcc command lines) that a JIT cache miss logs on the root
+    logger (setuptools resets the root level during the build, so a filter is used, not the level)."""
+
+    @staticmethod
+    def filter(record):
+        return record.levelno >= 30  # logging.WARNING
+
+    def __enter__(self):
+        import logging
+        logging.getLogger().addFilter(self.filter)
+
+    def __exit__(self, *exc):
+        import logging
+        logging.getLogger().removeFilter(self.filter)
+        return False
+
+
 def assemble_operators(mesh, E, nu, rho, thickness=1.0, plane="stress") -> FEOperators:
     """K, M (consistent and lumped) of a BlockMesh with dolfinx, in the BlockMesh dof order."""
     check_material(E, nu, rho, thickness, plane)
@@ -79,7 +97,8 @@ def assemble_operators(mesh, E, nu, rho, thickness=1.0, plane="stress") -> FEOpe
         cells = cells[:, perm]
     domain = gmshio.ufl_mesh(gmsh_type, 2)  # one ufl.Mesh per dolfinx mesh (0.5.2 requirement)
     msh = dmesh.create_mesh(MPI.COMM_SELF, cells, np.ascontiguousarray(mesh.points, dtype=np.float64), domain)
-    V = fem.VectorFunctionSpace(msh, ("Lagrange", 1))
+    with _quiet_jit():
+        V = fem.VectorFunctionSpace(msh, ("Lagrange", 1))
     n = mesh.points.shape[0]
     if V.dofmap.index_map.size_local != n:
         raise InputError(f"{mesh.source}: dolfinx built {V.dofmap.index_map.size_local} nodes for {n} mesh nodes")
@@ -90,11 +109,14 @@ def assemble_operators(mesh, E, nu, rho, thickness=1.0, plane="stress") -> FEOpe
     perm = np.empty(2 * n, dtype=np.int64)
     perm[0::2], perm[1::2] = 2 * node, 2 * node + 1
 
-    lam, mu = lame(E, nu, plane)
+    # material data as dolfinx Constants (not literals): the generated kernels do not depend on the material,
+    # so they are JIT-compiled once per cell type and found in the cache for every other material
+    lam_, mu_ = lame(E, nu, plane)
+    lam, mu = fem.Constant(msh, float(lam_)), fem.Constant(msh, float(mu_))
+    t, trho = fem.Constant(msh, float(thickness)), fem.Constant(msh, float(thickness) * float(rho))
     u, v = ufl.TrialFunction(V), ufl.TestFunction(V)
     eps = lambda w: ufl.sym(ufl.grad(w))  # noqa: E731
     sig = lambda w: lam * ufl.tr(eps(w)) * ufl.Identity(2) + 2 * mu * eps(w)  # noqa: E731
-    t = float(thickness)
     if mesh.cell_type == "quad":
         # Q1: standard 2x2 Gauss (basix degree 2 and 3 on quadrilaterals), exact for K on parallelograms and
         # for M on any quadrilateral (N_a N_b det J is cubic per direction)
@@ -102,8 +124,9 @@ def assemble_operators(mesh, E, nu, rho, thickness=1.0, plane="stress") -> FEOpe
         dx_m = ufl.dx(metadata={"quadrature_degree": 3})
     else:
         dx_k = dx_m = ufl.dx  # P1: exact by the estimated degrees (0 and 2)
-    k_form = fem.form(t * ufl.inner(sig(u), eps(v)) * dx_k)
-    m_form = fem.form(t * rho * ufl.inner(u, v) * dx_m)
+    with _quiet_jit():
+        k_form = fem.form(t * ufl.inner(sig(u), eps(v)) * dx_k)
+        m_form = fem.form(trho * ufl.inner(u, v) * dx_m)
     K = assemble_matrix(k_form)
     K.assemble()
     M = assemble_matrix(m_form)
@@ -113,9 +136,9 @@ def assemble_operators(mesh, E, nu, rho, thickness=1.0, plane="stress") -> FEOpe
     M.destroy()
     if mesh.cell_type == "triangle":
         import warnings
-        with warnings.catch_warnings():
+        with warnings.catch_warnings(), _quiet_jit():
             warnings.simplefilter("ignore", UserWarning)  # "requested degree 2" of the vertex rule
-            ml_form = fem.form(t * rho * ufl.inner(u, v) * ufl.dx(metadata={"quadrature_rule": "vertex"}))
+            ml_form = fem.form(trho * ufl.inner(u, v) * ufl.dx(metadata={"quadrature_rule": "vertex"}))
         ML = assemble_matrix(ml_form)
         ML.assemble()
         Ml = _petsc_to_scipy(ML, perm)

@@ -351,7 +351,10 @@ def _open_file(gmsh, path: str, kind: str):
 
 
 def load_geo(path: str, size: float | None = None, cell: str | None = None) -> BlockMesh:
-    """Mesh a gmsh .geo file (2D). `size` caps the element size; `cell = "quad"` recombines."""
+    """Mesh a gmsh .geo file (2D). `size` caps the element size; `cell = "quad"` recombines, `"triangle"`
+    requires triangles, None keeps what the file asks for. Physical curves become boundary tags."""
+    if cell not in (None, "quad", "triangle"):
+        raise InputError(f"{path}: cell = {cell!r}: expected 'quad', 'triangle' or None")
     with _Gmsh() as gmsh:
         _open_file(gmsh, path, "geometry")
         if size is not None:
@@ -368,6 +371,9 @@ def load_geo(path: str, size: float | None = None, cell: str | None = None) -> B
         except Exception as e:
             raise InputError(f"{path}: gmsh failed to mesh the geometry ({str(e).strip()})") from None
         mesh = _extract(gmsh, path)
+    if cell is not None and mesh.cell_type != cell:
+        raise InputError(f"{path}: the file produces {mesh.cell_type} elements (e.g. 'Recombine Surface'), "
+                         f"but cell = {cell!r} was asked for")
     validate(mesh, path)
     return mesh
 

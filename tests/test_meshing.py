@@ -383,3 +383,10 @@ def test_gmsh_ids_named_in_messages(tmp_path):
     p.write_text(_msh(nodes, [(1, 1, 1, 2), (3, 2, 1, 2, 5, 4), (3, 2, 2, 3, 6, 5)]))
     with pytest.raises(InputError, match=r"flat\.msh: quadrangle 3 \(gmsh tag\) is not convex"):
         load_msh(str(p))
+
+
+def test_geo_cell_request_must_match(tmp_path):
+    with pytest.raises(InputError, match=r"brick\.geo: the file produces quad elements .*'triangle'"):
+        load_geo(os.path.join(ROOT, "meshes", "brick.geo"), cell="triangle")
+    with pytest.raises(InputError, match="cell = 'hex'"):
+        load_geo(os.path.join(ROOT, "meshes", "brick.geo"), cell="hex")
