@@ -80,8 +80,9 @@ def _signed_areas(points, cells) -> np.ndarray:
     return 0.5 * np.sum(x * np.roll(y, -1, axis=1) - np.roll(x, -1, axis=1) * y, axis=1)
 
 
-def boundary_from_cells(cells: np.ndarray, source: str = "mesh"):
-    """Edges used by exactly one cell, oriented as in that (CCW) cell; error on non-manifold edges."""
+def boundary_from_cells(cells: np.ndarray, source: str = "mesh", node_name=str):
+    """Edges used by exactly one cell, oriented as in that (CCW) cell, and that cell's index; InputError on an
+    edge shared by more than 2 cells (nodes named by `node_name(index)`)."""
     nv = cells.shape[1]
     e = np.stack([cells, np.roll(cells, -1, axis=1)], axis=2).reshape(-1, 2)
     key = np.sort(e, axis=1)
@@ -89,7 +90,8 @@ def boundary_from_cells(cells: np.ndarray, source: str = "mesh"):
     inv = inv.ravel()
     if np.any(cnt > 2):
         a, b = uniq[np.flatnonzero(cnt > 2)[0]]
-        raise InputError(f"{source}: non-manifold mesh: edge between nodes {a} and {b} is shared by "
+        raise InputError(f"{source}: non-manifold mesh: edge between nodes {node_name(a)} and {node_name(b)} is "
+                         f"shared by "
                          f"{cnt.max()} elements (expected at most 2)")
     once = cnt[inv] == 1
     return e[once], np.flatnonzero(once) // nv
@@ -214,7 +216,7 @@ def _extract(gmsh, source: str) -> BlockMesh:
     if neg.size:
         raise InputError(f"{source}: element {cell_tags[neg[0]]} is inverted or degenerate "
                          f"(signed area {A[neg[0]]:.3g}); {neg.size} such element(s)")
-    bedges, _ = boundary_from_cells(cells, source)
+    bedges, _ = boundary_from_cells(cells, source, lambda i: f"{int(node_ids[i])} (gmsh tag)")
     # physical curves -> tags (an edge in several physical curves gets the last one listed)
     tag_names = {}
     keys, vals = [np.zeros(0, np.int64)], [np.zeros(0, np.int64)]
@@ -271,7 +273,7 @@ def mesh_rectangle(lx: float, ly: float, size: float, cell: str = "quad", name: 
         surf = geo.addPlaneSurface([loop])
         for l, n in zip(lines, (nx, ny, nx, ny)):
             geo.mesh.setTransfiniteCurve(l, n + 1)
-        geo.mesh.setTransfiniteSurface(surf, "Left" if cell == "triangle" else "Left", p)
+        geo.mesh.setTransfiniteSurface(surf, "Left", p)
         if cell == "quad":
             geo.mesh.setRecombine(2, surf)
         geo.synchronize()
@@ -451,7 +453,7 @@ def validate(mesh: BlockMesh, source: str = "mesh") -> None:
     if len(pairs):
         a, b = pairs[0]
         raise InputError(f"{source}: nodes {nid(a)} and {nid(b)} are duplicates (same position)")
-    bedges, _ = boundary_from_cells(C, source)
+    bedges, _ = boundary_from_cells(C, source, nid)
     deg = np.bincount(bedges.ravel(), minlength=len(P))
     if np.any(deg > 2):
         raise InputError(f"{source}: non-manifold boundary at node {nid(np.flatnonzero(deg > 2)[0])} "

@@ -390,3 +390,12 @@ def test_geo_cell_request_must_match(tmp_path):
         load_geo(os.path.join(ROOT, "meshes", "brick.geo"), cell="triangle")
     with pytest.raises(InputError, match="cell = 'hex'"):
         load_geo(os.path.join(ROOT, "meshes", "brick.geo"), cell="hex")
+
+
+def test_msh_non_manifold_edge_names_gmsh_node_tags(tmp_path):
+    nodes = {11: (0, 0), 12: (1, 0), 13: (0.5, 1), 14: (0.5, -1), 15: (0.5, 0.5)}
+    p = tmp_path / "fan.msh"
+    p.write_text(_msh(nodes, [(2, 2, 11, 12, 13), (2, 2, 12, 11, 14), (2, 2, 11, 12, 15)]))
+    with pytest.raises(InputError, match=r"fan\.msh: non-manifold mesh: edge between nodes 11 \(gmsh tag\) and "
+                                         r"12 \(gmsh tag\) is shared by 3 elements"):
+        load_msh(str(p))
