@@ -321,7 +321,8 @@ def mesh_polygon(vertices, size: float, cell: str = "triangle", name: str = "pol
         gmsh.model.setPhysicalName(2, gmsh.model.addPhysicalGroup(2, [surf]), "block")
         gmsh.option.setNumber("Mesh.MeshSizeMax", size)
         if cell == "quad":
-            # Blossom full-quad recombination (Mesh.Algorithm 8 segfaults in gmsh 4.8); if triangles remain, subdivide (all quads, half size)
+            # Blossom full-quad recombination (Mesh.Algorithm 8 segfaults in gmsh 4.8); if triangles remain,
+            # remesh at twice the size and subdivide (all quads, about the requested size)
             gmsh.option.setNumber("Mesh.RecombinationAlgorithm", 2)
         gmsh.model.mesh.generate(2)
         if cell == "quad" and len(gmsh.model.mesh.getElements(dim=2)[0]) > 1:
