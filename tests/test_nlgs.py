@@ -1,18 +1,13 @@
-"""2D NLGS: exact local cases, small closed-form problems, determinism, and the FCLIB 2D problems."""
-import glob
-import json
-import os
-
+"""NLGS 2D/3D: exact local cases, small closed-form problems, determinism, warm start, input validation.
+The FCLIB problems are in test_fclib.py."""
 import numpy as np
 import pytest
+import scipy.sparse as sp
 
 from fem_blocks.errors import InputError
-from fem_blocks.io import fclib
 from fem_blocks.solver import nlgs
 
-FCLIB = "/work/shared/data/fclib"
-if not os.path.isdir(FCLIB):
-    FCLIB = os.path.join(os.path.dirname(__file__), "..", "..", "shared", "data", "fclib")
+from fem_blocks.solver import local as loc
 
 
 @pytest.mark.parametrize("q, mu, expect_case", [
@@ -115,7 +110,12 @@ def test_nonconvergence_reported_not_raised():
     (dict(omega=2.5), "omega = 2.5"),
     (dict(order="random"), "order = 'random'"),
     (dict(max_sweeps=0), "max_sweeps = 0"),
-    (dict(dim=3), "dim = 3"),
+    (dict(dim=4), "dim = 4: expected 2 or 3"),
+    (dict(omega=0.0), "omega = 0.0: expected 0 < omega <= 2"),
+    (dict(criterion="both"), "criterion = 'both'"),
+    (dict(check_every=0), "check_every = 0"),
+    (dict(mu=[0.1, 0.2]), "mu: expected a scalar or 3 friction"),
+    (dict(r0=np.zeros(5)), "r0: expected 6 entries"),
 ])
 def test_bad_arguments(kwargs, match):
     W, q = random_problem(n=3)
@@ -127,43 +127,210 @@ def test_bad_arguments(kwargs, match):
         nlgs.solve(W, q[:-1], 0.3)
 
 
-# ----------------------------------------------------------------------------- FCLIB 2D problems
-def fclib_2d():
-    out = []
-    for f in sorted(glob.glob(os.path.join(FCLIB, "**", "*.hdf5"), recursive=True)):
-        cat = os.path.basename(f)
-        if "fc2d" in cat or "FC2D" in cat:
-            out.append(f)
-    return out
+
+def test_bad_arguments_3d_and_block_csr():
+    W, q = random_problem(n=3)  # 6 x 6: two 3D contacts or three 2D contacts
+    with pytest.raises(InputError, match=r"W: expected a square matrix of size dim \* n_contacts"):
+        nlgs.solve(W[:5, :5], q[:5], 0.3, dim=3)
+    with pytest.raises(InputError, match="q: expected finite values"):
+        nlgs.solve(W, np.full(6, np.nan), 0.3, dim=3)
+    with pytest.raises(InputError, match="r0: expected finite values"):
+        nlgs.solve(W, q, 0.3, dim=3, r0=np.full(6, np.inf))
+    B2 = nlgs.to_block_csr(W, 2)
+    with pytest.raises(InputError, match="dim = 3: W is a BlockCSR of 2x2 blocks"):
+        nlgs.solve(B2, q, 0.3, dim=3)
 
 
-REFERENCE = {}
-if os.path.exists(os.path.join(FCLIB, "reference_solutions", "SUMMARY.json")):
-    REFERENCE = {d["problem"]: d for d in json.load(open(os.path.join(FCLIB, "reference_solutions", "SUMMARY.json")))}
-
-# Siconos' NSGS stalls on these two granular problems (README): we report the residual reached after
-# 20 000 sweeps and require it to be no worse than 2x Siconos' figure after its (longer) runs.
-STALLING = {"fc2d_granularflowonwall_02020_00213": 1.0e-6, "fc2d_granularflowonwall_07002_00801": 3.0e-8}
+# ----------------------------------------------------------------------------- 3D local solver
+J = np.empty((3, 3))
 
 
-@pytest.mark.skipif(not fclib_2d(), reason="FCLIB data not available")
-@pytest.mark.parametrize("path", fclib_2d(), ids=lambda p: os.path.basename(p)[:-5])
-def test_fclib_2d(path):
-    p = fclib.read(path)
-    assert p.dim == 2
-    res = nlgs.solve(p.W, p.q, p.mu, tol=1e-8, max_sweeps=20000, criterion="residual", check_every=10)
-    f, frel = nlgs.fclib_residual(p.W, p.q, p.mu, res.r)
-    assert frel == pytest.approx(res.residual, rel=1e-12)  # reported residual is the recomputed one
-    if p.name in STALLING:
-        assert res.residual <= STALLING[p.name]
-    else:
-        assert res.converged and res.residual <= 1e-8, res.message
-    assert np.all(res.r[0::2] >= 0) and np.all(np.abs(res.r[1::2]) <= p.mu * res.r[0::2] * (1 + 1e-12) + 1e-300)
+def local3(W, q, mu, guess=(0.0, 0.0, 0.0)):
+    W = np.asarray(W, dtype=float)[None].copy()
+    r0, r1, r2, case = loc.local_3d(W, 0, q[0], q[1], q[2], mu, guess[0], guess[1], guess[2], J)
+    return np.array([r0, r1, r2]), case
 
 
-def test_fclib_bad_file(tmp_path):
-    with pytest.raises(InputError, match="FCLIB file not found"):
-        fclib.read(str(tmp_path / "none.hdf5"))
-    (tmp_path / "x.hdf5").write_text("not hdf5")
-    with pytest.raises(InputError, match="not an HDF5 file"):
-        fclib.read(str(tmp_path / "x.hdf5"))
+def test_local_3d_open_and_stick():
+    W = np.array([[2.0, 0.1, -0.2], [0.1, 1.0, 0.05], [-0.2, 0.05, 1.5]])
+    r, case = local3(W, (0.5, 3.0, -2.0), 0.3)
+    assert case == 0 and np.array_equal(r, np.zeros(3))
+    r_stick = np.array([1.0, 0.1, -0.2])  # inside the cone for mu = 0.5
+    q = -W @ r_stick
+    r, case = local3(W, q, 0.5)
+    assert case == 1
+    np.testing.assert_allclose(r, r_stick, rtol=1e-14)
+    np.testing.assert_allclose(W @ r + q, 0.0, atol=1e-15)
+
+
+@pytest.mark.parametrize("phi", [0.0, 0.7, np.pi / 2, 2.0, np.pi, 4.0])
+@pytest.mark.parametrize("guess", [(0.0, 0.0, 0.0), (5.0, 1.0, -1.0)])
+def test_local_3d_slide_closed_form(phi, guess):
+    """W = diag(a, b, b): r_N = -q_N/a, r_T = -mu r_N q_T/‖q_T‖, v_T = q_T (1 - b mu r_N/‖q_T‖); forward
+    (phi) and backward (phi + pi) sliding directions, any warm start."""
+    a, b, mu, qn, qt = 2.0, 0.5, 0.4, -1.0, 3.0
+    e = np.array([np.cos(phi), np.sin(phi)])
+    q = np.array([qn, *(qt * e)])
+    r, case = local3(np.diag([a, b, b]), q, mu, guess)
+    rn = -qn / a
+    assert case == 2
+    np.testing.assert_allclose(r, [rn, *(-mu * rn * e)], rtol=1e-13, atol=1e-15)
+    v = np.diag([a, b, b]) @ r + q
+    np.testing.assert_allclose(v, [0.0, *(qt * (1 - b * mu * rn / qt) * e)], atol=1e-14)
+
+
+@pytest.mark.parametrize("q", [(-1.0, 0.2), (-1.0, 4.0), (-1.0, -4.0), (-2.0, 1.3), (0.3, 1.0)])
+@pytest.mark.parametrize("w01, w10", [(0.0, 0.0), (0.4, 0.4), (0.4, -0.3)])
+def test_local_3d_reduces_to_exact_2d(q, w01, w10):
+    """A 3D contact with no coupling to the second tangent and q_T2 = 0 is the 2D problem: same reaction as
+    the exact 2D case analysis (also for a non-symmetric block)."""
+    W2 = np.array([[2.0, w01], [w10, 1.5]])
+    mu = 0.5
+    rn, rt, case2 = nlgs.local_2d(W2[0, 0], W2[0, 1], W2[1, 0], W2[1, 1], q[0], q[1], mu)
+    W3 = np.zeros((3, 3))
+    W3[:2, :2] = W2
+    W3[2, 2] = 1.5
+    r, case = local3(W3, (q[0], q[1], 0.0), mu)
+    np.testing.assert_allclose(r, [rn, rt, 0.0], rtol=1e-12, atol=1e-14)
+
+
+def random_block(rng, asym):
+    A = rng.standard_normal((3, 3))
+    w = A @ A.T + 0.05 * np.eye(3)
+    w += asym * rng.standard_normal((3, 3)) * np.abs(np.diag(w)).mean()
+    lam = np.linalg.eigvalsh(0.5 * (w + w.T)).min()
+    if lam <= 0:
+        w += (0.1 - lam) * np.eye(3)
+    return w
+
+
+def test_local_3d_random_blocks_all_solved():
+    """2000 random blocks (symmetric and strongly non-symmetric, mu up to 3, random warm starts): the local
+    natural-map residual is at round-off level, and every fallback (search, projection) is exercised
+    without failure."""
+    rng = np.random.default_rng(0)
+    cases = np.zeros(6, dtype=int)
+    for k in range(2000):
+        w = random_block(rng, rng.choice([0.0, 0.3, 1.0]))
+        q = rng.standard_normal(3)
+        mu = rng.choice([0.0, 0.1, 0.5, 1.0, 3.0])
+        guess = rng.standard_normal(3) * rng.choice([0, 1])
+        r, case = local3(w, q, mu, guess)
+        cases[case + 1] += 1
+        res = loc.local_residual3(w[None], 0, q[0], q[1], q[2], mu, *r)
+        scale = np.linalg.norm(r) + np.linalg.norm(q) / w[0, 0]
+        assert res <= 1e-11 * scale, (k, case, res / scale)
+        assert r[0] >= 0 and np.hypot(r[1], r[2]) <= mu * r[0] * (1 + 1e-12) + 1e-300
+    assert cases[0] == 0 and cases[1] > 0 and cases[2] > 0 and cases[3] > 0 and cases[4] > 0
+
+
+def test_local_3d_search_and_projection_agree_with_newton():
+    """Symmetric blocks, small mu (unique solution): the exact direction search and the projection fixed point
+    give the Newton sliding solution."""
+    rng = np.random.default_rng(1)
+    n_slide = 0
+    for k in range(300):
+        w = random_block(rng, 0.0)
+        q = rng.standard_normal(3)
+        q[0] = -abs(q[0])
+        mu = 0.3
+        r, case = local3(w, q, mu)
+        if case != 2:
+            continue
+        n_slide += 1
+        s0, s1, s2, found = loc._slide_search(w[None], 0, q[0], q[1], q[2], mu)
+        assert found
+        np.testing.assert_allclose([s0, s1, s2], r, rtol=1e-9, atol=1e-12 * np.linalg.norm(r))
+        p = loc._projection(w[None], 0, q[0], q[1], q[2], mu, 0.0, 0.0, 0.0, 20000)
+        np.testing.assert_allclose(p, r, rtol=1e-6, atol=1e-8 * np.linalg.norm(r))
+    assert n_slide > 50
+
+
+# ----------------------------------------------------------------------------- 3D assembled problems
+def skew(x):
+    return np.array([[0.0, -x[2], x[1]], [x[2], 0.0, -x[0]], [-x[1], x[0], 0.0]])
+
+
+def test_3d_body_on_three_supports_balances_the_load():
+    """A rigid body (mass m, inertia diag(I)) on three contacts of the plane z = 0 (frame n = z, t1 = x,
+    t2 = y), hit by an impulse (P, moment C) that keeps it in sticking contact: it stops (u = 0) and the
+    reactions balance the applied wrench exactly, G^T r = -(P, C); normal reactions sum to -P_z."""
+    m, I = 3.0, np.array([0.4, 0.5, 0.3])
+    pts = np.array([[0.5, 0.0, -0.2], [-0.3, 0.4, -0.2], [-0.2, -0.45, -0.2]])  # from the centre of mass
+    R = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])  # rows n, t1, t2
+    G = np.vstack([R @ np.hstack([np.eye(3), -skew(p)]) for p in pts])  # u_loc = R (v + ω × p)
+    Minv = np.diag(np.r_[np.full(3, 1 / m), 1 / I])
+    wrench = np.array([0.2, -0.1, -5.0, 0.1, 0.2, -0.05])
+    W = G @ Minv @ G.T
+    q = G @ (Minv @ wrench)
+    for dense in (True, False):
+        res = nlgs.solve(W if dense else sp.csr_matrix(W), q, mu=0.6, dim=3, tol=1e-14, criterion="residual",
+                         max_sweeps=100000)
+        assert res.converged and res.residual <= 1e-14
+        np.testing.assert_allclose(G.T @ res.r, -wrench, rtol=0, atol=1e-12 * np.linalg.norm(wrench))
+        assert res.r[0::3].sum() == pytest.approx(5.0, rel=1e-12)
+        np.testing.assert_allclose(res.u, 0.0, atol=1e-12)
+
+
+@pytest.mark.parametrize("phi", [0.0, 1.1, -2.5])
+def test_3d_incline_one_step(phi):
+    """Particle on a plane inclined by alpha whose down-slope direction is (cos phi, sin phi) in the tangent
+    frame; one step h: with mu < tan(alpha) it slides down-slope with v_T = h g (sin a - mu cos a),
+    with mu > tan(alpha) it sticks; r_N = m h g cos a in both cases."""
+    g, h, m, alpha = 9.81, 1e-2, 3.0, np.deg2rad(30)
+    e = np.array([np.cos(phi), np.sin(phi)])
+    q = np.array([-h * g * np.cos(alpha), *(h * g * np.sin(alpha) * e)])
+    W = np.eye(3) / m
+    for mu in (0.3, 0.7):
+        res = nlgs.solve(W, q, mu=mu, dim=3, tol=1e-14, criterion="residual")
+        vt = h * g * (np.sin(alpha) - mu * np.cos(alpha)) if mu < np.tan(alpha) else 0.0
+        np.testing.assert_allclose(res.u, [0.0, *(vt * e)], atol=1e-15)
+        assert res.r[0] == pytest.approx(m * h * g * np.cos(alpha), rel=1e-14)
+
+
+def random_problem_3d(n=40, seed=3):
+    rng = np.random.default_rng(seed)
+    A = rng.standard_normal((3 * n, 4 * n)) * (rng.random((3 * n, 4 * n)) < 0.04)
+    W = A @ A.T + np.diag(1 + rng.random(3 * n))
+    q = rng.standard_normal(3 * n)
+    return W, q
+
+
+def test_3d_orders_deterministic_warm_start_relaxation():
+    W, q = random_problem_3d()
+    base = None
+    for order in ("given", "reversed", "shuffled"):
+        r1 = nlgs.solve(W, q, 0.3, dim=3, tol=1e-12, order=order, seed=7, criterion="residual")
+        r2 = nlgs.solve(W, q, 0.3, dim=3, tol=1e-12, order=order, seed=7, criterion="residual")
+        assert r1.converged and r1.residual <= 1e-12
+        assert np.array_equal(r1.r, r2.r)
+        f, frel = nlgs.fclib_residual(W, q, 0.3, r1.r, dim=3)
+        assert frel == r1.residual
+        base = r1.r if base is None else base
+        np.testing.assert_allclose(r1.r, base, atol=1e-9)
+    s1 = nlgs.solve(W, q, 0.3, dim=3, tol=1e-12, order="shuffled", seed=1)
+    s2 = nlgs.solve(W, q, 0.3, dim=3, tol=1e-12, order="shuffled", seed=2)
+    assert not np.array_equal(s1.r, s2.r)
+    cold = nlgs.solve(W, q, 0.3, dim=3, tol=1e-10)
+    warm = nlgs.solve(W, q, 0.3, dim=3, tol=1e-10, r0=cold.r)
+    assert cold.converged and warm.converged and warm.sweeps <= 2 < cold.sweeps
+    relaxed = nlgs.solve(W, q, 0.3, dim=3, tol=1e-10, omega=0.8, criterion="residual")
+    assert relaxed.converged and relaxed.residual <= 1e-10
+    bad = nlgs.solve(W, q, 0.3, dim=3, tol=1e-15, max_sweeps=2, criterion="residual")
+    assert not bad.converged and "not converged after 2 sweeps" in bad.message
+
+
+def test_sweep_and_block_csr_path_match_solve():
+    """The raw kernel path (to_block_csr + sweep / solve_block_csr) gives the same reactions as solve."""
+    W, q = random_problem_3d(n=10, seed=4)
+    B = nlgs.to_block_csr(sp.csr_matrix(W), 3)
+    assert B.blocks.shape == (B.indices.size, 3, 3) and B.blocks.flags["C_CONTIGUOUS"]
+    np.testing.assert_array_equal(B.indices[B.diag_pos], np.arange(10))
+    np.testing.assert_allclose(B.to_scipy().toarray(), W, rtol=0, atol=0)
+    r = np.zeros(30)
+    for k in range(5):
+        nlgs.sweep(B.indptr, B.indices, B.blocks, B.diag_pos, q, np.full(10, 0.3), r, np.arange(10))
+    ref = nlgs.solve(W, q, 0.3, dim=3, tol=1e-300, max_sweeps=5)
+    np.testing.assert_array_equal(r, ref.r)
+    res = nlgs.solve_block_csr(B, q, 0.3, r0=np.zeros(30), tol=1e-300, max_sweeps=5)
+    np.testing.assert_array_equal(res.r, ref.r)

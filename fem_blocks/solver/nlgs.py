@@ -1,6 +1,6 @@
-"""Nonlinear block Gauss–Seidel (NLGS) for 2D frictional contact, compiled with numba.
+"""Nonlinear block Gauss–Seidel (NLGS) for 2D and 3D frictional contact, compiled with numba.
 
-Problem (FCLIB / Siconos convention, contact α occupies entries (2α, 2α+1) = (normal, tangent)):
+Problem (FCLIB / Siconos convention, contact α occupies entries [dα, dα+d) = (normal, tangent[, tangent 2])):
 
     u = W r + q,   r_N >= 0, u_N >= 0, r_N u_N = 0,   |r_T| <= mu r_N,
     u_T = 0 if |r_T| < mu r_N, else r_T = -mu r_N u_T/|u_T|.
@@ -9,12 +9,14 @@ Sweep: for α in order, v_loc = q_α + Σ_{β≠α} W_αβ r_β, then the exact 
 v = W_αα r + v_loc (thesis §6.3.2.c): the affine line intersected with the Signorini and
 Coulomb graphs — open (r = 0 if v_loc,N >= 0), stick (v = 0), slide forward / backward
 (v_N = 0, r_T = -s mu r_N, s v_T >= 0) — then relaxation r_α <- ω r_loc + (1-ω) r_α.
+3D: local solver of solver/local.py (open, stick, Alart–Curnier Newton with line search, exact search on
+the sliding direction, projection fixed point), warm-started from the current r_α.
 
 Measures (both reported): relative change ‖Δr‖/‖r‖ over a sweep, and the FCLIB natural-map
 residual ‖F‖/‖q‖ with F_α = r_α - P_K(r_α - (u_α + [mu‖u_T‖, 0])) (README of data/fclib).
 The residual reported is always recomputed from the returned reactions.
 
-W is stored as block-CSR arrays (indptr, indices, blocks (nnzb, 2, 2), diag_pos) so the time
+W is stored as block-CSR arrays (indptr, indices, blocks (nnzb, d, d), diag_pos) so the time
 stepper calls the kernel without scipy objects.
 """
 from __future__ import annotations
@@ -26,6 +28,7 @@ import scipy.sparse as sp
 from numba import njit
 
 from ..errors import InputError
+from .local import _proj_cone3, local_3d
 
 ORDERS = {"given": 0, "reversed": 1, "shuffled": 2}
 
@@ -158,17 +161,19 @@ def _sweep(indptr, indices, blocks, diag_pos, q, mu, r, order, omega):
 
 @njit(cache=True)
 def matvec_bcsr(indptr, indices, blocks, x, y):
-    """y = W x (block-CSR, 2x2 blocks)."""
+    """y = W x (block-CSR, d x d blocks, d = blocks.shape[1])."""
     n = indptr.shape[0] - 1
+    dd = blocks.shape[1]
     for a in range(n):
-        s0 = 0.0
-        s1 = 0.0
+        for i in range(dd):
+            y[dd * a + i] = 0.0
         for k in range(indptr[a], indptr[a + 1]):
             b = indices[k]
-            s0 += blocks[k, 0, 0] * x[2 * b] + blocks[k, 0, 1] * x[2 * b + 1]
-            s1 += blocks[k, 1, 0] * x[2 * b] + blocks[k, 1, 1] * x[2 * b + 1]
-        y[2 * a] = s0
-        y[2 * a + 1] = s1
+            for i in range(dd):
+                s = 0.0
+                for j in range(dd):
+                    s += blocks[k, i, j] * x[dd * b + j]
+                y[dd * a + i] += s
 
 
 @njit(cache=True)
@@ -196,15 +201,96 @@ def natural_map_2d(r, u, mu):
 
 
 @njit(cache=True)
+def natural_map_3d(r, u, mu):
+    """‖F‖_2 with F_α = r_α - P_K(r_α - (u_α + [mu ‖u_T‖, 0, 0])) (3D Coulomb cone K)."""
+    s = 0.0
+    for a in range(mu.shape[0]):
+        u1 = u[3 * a + 1]
+        u2 = u[3 * a + 2]
+        p0, p1, p2 = _proj_cone3(r[3 * a] - (u[3 * a] + mu[a] * np.sqrt(u1 * u1 + u2 * u2)),
+                                 r[3 * a + 1] - u1, r[3 * a + 2] - u2, mu[a])
+        f0 = r[3 * a] - p0
+        f1 = r[3 * a + 1] - p1
+        f2 = r[3 * a + 2] - p2
+        s += f0 * f0 + f1 * f1 + f2 * f2
+    return np.sqrt(s)
+
+
+@njit(cache=True)
+def natural_map(r, u, mu, dim):
+    """‖F‖_2 of the FCLIB natural map for dim = 2 or 3."""
+    if dim == 2:
+        return natural_map_2d(r, u, mu)
+    return natural_map_3d(r, u, mu)
+
+
+@njit(cache=True)
+def _sweep3(indptr, indices, blocks, diag_pos, q, mu, r, order, omega, J, cases):
+    """One 3D Gauss–Seidel pass; cases[k] counts the local cases used (k = case + 1)."""
+    dr2 = 0.0
+    r2 = 0.0
+    for ii in range(order.shape[0]):
+        a = order[ii]
+        i0 = 3 * a
+        v0 = q[i0]
+        v1 = q[i0 + 1]
+        v2 = q[i0 + 2]
+        for k in range(indptr[a], indptr[a + 1]):
+            b = indices[k]
+            if b != a:
+                rb0 = r[3 * b]
+                rb1 = r[3 * b + 1]
+                rb2 = r[3 * b + 2]
+                v0 += blocks[k, 0, 0] * rb0 + blocks[k, 0, 1] * rb1 + blocks[k, 0, 2] * rb2
+                v1 += blocks[k, 1, 0] * rb0 + blocks[k, 1, 1] * rb1 + blocks[k, 1, 2] * rb2
+                v2 += blocks[k, 2, 0] * rb0 + blocks[k, 2, 1] * rb1 + blocks[k, 2, 2] * rb2
+        d = diag_pos[a]
+        o0 = r[i0]
+        o1 = r[i0 + 1]
+        o2 = r[i0 + 2]
+        if d < 0:
+            x0, x1, x2, case = 0.0, 0.0, 0.0, -1
+        else:
+            x0, x1, x2, case = local_3d(blocks, d, v0, v1, v2, mu[a], o0, o1, o2, J)
+        cases[case + 1] += 1
+        if omega != 1.0:
+            x0, x1, x2 = _proj_cone3(omega * x0 + (1.0 - omega) * o0, omega * x1 + (1.0 - omega) * o1,
+                                     omega * x2 + (1.0 - omega) * o2, mu[a])
+        e0 = x0 - o0
+        e1 = x1 - o1
+        e2 = x2 - o2
+        dr2 += e0 * e0 + e1 * e1 + e2 * e2
+        r2 += x0 * x0 + x1 * x1 + x2 * x2
+        r[i0] = x0
+        r[i0 + 1] = x1
+        r[i0 + 2] = x2
+    return dr2, r2
+
+
+def sweep(indptr, indices, blocks, diag_pos, q, mu, r, order, omega=1.0):
+    """One Gauss–Seidel pass over the contacts in `order` (r updated in place); dim = blocks.shape[1].
+    Returns the relative change ‖Δr‖/‖r‖ of the pass (‖Δr‖ if r = 0)."""
+    order = np.ascontiguousarray(order, dtype=np.int64)
+    if blocks.shape[1] == 2:
+        dr2, r2 = _sweep(indptr, indices, blocks, diag_pos, q, mu, r, order, float(omega))
+    else:
+        dr2, r2 = _sweep3(indptr, indices, blocks, diag_pos, q, mu, r, order, float(omega), np.empty((3, 3)),
+                          np.zeros(6, dtype=np.int64))
+    return float(np.sqrt(dr2 / r2)) if r2 > 0 else float(np.sqrt(dr2))
+
+
+@njit(cache=True)
 def _run(indptr, indices, blocks, diag_pos, q, mu, r, order_kind, omega, tol, max_sweeps, seed,
-         use_residual, check_every, qnorm):
+         use_residual, check_every, qnorm, cases):
     n = mu.shape[0]
+    dim = blocks.shape[1]
     order = np.arange(n)
     if order_kind == 1:
         order = order[::-1].copy()
     if order_kind == 2:
         np.random.seed(seed)
     u = np.empty_like(q)
+    J = np.empty((3, 3))
     change = np.inf
     res = np.inf
     sweeps = 0
@@ -212,17 +298,25 @@ def _run(indptr, indices, blocks, diag_pos, q, mu, r, order_kind, omega, tol, ma
     while sweeps < max_sweeps:
         if order_kind == 2:
             np.random.shuffle(order)
-        dr2, r2 = _sweep(indptr, indices, blocks, diag_pos, q, mu, r, order, omega)
+        if dim == 2:
+            dr2, r2 = _sweep(indptr, indices, blocks, diag_pos, q, mu, r, order, omega)
+        else:
+            dr2, r2 = _sweep3(indptr, indices, blocks, diag_pos, q, mu, r, order, omega, J, cases)
         sweeps += 1
         change = np.sqrt(dr2 / r2) if r2 > 0.0 else np.sqrt(dr2)
         if use_residual:
-            if sweeps % check_every == 0 or sweeps == max_sweeps:
+            if sweeps % check_every == 0 or sweeps == max_sweeps or change == 0.0:
                 matvec_bcsr(indptr, indices, blocks, r, u)
                 for i in range(q.shape[0]):
                     u[i] += q[i]
-                res = natural_map_2d(r, u, mu) / qnorm
-                if res <= tol or (change == 0.0 and sweeps > 1):  # stationary Gauss-Seidel point = solution
+                res = natural_map(r, u, mu, dim) / qnorm
+                if res <= tol:
                     converged = True
+                    break
+                if change == 0.0 and sweeps > 1:
+                    # stationary point: a solution when the local solver is exact (2D); in 3D only if the
+                    # residual says so (a failed local solve can also be stationary)
+                    converged = dim == 2
                     break
         elif change <= tol:
             converged = True
@@ -237,20 +331,25 @@ class NLGSResult:
     u: np.ndarray
     sweeps: int
     converged: bool
-    change: float
-    residual: float  # ‖F‖ / ‖q‖ recomputed from r
-    residual_abs: float
+    change: float    # ‖Δr‖/‖r‖ over the last sweep
+    residual: float  # FCLIB ‖F‖ / ‖q‖ recomputed from the returned r
+    residual_abs: float  # ‖F‖
     message: str
+    local_cases: np.ndarray | None = None  # 3D: counts of local cases (failed, open, stick, Newton, search, proj.)
 
 
 def _check(bcsr: BlockCSR, q, mu, tol, max_sweeps, omega, order, check_every):
     n = bcsr.n
-    if bcsr.dim != 2:
-        raise InputError(f"dim = {bcsr.dim}: this solver handles 2D problems (dim = 2)")
+    d = bcsr.dim
+    if d not in (2, 3):
+        raise InputError(f"dim = {d}: expected 2 or 3")
     q = np.ascontiguousarray(q, dtype=np.float64).ravel()
-    if q.size != 2 * n:
-        raise InputError(f"q: expected {2 * n} entries (2 per contact), got {q.size}")
-    mu = np.ascontiguousarray(np.broadcast_to(np.asarray(mu, dtype=np.float64), (n,)).copy())
+    if q.size != d * n:
+        raise InputError(f"q: expected {d * n} entries ({d} per contact), got {q.size}")
+    mu_a = np.asarray(mu, dtype=np.float64)
+    if mu_a.ndim > 1 or (mu_a.ndim == 1 and mu_a.size not in (1, n)):
+        raise InputError(f"mu: expected a scalar or {n} friction coefficients, got shape {mu_a.shape}")
+    mu = np.ascontiguousarray(np.broadcast_to(mu_a.ravel() if mu_a.ndim else mu_a, (n,)).copy())
     if np.any(~np.isfinite(mu)) or np.any(mu < 0):
         raise InputError("mu: expected friction coefficients >= 0")
     if not np.all(np.isfinite(q)):
@@ -259,8 +358,8 @@ def _check(bcsr: BlockCSR, q, mu, tol, max_sweeps, omega, order, check_every):
         raise InputError(f"tol = {tol!r}: expected tol > 0")
     if int(max_sweeps) < 1:
         raise InputError(f"max_sweeps = {max_sweeps!r}: expected an integer >= 1")
-    if not (0 < omega < 2):
-        raise InputError(f"omega = {omega!r}: expected 0 < omega < 2")
+    if not (0 < omega <= 2):
+        raise InputError(f"omega = {omega!r}: expected 0 < omega <= 2")
     if order not in ORDERS:
         raise InputError(f"order = {order!r}: expected one of {list(ORDERS)}")
     if int(check_every) < 1:
@@ -271,54 +370,62 @@ def _check(bcsr: BlockCSR, q, mu, tol, max_sweeps, omega, order, check_every):
 def solve_block_csr(W: BlockCSR, q, mu, r0=None, tol: float = 1e-8, max_sweeps: int = 10000,
                     omega: float = 1.0, order: str = "given", seed: int = 0, criterion: str = "change",
                     check_every: int = 10) -> NLGSResult:
-    """NLGS on block-CSR arrays. criterion "change": stop when ‖Δr‖/‖r‖ <= tol over a sweep;
-    "residual": stop when the FCLIB residual ‖F‖/‖q‖ <= tol (checked every `check_every` sweeps)."""
+    """NLGS on block-CSR arrays (2x2 or 3x3 blocks). criterion "change": stop when ‖Δr‖/‖r‖ <= tol over a
+    sweep; "residual": stop when the FCLIB residual ‖F‖/‖q‖ <= tol (checked every `check_every` sweeps)."""
     if criterion not in ("change", "residual"):
         raise InputError(f"criterion = {criterion!r}: expected 'change' or 'residual'")
     q, mu = _check(W, q, mu, tol, max_sweeps, omega, order, check_every)
-    n = W.n
-    r = np.zeros(2 * n) if r0 is None else np.array(r0, dtype=np.float64).ravel()
-    if r.size != 2 * n:
-        raise InputError(f"r0: expected {2 * n} entries, got {r.size}")
+    n, d = W.n, W.dim
+    r = np.zeros(d * n) if r0 is None else np.array(r0, dtype=np.float64).ravel()
+    if r.size != d * n:
+        raise InputError(f"r0: expected {d * n} entries, got {r.size}")
+    if not np.all(np.isfinite(r)):
+        raise InputError("r0: expected finite values")
     qnorm = float(np.linalg.norm(q)) or 1.0
     if n == 0:
         return NLGSResult(r, q.copy(), 0, True, 0.0, 0.0, 0.0, "no contact")
+    cases = np.zeros(6, dtype=np.int64)
     sweeps, change, converged = _run(W.indptr, W.indices, W.blocks, W.diag_pos, q, mu, r, ORDERS[order],
                                      float(omega), float(tol), int(max_sweeps), int(seed),
-                                     criterion == "residual", int(check_every), qnorm)
+                                     criterion == "residual", int(check_every), qnorm, cases)
     u = np.empty_like(q)
     matvec_bcsr(W.indptr, W.indices, W.blocks, r, u)
     u += q
-    res_abs = float(natural_map_2d(r, u, mu))
+    res_abs = float(natural_map(r, u, mu, d))
     res = res_abs / qnorm
     if converged:
         msg = f"converged in {sweeps} sweeps"
     else:
         msg = (f"not converged after {sweeps} sweeps (change {change:.3g}, residual {res:.3g}, "
                f"tolerance {tol:g} on the {criterion})")
-    return NLGSResult(r, u, int(sweeps), bool(converged), float(change), res, res_abs, msg)
+    if d == 3 and cases[0]:
+        msg += f"; {cases[0]} local solves without a positive diagonal block"
+    return NLGSResult(r, u, int(sweeps), bool(converged), float(change), res, res_abs, msg,
+                      cases if d == 3 else None)
 
 
 def solve(W, q, mu, dim: int = 2, tol: float = 1e-8, max_sweeps: int = 10000, r0=None, omega: float = 1.0,
           order: str = "given", seed: int = 0, criterion: str = "change", check_every: int = 10) -> NLGSResult:
-    """Solve u = W r + q with Signorini–Coulomb per contact (FCLIB ordering, normal first).
+    """Solve u = W r + q with Signorini–Coulomb per contact (FCLIB ordering, normal first, dim = 2 or 3).
     W: dense array, scipy sparse matrix or BlockCSR. Never raises on non-convergence: see `converged`."""
-    if dim != 2:
-        raise InputError(f"dim = {dim!r}: this solver handles 2D problems (dim = 2)")
+    if dim not in (2, 3):
+        raise InputError(f"dim = {dim!r}: expected 2 or 3")
+    if isinstance(W, BlockCSR) and W.dim != dim:
+        raise InputError(f"dim = {dim}: W is a BlockCSR of {W.dim}x{W.dim} blocks")
     return solve_block_csr(to_block_csr(W, dim), q, mu, r0=r0, tol=tol, max_sweeps=max_sweeps, omega=omega,
                            order=order, seed=seed, criterion=criterion, check_every=check_every)
 
 
-def fclib_residual(W, q, mu, r) -> tuple[float, float]:
-    """(‖F‖, ‖F‖/‖q‖) of the natural map for reactions r (2D)."""
-    B = to_block_csr(W, 2)
+def fclib_residual(W, q, mu, r, dim: int = 2) -> tuple[float, float]:
+    """(‖F‖, ‖F‖/‖q‖) of the natural map for reactions r."""
+    B = to_block_csr(W, dim)
     q = np.ascontiguousarray(q, dtype=np.float64).ravel()
     r = np.ascontiguousarray(r, dtype=np.float64).ravel()
     mu = np.ascontiguousarray(np.broadcast_to(np.asarray(mu, dtype=np.float64), (B.n,)).copy())
     u = np.empty_like(q)
     matvec_bcsr(B.indptr, B.indices, B.blocks, r, u)
     u += q
-    f = float(natural_map_2d(r, u, mu))
+    f = float(natural_map(r, u, mu, B.dim))
     return f, f / (float(np.linalg.norm(q)) or 1.0)
 
 
