@@ -1,10 +1,10 @@
 """NLGS on the real FCLIB problems of shared/data/fclib (every 2D and 3D Coulomb problem, local and global),
 the FCLIB reader (local, global + condensation, residual) and its input errors.
 
-Target: FCLIB residual ‖F‖/‖q‖ <= 1e-8 (README), 20 000 sweeps at most. The exceptions are stated per problem
-below with the reason; they are the problems on which Siconos' own Gauss-Seidel (NSGS) stalls (data README), where
-only a global Newton method reaches 1e-8. For those we assert the level the kernel reaches (about 2x the
-measured value), so that a regression of the kernel still fails the test.
+Target: FCLIB residual ‖F‖/‖q‖ <= 1e-8 (README), 20 000 sweeps at most unless stated per problem (OPTIONS). The
+exceptions (STALLING) are stated per problem with the reason; they are problems on which Siconos' own Gauss-Seidel
+(NSGS) stalls too (data README) and only a global Newton method reaches 1e-8 in reasonable time. For those we
+assert the level the kernel reaches (about 2x the measured value), so that a regression still fails the test.
 """
 import glob
 import json
@@ -31,20 +31,22 @@ if os.path.exists(os.path.join(FCLIB, "reference_solutions", "SUMMARY.json")):
 MAX_SWEEPS = 20000
 # problem -> (tolerance asserted after MAX_SWEEPS sweeps, reason). Measured on this kernel, order "given".
 STALLING = {
-    "BoxesStack1-i100000-32": (3e-5, "stacked boxes: Siconos NSGS stalls at 1e-5..1e-3 (README); ours 1.5e-5 "
-                                     "after 2e4 sweeps, 5.9e-6 after 5e4; Siconos reached 9e-13 with NSN_FB"),
-    "fclib_local_problem_test": (3.6e-4, "stacked boxes: NSGS stalls (README); ours 1.8e-4 after 2e4 sweeps, "
-                                       "5.3e-5 after 5e4; Siconos reached 1e-13 with NSN_AC"),
-    "spheres-in-a-box-98-i10000-256-10": (1.1e-5, "NSGS stalls (README); ours 5.5e-6 after 2e4 sweeps, 2.7e-6 "
-                                                  "after 5e4; Siconos reached 1.7e-14 with NSN_AC"),
+    "spheres-in-a-box-98-i10000-256-10": (1.1e-5, "slow Gauss-Seidel convergence (README: NSGS stalls); ours "
+                                                  "5.5e-6 after 2e4 sweeps, 8e-8 after 1e6 (50 s, see the bench); "
+                                                  "Siconos reached 1.7e-14 with the global Newton NSN_AC"),
     "fc2d_granularflowonwall_02020_00213": (1e-6, "Siconos NSGS stalls near 4.7e-7 after 5e5 sweeps (README); "
                                                   "ours 5.5e-7 after 2e4"),
     "fc2d_granularflowonwall_07002_00801": (3e-8, "Siconos NSGS stalls near 1.2e-8 after 1.2e5 sweeps (README); "
                                                   "ours 1.7e-8 after 2e4"),
 }
-# problem -> solve options: in the given order, Gauss-Seidel on OneObject falls into a period-2 cycle at 1.7e-3
-# (reactions alternate between two states exactly); a shuffled order breaks it and reaches 1e-8 in ~500 sweeps.
-OPTIONS = {"OneObject-i100000-316": dict(order="shuffled", seed=0)}
+# problem -> solve options.
+# * OneObject: in the given order Gauss-Seidel falls into a period-2 cycle at 1.7e-3 (the reactions alternate
+#   exactly between two states); a shuffled order breaks it and reaches 1e-8 in ~500 sweeps.
+# * stacked boxes (README: Siconos NSGS stalls at 1e-5..1e-3 after 2e4 sweeps): the convergence is slow, not a
+#   stall: 1e-8 after 2.6e5 (BoxesStack1) and 1.7e5 (fclib_local_problem_test) sweeps, about 1.5 s each.
+OPTIONS = {"OneObject-i100000-316": dict(order="shuffled", seed=0),
+           "BoxesStack1-i100000-32": dict(max_sweeps=300000),
+           "fclib_local_problem_test": dict(max_sweeps=300000)}
 # files that are not Signorini-Coulomb problems: read must refuse them with a clear InputError
 NOT_COULOMB = {"Chute-ndof-768-nc-4-3": "rolling-friction problem (/fclib_global_rolling, 5 rows per contact)"}
 
@@ -71,9 +73,9 @@ def problem(path):
 @pytest.mark.parametrize("path", COULOMB, ids=name_of)
 def test_nlgs_on_fclib(path):
     p = problem(path)
-    opts = OPTIONS.get(p.name, {})
-    res = nlgs.solve(p.W, p.q, p.mu, dim=p.dim, tol=1e-8, max_sweeps=MAX_SWEEPS, criterion="residual",
-                     check_every=10, **opts)
+    opts = dict(max_sweeps=MAX_SWEEPS)
+    opts.update(OPTIONS.get(p.name, {}))
+    res = nlgs.solve(p.W, p.q, p.mu, dim=p.dim, tol=1e-8, criterion="residual", check_every=10, **opts)
     # the reported residual is the README one, recomputed independently (numpy) from the returned r
     R = fclib.residual(p.W, p.q, p.mu, res.r, p.dim)
     # (u = W r + q is summed in another order: differences of round-off size relative to |W||r| + |q| + |r|)

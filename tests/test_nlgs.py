@@ -334,3 +334,38 @@ def test_sweep_and_block_csr_path_match_solve():
     np.testing.assert_array_equal(r, ref.r)
     res = nlgs.solve_block_csr(B, q, 0.3, r0=np.zeros(30), tol=1e-300, max_sweeps=5)
     np.testing.assert_array_equal(res.r, ref.r)
+
+
+def test_local_2d_degenerate_block_least_residual():
+    """Rank-1 block a aᵀ, a = (0.0707, -0.9975), q = (-0.274, -1.881), mu = 0.5: v_T = q_T - a_T q_N/a_N < 0 is
+    fixed once v_N = 0, and backward sliding needs r_N < 0, so no solution exists (open impossible: q_N < 0).
+    The solver returns case -1 with a local residual no larger than any candidate's (open, frictionless,
+    forward slide)."""
+    a = np.array([0.0707, -0.9975])
+    w = np.outer(a, a)
+    q0, q1, mu = -0.274, -1.881, 0.5
+    rn, rt, case = nlgs.local_2d(w[0, 0], w[0, 1], w[1, 0], w[1, 1], q0, q1, mu)
+    assert case == -1
+    e = nlgs.local_residual_2d(w[0, 0], w[0, 1], w[1, 0], w[1, 1], q0, q1, mu, rn, rt)
+    den = w[0, 0] - mu * w[0, 1]
+    for cn, ct in ((0.0, 0.0), (-q0 / w[0, 0], 0.0), (-q0 / den, mu * q0 / den)):
+        assert e <= nlgs.local_residual_2d(w[0, 0], w[0, 1], w[1, 0], w[1, 1], q0, q1, mu, cn, ct)
+    assert rn >= 0 and abs(rt) <= mu * rn * (1 + 1e-14)
+
+
+def test_local_2d_random_nonsymmetric_blocks_exact():
+    """20 000 random blocks with positive definite symmetric part (up to strongly non-symmetric), mu up to 3:
+    a consistent case is always found and the local natural-map residual is at round-off level."""
+    rng = np.random.default_rng(2)
+    for k in range(20000):
+        A = rng.standard_normal((2, 2))
+        w = A @ A.T + 0.01 * np.eye(2)
+        w += rng.choice([0.0, 0.3, 1.0, 3.0]) * rng.standard_normal((2, 2)) * np.abs(np.diag(w)).mean()
+        lam = np.linalg.eigvalsh(0.5 * (w + w.T)).min()
+        if lam <= 0:
+            w += (0.05 - lam) * np.eye(2)
+        q = rng.standard_normal(2)
+        mu = rng.choice([0.0, 0.1, 0.5, 1.0, 3.0])
+        rn, rt, case = nlgs.local_2d(w[0, 0], w[0, 1], w[1, 0], w[1, 1], q[0], q[1], mu)
+        e = nlgs.local_residual_2d(w[0, 0], w[0, 1], w[1, 0], w[1, 1], q[0], q[1], mu, rn, rt)
+        assert case >= 0 and e <= 1e-12 * (np.hypot(rn, rt) + np.linalg.norm(q) / w[0, 0]), (k, case, e)

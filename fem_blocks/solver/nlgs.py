@@ -83,9 +83,30 @@ def to_block_csr(W, dim: int = 2) -> BlockCSR:
 
 # ----------------------------------------------------------------------------- compiled kernels
 @njit(cache=True)
+def local_residual_2d(w00, w01, w10, w11, q0, q1, mu, rn, rt):
+    """‖F‖ of the local natural map F = r - P_K(r - (v + [mu|v_T|, 0])), v = w r + q (2D)."""
+    v0 = w00 * rn + w01 * rt + q0
+    v1 = w10 * rn + w11 * rt + q1
+    x0 = rn - (v0 + mu * abs(v1))
+    x1 = rt - v1
+    ax1 = abs(x1)
+    if ax1 <= mu * x0:
+        p0, p1 = x0, x1
+    elif mu * ax1 <= -x0:
+        p0, p1 = 0.0, 0.0
+    else:
+        c = (x0 + mu * ax1) / (1.0 + mu * mu)
+        p0 = c
+        p1 = c * mu * (1.0 if x1 > 0.0 else -1.0)
+    return np.sqrt((rn - p0) ** 2 + (rt - p1) ** 2)
+
+
+@njit(cache=True)
 def local_2d(w00, w01, w10, w11, q0, q1, mu):
     """Exact solution of v = w r + q with Signorini + Coulomb (2D). Returns (r_N, r_T, case):
-    case 0 open, 1 stick, 2 slide forward (v_T > 0), 3 slide backward, -1 no consistent case (r = 0)."""
+    case 0 open, 1 stick, 2 slide forward (v_T > 0), 3 slide backward, -1 no consistent case (degenerate block,
+    e.g. singular or strongly non-symmetric w): the candidate (open, frictionless, either slide, stick projected
+    on the cone) with the smallest local natural-map residual."""
     if q0 >= 0.0:
         return 0.0, 0.0, 0
     det = w00 * w11 - w01 * w10
@@ -94,7 +115,6 @@ def local_2d(w00, w01, w10, w11, q0, q1, mu):
         rt = -(-w10 * q0 + w00 * q1) / det
         if rn > 0.0 and abs(rt) <= mu * rn:
             return rn, rt, 1
-    best_rn, best_rt, best_case = 0.0, 0.0, -1
     for k in range(2):
         s = 1.0 if k == 0 else -1.0
         den = w00 - s * mu * w01
@@ -102,15 +122,41 @@ def local_2d(w00, w01, w10, w11, q0, q1, mu):
             rn = -q0 / den
             rt = -s * mu * rn
             vt = w10 * rn + w11 * rt + q1
-            if rn >= 0.0 and s * vt >= 0.0:
+            if rn >= 0.0 and s * vt >= -1e-14 * (abs(q1) + abs(q0) + 1e-300):
                 return rn, rt, 2 + k
-            if best_case < 0 and rn >= 0.0 and abs(vt) < 1e-14 * (abs(q1) + abs(q0) + 1e-300):
-                best_rn, best_rt, best_case = rn, rt, 2 + k
-    if best_case < 0 and w00 > 0.0:
-        # numerically degenerate (e.g. mu = 0 and w01 != 0): frictionless normal solve
-        rn = -q0 / w00
-        return rn, 0.0, 2
-    return best_rn, best_rt, best_case
+    # no consistent case: least local residual among the candidates
+    best_rn, best_rt = 0.0, 0.0
+    best = local_residual_2d(w00, w01, w10, w11, q0, q1, mu, 0.0, 0.0)
+    for k in range(4):
+        if k < 2:
+            s = 1.0 if k == 0 else -1.0
+            den = w00 - s * mu * w01
+            if not (den > 0.0):
+                continue
+            rn = -q0 / den
+            rt = -s * mu * rn
+        elif k == 2:
+            if not (w00 > 0.0):
+                continue
+            rn = -q0 / w00
+            rt = 0.0
+        else:
+            if det == 0.0:
+                continue
+            x0 = -(w11 * q0 - w01 * q1) / det
+            x1 = -(-w10 * q0 + w00 * q1) / det
+            ax1 = abs(x1)
+            if ax1 <= mu * x0:
+                rn, rt = x0, x1
+            elif mu * ax1 <= -x0:
+                continue
+            else:
+                rn = (x0 + mu * ax1) / (1.0 + mu * mu)
+                rt = rn * mu * (1.0 if x1 > 0.0 else -1.0)
+        e = local_residual_2d(w00, w01, w10, w11, q0, q1, mu, rn, rt)
+        if e < best:
+            best, best_rn, best_rt = e, rn, rt
+    return best_rn, best_rt, -1
 
 
 @njit(cache=True, inline="always")
