@@ -415,7 +415,7 @@ def _check(bcsr: BlockCSR, q, mu, tol, max_sweeps, omega, order, check_every):
 
 def solve_block_csr(W: BlockCSR, q, mu, r0=None, tol: float = 1e-8, max_sweeps: int = 10000,
                     omega: float = 1.0, order: str = "given", seed: int = 0, criterion: str = "change",
-                    check_every: int = 10) -> NLGSResult:
+                    check_every: int = 1) -> NLGSResult:
     """NLGS on block-CSR arrays (2x2 or 3x3 blocks). criterion "change": stop when ‖Δr‖/‖r‖ <= tol over a
     sweep; "residual": stop when the FCLIB residual ‖F‖/‖q‖ <= tol (checked every `check_every` sweeps)."""
     if criterion not in ("change", "residual"):
@@ -451,7 +451,7 @@ def solve_block_csr(W: BlockCSR, q, mu, r0=None, tol: float = 1e-8, max_sweeps: 
 
 
 def solve(W, q, mu, dim: int = 2, tol: float = 1e-8, max_sweeps: int = 10000, r0=None, omega: float = 1.0,
-          order: str = "given", seed: int = 0, criterion: str = "change", check_every: int = 10) -> NLGSResult:
+          order: str = "given", seed: int = 0, criterion: str = "change", check_every: int = 1) -> NLGSResult:
     """Solve u = W r + q with Signorini–Coulomb per contact (FCLIB ordering, normal first, dim = 2 or 3).
     W: dense array, scipy sparse matrix or BlockCSR. Never raises on non-convergence: see `converged`."""
     if dim not in (2, 3):
