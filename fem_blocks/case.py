@@ -11,6 +11,7 @@ which case values are converted to SI at load.
 """
 from __future__ import annotations
 
+import hashlib
 import math
 import os
 import tomllib
@@ -300,6 +301,9 @@ DERIVED = {"stiffness": lambda U: U["stress"] / U["length"], "energy": lambda U:
            "viscosity": lambda U: U["force"] / U["length"] * U["time"]}
 
 
+NONCONV = ("warn", "fail", "refine")
+
+
 @dataclass
 class StageSpec:
     name: str
@@ -317,6 +321,7 @@ class StageSpec:
     drivers: dict = field(default_factory=dict)  # body -> dof -> (kind, history) | None (free)
     forces: dict = field(default_factory=dict)   # body -> dof -> history
     stop_after_peak: tuple | None = None    # (body, reaction dof, relative drop)
+    on_nonconvergence: str | None = None    # "warn" | "fail" | "refine" (None: [contact] on_nonconvergence)
 
 
 @dataclass
@@ -333,6 +338,23 @@ class Case:
     output: dict
     contact: dict = field(default_factory=dict)
     interfaces: list = field(default_factory=list)
+    checks: dict = field(default_factory=lambda: dict(max_penetration=None, max_energy_growth=10.0))
+    variant: str = ""  # "" or "quick x2" (reduced-resolution variant, part of the fingerprint)
+
+
+def fingerprint(case: Case) -> str:
+    """SHA-256 of what determines a run: the case file's bytes, the mesh files it names and the variant
+    (--quick). A resumed run compares it with the checkpoint's."""
+    h = hashlib.sha256()
+    for path in [case.source] + sorted({bt.file for bt in case.block_types.values() if bt.file}):
+        h.update(os.path.abspath(path).encode() if path != case.source else b"case")
+        try:
+            with open(path, "rb") as f:
+                h.update(f.read())
+        except OSError:
+            h.update(b"<unreadable>")
+    h.update(case.variant.encode())
+    return h.hexdigest()
 
 
 def load_case(path: str) -> Case:
@@ -506,6 +528,7 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
                 bt_.done()
             ftab.done()
         st.tol = t.number("tol", None, lo=0, lo_open=True)
+        st.on_nonconvergence = t.string("on_nonconvergence", None, choices=NONCONV)
         st.max_sweeps = t.integer("max_sweeps", None, lo=1)
         sd = t.table("stop_at_displacement")
         if sd is not None:
@@ -540,7 +563,8 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
                        omega=ct.number("omega", 1.0, lo=0, hi=2, lo_open=True, hi_open=True),
                        order=ct.string("order", "given", choices=("given", "reversed", "shuffled")),
                        seed=ct.integer("seed", 0, lo=0),
-                       on_nonconvergence=ct.string("on_nonconvergence", "warn", choices=("warn", "fail")),
+                       on_nonconvergence=ct.string("on_nonconvergence", "warn", choices=NONCONV),
+                       max_refinements=ct.integer("max_refinements", 4, lo=1, hi=12),
                        criterion=ct.string("criterion", "change", choices=("change", "residual")),
                        check_every=ct.integer("check_every", 10, lo=1))
         ct.done()
@@ -599,7 +623,14 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
                              f"interface (orientation 'any') or two ('bed' and 'head'), got {orients}")
     if interfaces and not contact:
         contact = dict(geometry="frozen", redetect_every=1, tol=1e-6, max_sweeps=2000, omega=1.0, order="given",
-                       seed=0, on_nonconvergence="warn", criterion="change", check_every=10)
+                       seed=0, on_nonconvergence="warn", max_refinements=4, criterion="change", check_every=10)
+
+    checks = dict(max_penetration=None, max_energy_growth=10.0)
+    ck = root.table("checks")
+    if ck is not None:
+        checks["max_penetration"] = ck.number("max_penetration", None, lo=0, lo_open=True, dim="length")
+        checks["max_energy_growth"] = ck.number("max_energy_growth", 10.0, lo=0, lo_open=True)
+        ck.done()
 
     out = root.table("output")
     output = {"paraview": True, "stress": True, "checkpoint_every": 0, "crack_pattern": True}
@@ -642,7 +673,7 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
             raise InputError(f"{source}: output.curve.body = {cb!r}: expected a rigid body among {sorted(rigid_names)}")
     return Case(source=source, name=name, units=units, gravity=gravity, materials=materials,
                 block_types=block_types, blocks=blocks, rigid_bodies=rigid, stages=stages, output=output,
-                contact=contact, interfaces=interfaces)
+                contact=contact, interfaces=interfaces, checks=checks)
 
 
 def _parse_rigid(t: Table, U: dict, rname: str, vertices) -> RigidSpec:
@@ -798,6 +829,7 @@ def quick(case: Case, factor: float = 2.0) -> Case:
             st.stop_after_peak = (body, dof, drop, max(1, int(round(n / factor))))
         st.min_steps = max(1, int(round(st.min_steps / factor)))
     case.name += " (quick)"
+    case.variant = f"quick x{factor:g}"
     return case
 
 

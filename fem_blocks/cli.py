@@ -1,7 +1,9 @@
 """Command line: `fem-blocks run CASE.toml --out DIR`, `fem-blocks demo [NAME|--list]`, `--version`.
 
 Exit status: 0 success, 2 invalid input (one line on stderr naming the file/key and what was
-expected, no traceback), 1 a run that failed numerically (message says where).
+expected, no traceback), 1 a run that failed numerically or by solver policy (message says where; a
+checkpoint of the last good step and the outputs so far are written), 130/143 stopped by SIGINT/SIGTERM
+after finishing the current step and writing a checkpoint (`--resume` continues it).
 """
 from __future__ import annotations
 
@@ -44,14 +46,19 @@ def _run_script(path: str, out: str) -> int:
     return 0
 
 
-def _run(case_path: str, out: str, quiet: bool, quick: bool = False) -> int:
+def _run(case_path: str, out: str, quiet: bool, quick: bool = False, resume: bool = False,
+         force: bool = False) -> int:
     from .case import load_case
     from .case import quick as make_quick
     case = load_case(case_path)  # validate before importing the heavy stages
     if quick:
         case = make_quick(case)
-    from .runner import run_case
-    summary = run_case(case, out, progress=not quiet)
+    from .runner import RunStopped, run_case
+    try:
+        summary = run_case(case, out, progress=not quiet, resume=resume, force=force)
+    except RunStopped as e:
+        print(f"fem-blocks: run stopped: {e}", file=sys.stderr)
+        return e.code
     pv = summary["outputs"].get("paraview")
     print(f"fem-blocks: {case.name}: {summary['steps']} steps in {summary['wall_time']:.1f} s")
     if pv:
@@ -76,6 +83,8 @@ def main(argv=None) -> int:
     r.add_argument("--out", required=True, help="output directory")
     r.add_argument("--quiet", action="store_true", help="no progress line")
     r.add_argument("--quick", action="store_true", help="reduced resolution: element sizes and time steps x2")
+    r.add_argument("--resume", action="store_true", help="continue from the last checkpoint in --out")
+    r.add_argument("--force", action="store_true", help="with --resume: resume even if the case file changed")
     d = sub.add_parser("demo", help="run a shipped demo")
     d.add_argument("name", nargs="?", default="default", help="demo name (see --list); 'default' = "
                                                               + DEFAULT_DEMO)
@@ -89,7 +98,9 @@ def main(argv=None) -> int:
         return 2
     try:
         if args.command == "run":
-            return _run(args.case, args.out, args.quiet, args.quick)
+            if args.force and not args.resume:
+                raise InputError("--force: only meaningful with --resume")
+            return _run(args.case, args.out, args.quiet, args.quick, args.resume, args.force)
         demos = list_demos()
         if args.list:
             for name, path in demos.items():

@@ -84,6 +84,7 @@ class Simulation:
         self.velocity_reset = bool(velocity_reset)
         self.time, self.step_count = float(t0), 0
         self.external_work = 0.0
+        self.driver_work = 0.0  # work of the drivers on driven rigid dofs: sum R_drv . dq
         self.contact = contact
         self.deformable = [i for i, b in enumerate(self.bodies) if b.kind == 0]
         self.rigid = [i for i, b in enumerate(self.bodies) if b.kind == 1]
@@ -155,7 +156,7 @@ class Simulation:
         cinfo = {}
         if self.contact is not None:
             cinfo = self.contact.solve(self, t0, t1)  # sets gr.Ucorr / body.ucorr (W H h r)
-        work = 0.0
+        work = wdrv = 0.0
         for gr in self.groups:
             Unew = gr.Ufree if getattr(gr, "Ucorr", None) is None else gr.Ufree + gr.Ucorr
             dQ = h * ((1 - th) * gr.U + th * Unew)
@@ -173,6 +174,7 @@ class Simulation:
             dq = h * ((1 - th) * b.u + th * unew)
             gforce = np.array([b.mass[0] * self.g[0], b.mass[1] * self.g[1], 0.0])
             work += float(np.dot(np.where(b.driven, 0.0, b.Ftheta - gforce), dq))
+            wdrv += float(np.dot(b.reaction, dq))
             b.q += dq
             for k, drv in b.drivers.items():
                 if drv.kind == "displacement":
@@ -181,7 +183,35 @@ class Simulation:
             b.ucorr, b.contact_impulse = None, None
         self.time, self.step_count = t1, self.step_count + 1
         self.external_work += work
+        self.driver_work += wdrv
         return self.info(cinfo)
+
+    # -------------------------------------------------------------- checkpoint
+    def export_state(self) -> dict:
+        """Arrays that determine the rest of the run (with the case): time, counters, work, q, u, reactions."""
+        d = {"sim.time": np.float64(self.time), "sim.step": np.int64(self.step_count),
+             "sim.external_work": np.float64(self.external_work), "sim.driver_work": np.float64(self.driver_work),
+             "sim.h": np.float64(self.h), "sim.theta": np.float64(self.theta)}
+        for i, b in enumerate(self.bodies):
+            d[f"sim.body{i}.q"] = np.array(b.q)
+            d[f"sim.body{i}.u"] = np.array(b.u)
+            if b.kind == 1:
+                d[f"sim.body{i}.reaction"] = np.array(b.reaction)
+        return d
+
+    def restore_state(self, d: dict) -> None:
+        """Inverse of `export_state` (in place: the groups' arrays keep their identity)."""
+        for i, b in enumerate(self.bodies):
+            for name in ("q", "u") + (("reaction",) if b.kind == 1 else ()):
+                key = f"sim.body{i}.{name}"
+                if key not in d or np.shape(d[key]) != np.shape(getattr(b, name)):
+                    raise InputError(f"checkpoint: {key}: missing or of another shape than body {i} of this model "
+                                     f"(expected {np.shape(getattr(b, name))})")
+                getattr(b, name)[...] = d[key]
+        self.time = float(d["sim.time"])
+        self.step_count = int(d["sim.step"])
+        self.external_work = float(d["sim.external_work"])
+        self.driver_work = float(d["sim.driver_work"])
 
     # -------------------------------------------------------------- diagnostics
     def energies(self):

@@ -13,6 +13,7 @@ import numpy as np
 
 from . import __version__
 from .case import Case
+from .errors import InputError
 from .bodies import Driver
 from .dynamics import Simulation
 from .model import Model, build_model
@@ -54,8 +55,8 @@ class Progress:
 
 
 def history_columns(model: Model) -> list[str]:
-    cols = ["step", "time", "stage", "kinetic", "elastic", "gravity_potential", "external_work",
-            "total_energy", "max_velocity"]
+    cols = ["step", "time", "stage", "h", "kinetic", "elastic", "gravity_potential", "external_work",
+            "total_energy", "driver_work", "max_velocity"]
     for i, b in enumerate(model.bodies):
         if b.kind == 1:
             name = model.names[i]
@@ -66,10 +67,11 @@ def history_columns(model: Model) -> list[str]:
     return cols
 
 
-def history_row(model: Model, info, stage_index: int) -> dict:
-    row = dict(step=info.step, time=info.time, stage=stage_index, kinetic=info.kinetic, elastic=info.elastic,
+def history_row(model: Model, info, stage_index: int, sim=None, h=None) -> dict:
+    row = dict(step=info.step, time=info.time, stage=stage_index, h=h, kinetic=info.kinetic, elastic=info.elastic,
                gravity_potential=info.gravity_potential, external_work=info.external_work,
-               total_energy=info.total_energy, max_velocity=info.max_velocity)
+               total_energy=info.total_energy, driver_work=None if sim is None else sim.driver_work,
+               max_velocity=info.max_velocity)
     for i, b in enumerate(model.bodies):
         if b.kind == 1:
             name = model.names[i]
@@ -85,139 +87,414 @@ def history_row(model: Model, info, stage_index: int) -> dict:
     return row
 
 
-def run_case(case: Case, out_dir: str, progress: bool = True) -> dict:
-    """Run every stage of `case`, writing outputs in `out_dir`; returns the summary dict."""
+class RunStopped(Exception):
+    """The run stopped before its end (signal, numerical failure, solver policy); outputs and a checkpoint were
+    written. `code`: exit status for the CLI (1 failure, 130 SIGINT, 143 SIGTERM)."""
+
+    def __init__(self, message: str, code: int = 1):
+        super().__init__(message)
+        self.code = code
+
+
+class _Signals:
+    """SIGINT/SIGTERM set a flag; the runner finishes the current step, writes a checkpoint and stops."""
+
+    def __init__(self):
+        self.received = None
+        self.old = {}
+
+    def __enter__(self):
+        import signal
+        import threading
+        if threading.current_thread() is threading.main_thread():
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                self.old[sig] = signal.signal(sig, self._handler)
+        return self
+
+    def _handler(self, signum, frame):
+        if self.received is not None:  # second signal: stop now
+            raise KeyboardInterrupt
+        self.received = signum
+
+    def __exit__(self, *exc):
+        import signal
+        for sig, h in self.old.items():
+            signal.signal(sig, h)
+        return False
+
+
+def _enter_stage(model: Model, sim: Simulation, case: Case, si: int):
+    """Apply stage `si`'s drivers, forces, time step and solver options (stages accumulate in order)."""
+    st = case.stages[si]
+    changed = False
+    for bname, dofs in st.drivers.items():
+        b = model.bodies[model.index(bname)]
+        for dof, spec in dofs.items():
+            b.set_driver(dof, None if spec is None else Driver(*spec, name=f"stages[{si}].drivers.{bname}"))
+            changed = True
+    for bname, dofs in st.forces.items():
+        b = model.bodies[model.index(bname)]
+        for dof, force_hist in dofs.items():
+            b.set_force(dof, force_hist)
+            changed = True
+    if changed and model.contact is not None:
+        model.contact.W_dirty = True  # rigid W (driven dofs) changed
+    sim.set_step(st.h, st.theta)
+    sim.velocity_reset = st.velocity_reset
+    if model.contact is not None:
+        o = model.contact.opts
+        o.tol = st.tol if st.tol is not None else case.contact.get("tol", o.tol)
+        o.max_sweeps = st.max_sweeps if st.max_sweeps is not None else case.contact.get("max_sweeps", o.max_sweeps)
+        o.on_nonconvergence = "warn"  # the runner applies the policy (it writes a checkpoint before stopping)
+
+
+def _policy(case: Case, st) -> str:
+    return st.on_nonconvergence or case.contact.get("on_nonconvergence", "warn")
+
+
+class _Guards:
+    """Numerical safety checks after every step (DESIGN: a run never goes on silently from a wrong state).
+
+    * NaN/Inf in any displacement, velocity or contact impulse;
+    * penetration: -(g - g0) at a contact point with rigid compression (coulomb, brittle, fremond) or -g for the
+      compliant laws (elastic, mixed: joint closed beyond its thickness), above `[checks] max_penetration`
+      (default: the interface's alert distance, beyond which detection is no longer trustworthy);
+    * energy: E - E_0 - W_ext - W_drivers (which is <= 0 for θ >= 1/2: contacts, cohesive joints and the θ-method
+      only dissipate or store) above `max_energy_growth` x (K_0 + E_el,0 + |V - V_0| + |W_ext| + |W_drivers|).
+    """
+
+    def __init__(self, case: Case, model: Model, names):
+        self.names = names
+        self.max_pen = case.checks.get("max_penetration")
+        self.growth = case.checks.get("max_energy_growth", 10.0)
+        self.model = model
+        self.max_ratio = 0.0  # largest (E - E_0 - W) / scale seen: > 0 means energy created (unconverged solves)
+
+    def check(self, sim: Simulation, info, e0: tuple) -> str | None:
+        for i, b in enumerate(sim.bodies):
+            for name in ("q", "u"):
+                a = getattr(b, name)
+                if not np.all(np.isfinite(a)):
+                    return f"{'displacement' if name == 'q' else 'velocity'} of body {self.names[i]!r} is NaN/Inf"
+        c = self.model.contact
+        if c is not None and c.cs is not None and len(c.cs.gap) and getattr(c, "P", None) is not None:
+            if not np.all(np.isfinite(c.P)):
+                a = int(np.flatnonzero(~np.isfinite(c.P).all(axis=1))[0])
+                return f"contact impulse at contact {a} (bodies {self._pair(c, a)}) is NaN/Inf"
+            gt = getattr(c, "gt_end", None)
+            if gt is not None and len(gt) == len(c.cs.gap):
+                from .laws import ELASTIC, MIXED
+                compliant = (c.law == ELASTIC) | (c.law == MIXED)
+                pen = np.where(compliant, -(gt + c.cs.g0), -gt)
+                lim = (np.full(len(gt), self.max_pen) if self.max_pen is not None
+                       else c.table.alert[c.cs.interface])
+                bad = pen > lim
+                if np.any(bad):
+                    a = int(np.argmax(np.where(bad, pen / lim, -np.inf)))
+                    return (f"penetration {pen[a]:.3g} m at contact {a} (bodies {self._pair(c, a)}) exceeds "
+                            f"{lim[a]:.3g} m ([checks] max_penetration)")
+        K0, El0, V0 = e0
+        dE = info.total_energy - (K0 + El0 + V0) - sim.external_work - sim.driver_work
+        scale = K0 + El0 + abs(info.gravity_potential - V0) + abs(sim.external_work) + abs(sim.driver_work)
+        if not np.isfinite(info.total_energy):
+            return "the energy is NaN/Inf"
+        if scale > 0:
+            self.max_ratio = max(self.max_ratio, dE / scale)
+        if dE > self.growth * scale and dE > 1e-9 * max(1.0, scale):
+            return (f"energy grew by {dE:.4g} J without a source (more than max_energy_growth = {self.growth:g} x "
+                    f"{scale:.4g} J of energy put in): unstable or unconverged step")
+        return None
+
+    def _pair(self, c, a) -> str:
+        return f"{self.names[c.cs.cand_body[a]]} / {self.names[c.cs.ant_body[a]]}"
+
+
+def _snapshot(sim: Simulation, model: Model, run: dict) -> dict:
+    """Copy of everything a step changes (to redo it, or to checkpoint the last good state)."""
+    d = sim.export_state()
+    if model.contact is not None:
+        for k, v in model.contact.export_state().items():
+            d[k] = v.copy() if k in ("contact.state", "contact.P") else v
+    d.update(_run_arrays(run))
+    return d
+
+
+def _run_arrays(run: dict) -> dict:
+    import json
+    return {"run.stage": np.int64(run["stage"]), "run.k": np.int64(run["k"]),
+            "run.stage_done": np.bool_(run["stage_done"]), "run.peak_force": np.float64(run["peak_force"]),
+            "run.e0": np.array(run["e0"], dtype=float), "run.frames": np.int64(run["frames"]),
+            "run.json": np.array(json.dumps(dict(cstats=run["cstats"], stages_done=run["stages_done"]))),
+            "case_hash": np.array(run["case_hash"]), "fem_blocks": np.array(__version__)}
+
+
+def _restore(sim: Simulation, model: Model, d: dict) -> None:
+    sim.restore_state(d)
+    if model.contact is not None:
+        model.contact.restore_state(sim, d)
+
+
+def _step(sim: Simulation, model: Model, run: dict, policy: str, max_level: int, write_row) -> tuple:
+    """One nominal step h; with policy "refine", a step whose contact solve did not converge is redone as 2, 4, ...
+    2^max_level sub-steps (sub-step rows go to the history with their h). Returns (info, refinement level)."""
+    if policy != "refine" or model.contact is None:
+        info = sim.step()
+        write_row(info, sim.h)
+        return info, 0
+    snap = _snapshot(sim, model, run)
+    h, th, t0 = sim.h, sim.theta, sim.time
+    info = sim.step()
+    level = 0
+    while info.contact and not info.contact.get("converged", True) and level < max_level:
+        level += 1
+        _restore(sim, model, snap)
+        sim.set_step(h / 2 ** level, th)
+        rows = []
+        for _ in range(2 ** level):
+            info = sim.step()
+            rows.append((info, sim.h))
+            if not info.contact.get("converged", True) and level < max_level:
+                break
+        else:
+            break
+    if level:
+        sim.set_step(h, th)
+        for info_, hh in rows:
+            write_row(info_, hh)
+        sim.time = t0 + h  # the nominal time grid (sub-steps may differ from it by rounding)
+    else:
+        write_row(info, h)
+    return info, level
+
+
+def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = False, force: bool = False) -> dict:
+    """Run every stage of `case`, writing outputs in `out_dir` as it goes; returns the summary dict.
+
+    resume=True continues from the newest valid checkpoint in `out_dir` (refused if the case file or its meshes
+    changed since, unless force=True); history.csv and the .pvd series are cut back to the checkpoint and
+    appended to. Raises RunStopped (after writing a checkpoint and the outputs) on SIGINT/SIGTERM, on a
+    numerical failure (NaN, penetration, energy growth) and on non-convergence with policy "fail"."""
+    from .case import fingerprint
+    from .output.checkpoint import latest_checkpoint
     t_start = _time.perf_counter()
     os.makedirs(out_dir, exist_ok=True)
+    fp = fingerprint(case)
+    ck = None
+    if resume:
+        ck_path, ck = latest_checkpoint(out_dir)
+        if str(ck["case_hash"]) != fp and not force:
+            raise InputError(f"{ck_path}: the case file {case.source} (or a mesh file it names, or --quick) changed "
+                             "since this checkpoint was written; run without --resume to start again, or add "
+                             "--force to resume anyway")
     model = build_model(case)
     t_setup = _time.perf_counter() - t_start
     st0 = case.stages[0]
     sim = Simulation(model.bodies, h=st0.h, theta=st0.theta, gravity=model.gravity,
                      velocity_reset=st0.velocity_reset, contact=model.contact)
-    pv = BodiesWriter(sim, os.path.join(out_dir, "paraview"), stress=case.output["stress"]) \
+    import json
+    run = dict(stage=0, k=0, stage_done=False, peak_force=0.0, e0=None, frames=0, case_hash=fp,
+               cstats=dict(steps=0, sweeps=0, max_sweeps=0, unconverged=0, max_residual=0.0, max_change=0.0,
+                           refined_steps=0),
+               stages_done=[])
+    if ck is not None:
+        extra = json.loads(str(ck["run.json"]))
+        run.update(stage=int(ck["run.stage"]), k=int(ck["run.k"]), stage_done=bool(ck["run.stage_done"]),
+                   peak_force=float(ck["run.peak_force"]), e0=tuple(float(x) for x in ck["run.e0"]),
+                   frames=int(ck["run.frames"]), **extra)
+        for si in range(run["stage"] + 1):
+            _enter_stage(model, sim, case, si)
+        try:
+            _restore(sim, model, ck)
+        except (KeyError, ValueError) as e:
+            raise InputError(f"{out_dir}: checkpoint does not match this case's model ({e})") from None
+    pdir = os.path.join(out_dir, "paraview")
+    t_resume = float(ck["sim.time"]) if ck is not None else None
+    pv = BodiesWriter(sim, pdir, stress=case.output["stress"], append=resume, keep_until_time=t_resume) \
         if case.output["paraview"] else None
-    pc = ContactsWriter(model.contact, os.path.join(out_dir, "paraview")) \
+    pc = ContactsWriter(model.contact, pdir, append=resume, keep_until_time=t_resume) \
         if case.output["paraview"] and model.contact is not None else None
     ckpt_every = case.output.get("checkpoint_every", 0)
     cv = case.output.get("curve")
     curve_body = model.bodies[model.index(cv["body"])] if cv else None
-    cstats = dict(steps=0, sweeps=0, max_sweeps=0, unconverged=0, max_residual=0.0, max_change=0.0)
-    hist = HistoryWriter(os.path.join(out_dir, "history.csv"), history_columns(model), flush_every=50)
+    cols = history_columns(model)
+    hpath = os.path.join(out_dir, "history.csv")
+    if ck is not None and os.path.exists(hpath):
+        hist = HistoryWriter.resume(hpath, int(ck["sim.step"]), columns=cols, flush_every=50)
+    else:
+        hist = HistoryWriter(hpath, cols, flush_every=50)
+    cstats = run["cstats"]
+    names = list(model.names)
+    guards = _Guards(case, model, names)
     bar = Progress(progress)
     info = sim.info()
-    hist.write(history_row(model, info, 0))
-    if pv:
-        pv.write(sim.time)
-    if pc:
-        pc.write(sim.time)
-    n_frames = 1
-    e0 = info.total_energy
-    stages_done = []
+    if ck is None:
+        hist.write(history_row(model, info, 0, sim))
+        if pv:
+            pv.write(sim.time)
+        if pc:
+            pc.write(sim.time)
+        run["frames"] = 1
+        run["e0"] = (info.kinetic, info.elastic, info.gravity_potential)
+
+    def checkpoint(arrays=None):
+        hist.flush()  # the history must hold every step up to the checkpoint
+        write_checkpoint(out_dir, arrays if arrays is not None else _snapshot(sim, model, run))
+
+    def finish(status: str) -> dict:
+        summary = _summary(case, model, sim, info, run, t_start, t_setup, pv, pc, status)
+        summary["energy_created_ratio_max"] = guards.max_ratio
+        summary.update(_figures(case, sim, model, out_dir))
+        write_summary(os.path.join(out_dir, "summary.json"), summary)
+        return summary
+
+    def write_row(inf, hh):
+        hist.write(history_row(model, inf, run["stage"], sim, hh))
+
+    stopped_run = None
     try:
-        for si, st in enumerate(case.stages):
-            changed = False
-            for bname, dofs in st.drivers.items():
-                b = model.bodies[model.index(bname)]
-                for dof, spec in dofs.items():
-                    b.set_driver(dof, None if spec is None else Driver(*spec, name=f"stages[{si}].drivers.{bname}"))
-                    changed = True
-            for bname, dofs in st.forces.items():
-                b = model.bodies[model.index(bname)]
-                for dof, force_hist in dofs.items():
-                    b.set_force(dof, force_hist)
-                    changed = True
-            if changed and model.contact is not None:
-                model.contact.W_dirty = True  # rigid W (driven dofs) changed
-            sim.set_step(st.h, st.theta)
-            sim.velocity_reset = st.velocity_reset
-            if model.contact is not None:
-                o = model.contact.opts
-                o.tol = st.tol if st.tol is not None else case.contact.get("tol", o.tol)
-                o.max_sweeps = st.max_sweeps if st.max_sweeps is not None else case.contact.get("max_sweeps",
-                                                                                              o.max_sweeps)
-            stop_body = {}
-            for key, ref in (("disp", st.stop_displacement), ("peak", st.stop_after_peak)):
-                if ref is not None:
-                    stop_body[key] = (model.bodies[model.index(ref[0])], DOFS.index(ref[1])) + tuple(ref[2:])
-            peak_force = 0.0
-            n_steps = max(1, int(round(st.duration / st.h)))
-            t_stage = _time.perf_counter()
-            unconv0 = cstats["unconverged"]
-            stopped = None
-            for k in range(1, n_steps + 1):
-                info = sim.step()
-                hist.write(history_row(model, info, si))
-                c = info.contact
-                if c:
-                    cstats["steps"] += 1
-                    cstats["sweeps"] += c["sweeps"]
-                    cstats["max_sweeps"] = max(cstats["max_sweeps"], c["sweeps"])
-                    cstats["unconverged"] += 0 if c["converged"] else 1
-                    cstats["max_residual"] = max(cstats["max_residual"], c["residual"])
-                    cstats["max_change"] = max(cstats["max_change"], c["change"])
-                if not np.isfinite(info.total_energy):
-                    raise FloatingPointError(f"stage {st.name!r}, step {k}: the state became NaN/Inf")
-                at_eq = (st.stop_at_equilibrium and k >= st.min_steps
-                         and info.max_velocity <= st.equilibrium_velocity)
-                reason = None
-                if "disp" in stop_body:
-                    b, d, val = stop_body["disp"]
-                    if abs(b.q[d]) >= val * (1 - 1e-12):
-                        reason = f"target displacement {val:g} reached after {k} steps"
-                if "peak" in stop_body:
-                    b, d, drop, min_steps = stop_body["peak"]
-                    f = abs(b.reaction[d])
-                    peak_force = max(peak_force, f)
-                    if k >= min_steps and peak_force > 0 and f < (1 - drop) * peak_force:
-                        reason = f"force dropped by {drop:.0%} after its peak {peak_force:.6g} N ({k} steps)"
-                last = k == n_steps or at_eq or reason is not None
-                if pv and (k % st.output_every == 0 or last):
-                    pv.write(sim.time)
-                    if pc:
-                        pc.write(sim.time)
-                    n_frames += 1
-                extra = f" sweeps {c['sweeps']}" if c else ""
-                if curve_body is not None:
-                    extra += f" F{cv['force']} = {curve_body.reaction[DOFS.index(cv['force'])] / 1e3:.4g} kN"
-                bar.update(f"[{si + 1}/{len(case.stages)} {st.name}] step {k}/{n_steps} t = {sim.time:.6g} s "
-                           f"E = {info.total_energy:.6g} J vmax = {info.max_velocity:.3g} m/s{extra}", force=last)
-                if ckpt_every and (sim.step_count % ckpt_every == 0 or last):
-                    write_checkpoint(os.path.join(out_dir, "checkpoint.npz"), sim, si)
-                if at_eq:
-                    stopped = f"equilibrium (max velocity {info.max_velocity:.3g} m/s) after {k} steps"
-                    break
-                if reason is not None:
-                    stopped = reason
-                    break
-            n_unconv = cstats["unconverged"] - unconv0
-            if n_unconv:
-                print(f"fem-blocks: warning: stage {st.name!r}: {n_unconv} of {k} steps reached the NLGS sweep "
-                      f"limit without converging (see the 'converged' column of history.csv)", file=sys.stderr)
-            stages_done.append(dict(name=st.name, steps=k, h=st.h, theta=st.theta, stopped=stopped or "duration",
-                                    unconverged_steps=n_unconv, wall_time=_time.perf_counter() - t_stage))
+        with _Signals() as sig:
+            si0 = run["stage"] + (1 if ck is not None and run["stage_done"] else 0)
+            resumed_mid_stage = ck is not None and not run["stage_done"]
+            for si in range(si0, len(case.stages)):
+                st = case.stages[si]
+                if not resumed_mid_stage:  # (a resumed run entered stages 0..run["stage"] before restoring)
+                    _enter_stage(model, sim, case, si)
+                    run.update(stage=si, k=0, stage_done=False, peak_force=0.0)
+                resumed_mid_stage = False
+                policy = _policy(case, st)
+                max_level = case.contact.get("max_refinements", 4)
+                stop_body = {}
+                for key, ref in (("disp", st.stop_displacement), ("peak", st.stop_after_peak)):
+                    if ref is not None:
+                        stop_body[key] = (model.bodies[model.index(ref[0])], DOFS.index(ref[1])) + tuple(ref[2:])
+                n_steps = max(1, int(round(st.duration / st.h)))
+                t_stage = _time.perf_counter()
+                unconv0 = cstats["unconverged"]
+                stopped = None
+                k = run["k"]
+                while k < n_steps:
+                    k += 1
+                    good = _snapshot(sim, model, run)  # last good state, checkpointed if this step fails
+                    info, level = _step(sim, model, run, policy, max_level, write_row)
+                    run["k"] = k
+                    c = info.contact
+                    if c:
+                        cstats["steps"] += 1
+                        cstats["sweeps"] += c["sweeps"]
+                        cstats["max_sweeps"] = max(cstats["max_sweeps"], c["sweeps"])
+                        cstats["unconverged"] += 0 if c["converged"] else 1
+                        cstats["refined_steps"] += 1 if level else 0
+                        cstats["max_residual"] = max(cstats["max_residual"], c["residual"])
+                        cstats["max_change"] = max(cstats["max_change"], c["change"])
+                    failure = guards.check(sim, info, run["e0"])
+                    if failure is None and c and not c["converged"] and policy in ("fail", "refine") \
+                            and (policy == "fail" or level >= max_level):
+                        if policy == "fail":
+                            failure = (f"the contact solver did not converge in {c['sweeps']} sweeps (change "
+                                       f"{c['change']:.3g}, residual {c['residual']:.3g}; on_nonconvergence = 'fail')")
+                    if failure is not None:
+                        if pv:
+                            pv.write(sim.time)
+                            if pc:
+                                pc.write(sim.time)
+                        checkpoint(good)
+                        raise RunStopped(f"stage {st.name!r}, step {k} (t = {sim.time:.6g} s): {failure}. Outputs "
+                                         f"so far are in {out_dir}; the checkpoint holds the last good step "
+                                         f"({sim.step_count - 1}): fix the case and resume with --resume --force",
+                                         1)
+                    at_eq = (st.stop_at_equilibrium and k >= st.min_steps
+                             and info.max_velocity <= st.equilibrium_velocity)
+                    reason = None
+                    if "disp" in stop_body:
+                        b, d, val = stop_body["disp"]
+                        if abs(b.q[d]) >= val * (1 - 1e-12):
+                            reason = f"target displacement {val:g} reached after {k} steps"
+                    if "peak" in stop_body:
+                        b, d, drop, min_steps = stop_body["peak"]
+                        f = abs(b.reaction[d])
+                        run["peak_force"] = max(run["peak_force"], f)
+                        pk = run["peak_force"]
+                        if k >= min_steps and pk > 0 and f < (1 - drop) * pk:
+                            reason = f"force dropped by {drop:.0%} after its peak {pk:.6g} N ({k} steps)"
+                    last = k == n_steps or at_eq or reason is not None
+                    interrupted = sig.received is not None
+                    if pv and (k % st.output_every == 0 or last or interrupted):
+                        pv.write(sim.time)
+                        if pc:
+                            pc.write(sim.time)
+                        run["frames"] += 1
+                    extra = f" sweeps {c['sweeps']}" if c else ""
+                    if level:
+                        extra += f" (refined x{2 ** level})"
+                    if curve_body is not None:
+                        extra += f" F{cv['force']} = {curve_body.reaction[DOFS.index(cv['force'])] / 1e3:.4g} kN"
+                    bar.update(f"[{si + 1}/{len(case.stages)} {st.name}] step {k}/{n_steps} t = {sim.time:.6g} s "
+                               f"E = {info.total_energy:.6g} J vmax = {info.max_velocity:.3g} m/s{extra}",
+                               force=last)
+                    if at_eq:
+                        stopped = f"equilibrium (max velocity {info.max_velocity:.3g} m/s) after {k} steps"
+                    elif reason is not None:
+                        stopped = reason
+                    if last:
+                        n_unconv = cstats["unconverged"] - unconv0
+                        run["stages_done"].append(dict(name=st.name, steps=k, h=st.h, theta=st.theta,
+                                                       stopped=stopped or "duration", unconverged_steps=n_unconv,
+                                                       wall_time=_time.perf_counter() - t_stage))
+                        run["stage_done"] = True
+                        if n_unconv:
+                            print(f"fem-blocks: warning: stage {st.name!r}: {n_unconv} of {k} steps reached the "
+                                  f"NLGS sweep limit without converging (see the 'converged' column of "
+                                  f"history.csv)", file=sys.stderr)
+                    if last or interrupted or (ckpt_every and sim.step_count % ckpt_every == 0):
+                        checkpoint()
+                    if interrupted:
+                        import signal
+                        code = 130 if sig.received == signal.SIGINT else 143
+                        raise RunStopped(f"interrupted by signal {sig.received} at stage {st.name!r}, step {k} "
+                                         f"(t = {sim.time:.6g} s); checkpoint and outputs written in {out_dir}; "
+                                         f"continue with: fem-blocks run {case.source} --out {out_dir} --resume",
+                                         code)
+                    if last:
+                        break
+    except RunStopped as e:
+        stopped_run = e
+        raise
     finally:
         hist.close()
         bar.close()
-    summary = dict(case=os.path.abspath(case.source), name=case.name, fem_blocks=__version__,
+        if stopped_run is not None:
+            try:
+                finish(f"stopped: {stopped_run}")
+            except Exception as e2:  # noqa: BLE001 - the stop message matters more than the summary
+                print(f"fem-blocks: warning: could not write the summary: {e2}", file=sys.stderr)
+    return finish("completed")
+
+
+def _summary(case, model, sim, info, run, t_start, t_setup, pv, pc, status) -> dict:
+    cstats = run["cstats"]
+    e0 = run["e0"] or (0.0, 0.0, 0.0)
+    summary = dict(case=os.path.abspath(case.source), name=case.name, fem_blocks=__version__, status=status,
+                   case_hash=run["case_hash"],
                    n_bodies=len(model.bodies),
                    n_deformable=sum(b.kind == 0 for b in model.bodies),
                    n_rigid=sum(b.kind == 1 for b in model.bodies),
                    n_block_types=len(model.block_types),
                    n_dofs=int(sum(bt.ndof * sum(1 for b in model.bodies if b.kind == 0 and b.type is bt)
                                   for bt in model.block_types.values())),
-                   stages=stages_done, final_time=sim.time, steps=sim.step_count,
+                   stages=run["stages_done"], final_time=sim.time, steps=sim.step_count,
                    final_energy=dict(kinetic=info.kinetic, elastic=info.elastic,
                                      gravity_potential=info.gravity_potential, total=info.total_energy,
-                                     initial_total=e0, external_work=info.external_work),
-                   frames=n_frames, setup_time=t_setup, contact=cstats if model.contact is not None else None, wall_time=_time.perf_counter() - t_start,
+                                     initial_total=float(sum(e0)), external_work=sim.external_work,
+                                     driver_work=sim.driver_work),
+                   frames=run["frames"], setup_time=t_setup,
+                   contact=cstats if model.contact is not None else None,
+                   wall_time=_time.perf_counter() - t_start,
                    outputs=dict(paraview=os.path.join("paraview", "blocks.pvd") if pv else None,
                                 contacts=os.path.join("paraview", "contacts.pvd") if pc else None,
-                                history="history.csv"))
+                                history="history.csv", checkpoint="checkpoint.npz"))
     if model.contact is not None and getattr(model.contact, "state", None) is not None:
         from .laws import S_DISS
         summary["dissipated_energy_J"] = float(model.contact.state[:, S_DISS].sum())
-    summary.update(_figures(case, sim, model, out_dir))
-    write_summary(os.path.join(out_dir, "summary.json"), summary)
     return summary
 
 

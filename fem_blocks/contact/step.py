@@ -17,6 +17,7 @@ from the current configuration every `redetect_every` steps, reactions carried o
 """
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -77,6 +78,7 @@ class ContactOptions:
     order: str = "given"
     seed: int = 0
     on_nonconvergence: str = "warn"
+    max_refinements: int = 4  # "refine": at most 2^max_refinements sub-steps per step
     criterion: str = "change"   # "change": ‖ΔP‖/‖P‖ between sweeps; "residual": natural-map residual ‖F‖/‖q‖
     check_every: int = 10
 
@@ -91,8 +93,10 @@ class ContactOptions:
         if self.criterion not in ("change", "residual"):
             raise InputError(f"contact.criterion = {self.criterion!r}: expected 'change' or 'residual'")
         check_range("contact.check_every", self.check_every, 1, expected="check_every >= 1")
-        if self.on_nonconvergence not in ("warn", "fail"):
-            raise InputError(f"contact.on_nonconvergence = {self.on_nonconvergence!r}: expected 'warn' or 'fail'")
+        if self.on_nonconvergence not in ("warn", "fail", "refine"):
+            raise InputError(f"contact.on_nonconvergence = {self.on_nonconvergence!r}: expected 'warn', 'fail' or "
+                             "'refine' (refine: handled by the runner, warn here)")
+        check_range("contact.max_refinements", self.max_refinements, 1, 12, expected="1 <= max_refinements <= 12")
 
 
 @njit(cache=True)
@@ -208,6 +212,53 @@ class ContactStep:
             raise InputError(f"bodies {names[self.cs.cand_body[a]]} and {names[self.cs.ant_body[a]]} overlap at the "
                              f"start by {-gt[a]:.3g} m (more than the alert distance {alerts[a]:.3g} m)")
 
+    def _setup(self, sim):
+        self.scene = ContactScene(sim, self.body_group)
+        self.table = self._table()
+        self.body_thickness = np.array([b.type.material.thickness if b.kind == 0 else b.thickness
+                                        for b in sim.bodies])
+
+    # ------------------------------------------------------------------ checkpoint
+    _CS = tuple(f.name for f in dataclasses.fields(det.ContactSet))
+    _OUT = ("gt_end", "v", "r", "status")
+
+    def export_state(self) -> dict:
+        """Arrays that determine the rest of the run: contact set, G blocks, reference gaps, impulses (warm
+        start), law states and counters (the shuffled order's seed is `seed + steps`)."""
+        d = {"contact.steps": np.int64(self.steps), "contact.n_unconverged": np.int64(self.n_unconverged)}
+        if self.cs is None:
+            return d
+        for k in self._CS:
+            d[f"contact.cs.{k}"] = getattr(self.cs, k)
+        for k in ("side_body", "side_dofs", "side_G"):
+            d[f"contact.G.{k}"] = getattr(self.G, k)
+        d["contact.P"], d["contact.state"], d["contact.law"] = self.P, self.state, self.law
+        if getattr(self, "gap_ref", None) is not None:
+            d["contact.gap_ref"] = self.gap_ref
+        for k in self._OUT:
+            if getattr(self, k, None) is not None:
+                d[f"contact.out.{k}"] = getattr(self, k)
+        return d
+
+    def restore_state(self, sim, d: dict) -> None:
+        """Inverse of `export_state`, for a Simulation built from the same case."""
+        self.steps = int(d["contact.steps"])
+        self.n_unconverged = int(d["contact.n_unconverged"])
+        if "contact.cs.gap" not in d:
+            return
+        self._setup(sim)
+        self.cs = det.ContactSet(**{k: np.array(d[f"contact.cs.{k}"]) for k in self._CS})
+        if len(self.cs.cand_body) and max(self.cs.cand_body.max(), self.cs.ant_body.max()) >= self.scene.nb:
+            raise InputError("checkpoint: contacts refer to bodies this model does not have")
+        self._assign_laws()
+        self.G = kin.GBlocks(*(np.array(d[f"contact.G.{k}"]) for k in ("side_body", "side_dofs", "side_G")))
+        self.P, self.state = np.array(d["contact.P"]), np.array(d["contact.state"])
+        self.gap_ref = np.array(d["contact.gap_ref"]) if "contact.gap_ref" in d else None
+        for k in self._OUT:
+            if f"contact.out.{k}" in d:
+                setattr(self, k, np.array(d[f"contact.out.{k}"]))
+        self.W_dirty = True
+
     # ------------------------------------------------------------------ the step
     def solve(self, sim, t0, t1):
         from time import perf_counter
@@ -216,10 +267,7 @@ class ContactStep:
         c0 = perf_counter()
         first = self.scene is None
         if first:
-            self.scene = ContactScene(sim, self.body_group)
-            self.table = self._table()
-            self.body_thickness = np.array([b.type.material.thickness if b.kind == 0 else b.thickness
-                                            for b in sim.bodies])
+            self._setup(sim)
         self._geometry(sim, first)
         c1 = perf_counter()
         tm["detection"] += c1 - c0  # includes the Delassus assembly when geometry or h changed

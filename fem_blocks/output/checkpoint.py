@@ -1,44 +1,90 @@
 """Checkpoints: the full state of a run in one .npz, written atomically (temporary file, fsync, rename).
 
-Contents: time, step, stage index, the displacements and velocities of every deformable block (type frame)
-and rigid body, driver reactions, and for the contact layer the contact keys, impulses (warm start) and
-every law's internal variables (β / damage, jumps u_N, u_T, dissipated energy). `read_checkpoint` returns
-the arrays; resuming a run from them belongs to the runner.
+`DIR/checkpoint.npz` is the newest checkpoint and `DIR/checkpoint.prev.npz` the one before: a new checkpoint
+first renames the newest to `.prev`, then writes itself atomically, so at any instant at least one complete
+checkpoint exists. Every checkpoint carries a SHA-256 digest of its arrays (`_digest`) and the case file's
+fingerprint (`case_hash`); `latest_checkpoint` returns the newest one that opens and whose digest matches
+(a file truncated or corrupted after the fact is reported and skipped).
+
+Contents (see `runner.run_case`): `run.*` counters of the runner (stage, step in stage, peak force, statistics),
+`sim.*` the Simulation state (time, step count, work, displacements and velocities of every body, driver
+reactions) and `contact.*` the contact layer (contact set, G blocks, reference gaps, impulses for the warm
+start, every law's internal variables: β / damage, jumps u_N, u_T, dissipated energy).
 """
 from __future__ import annotations
 
+import hashlib
 import io
 import os
+import sys
+import zipfile
 
 import numpy as np
 
-from .atomic import atomic_write_bytes
+from ..errors import InputError
+from .atomic import atomic_write_bytes, fsync_dir
+
+NAME = "checkpoint.npz"
+PREV = "checkpoint.prev.npz"
 
 
-def state_arrays(sim, stage: int = 0, case_hash: str = "") -> dict:
-    out = {"time": np.float64(sim.time), "step": np.int64(sim.step_count), "stage": np.int64(stage),
-           "case_hash": np.array(case_hash)}
-    for i, b in enumerate(sim.bodies):
-        out[f"body{i}_q"] = np.array(b.q)
-        out[f"body{i}_u"] = np.array(b.u)
-        if b.kind == 1:
-            out[f"body{i}_reaction"] = np.array(b.reaction)
-    c = sim.contact
-    if c is not None and getattr(c, "cs", None) is not None:
-        out["contact_key"] = c.cs.key
-        out["contact_ant_body"] = c.cs.ant_body
-        out["contact_P"] = c.P
-        out["contact_state"] = c.state
-        out["contact_law"] = c.law
-    return out
+def digest(arrays: dict) -> str:
+    """SHA-256 over the sorted keys, dtypes, shapes and bytes of the arrays (the `_digest` entry excluded)."""
+    h = hashlib.sha256()
+    for k in sorted(arrays):
+        if k == "_digest":
+            continue
+        a = np.ascontiguousarray(arrays[k])
+        h.update(k.encode())
+        h.update(str(a.dtype).encode())
+        h.update(str(a.shape).encode())
+        h.update(a.tobytes())
+    return h.hexdigest()
 
 
-def write_checkpoint(path: str, sim, stage: int = 0, case_hash: str = "") -> None:
+def write_checkpoint(directory: str, arrays: dict) -> str:
+    """Write `arrays` (name -> numpy array or scalar) as DIR/checkpoint.npz, keeping the previous one."""
+    arrays = {k: np.asarray(v) for k, v in arrays.items()}
+    arrays["_digest"] = np.array(digest(arrays))
     buf = io.BytesIO()
-    np.savez(buf, **state_arrays(sim, stage, case_hash))
+    np.savez(buf, **arrays)
+    path = os.path.join(directory, NAME)
+    if os.path.exists(path):
+        os.replace(path, os.path.join(directory, PREV))
+        fsync_dir(directory)
     atomic_write_bytes(path, buf.getvalue())
+    return path
 
 
 def read_checkpoint(path: str) -> dict:
-    with np.load(os.fspath(path), allow_pickle=False) as z:
-        return {k: z[k] for k in z.files}
+    """The arrays of one checkpoint file; InputError if it cannot be read or its digest does not match."""
+    path = os.fspath(path)
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            d = {k: z[k] for k in z.files}
+    except FileNotFoundError:
+        raise InputError(f"{path}: checkpoint not found") from None
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile, KeyError) as e:
+        raise InputError(f"{path}: unreadable checkpoint (truncated or corrupted: {e})") from None
+    if "_digest" not in d:
+        raise InputError(f"{path}: checkpoint has no digest (incomplete or not written by fem-blocks)")
+    if str(d["_digest"]) != digest(d):
+        raise InputError(f"{path}: checkpoint digest mismatch (corrupted)")
+    return d
+
+
+def latest_checkpoint(directory: str, warn=None) -> tuple[str, dict]:
+    """(path, arrays) of the newest valid checkpoint in `directory`; skipped files are reported via `warn`."""
+    warn = warn or (lambda msg: print(f"fem-blocks: warning: {msg}", file=sys.stderr))
+    errors = []
+    for name in (NAME, PREV):
+        p = os.path.join(directory, name)
+        if not os.path.exists(p):
+            continue
+        try:
+            return p, read_checkpoint(p)
+        except InputError as e:
+            errors.append(str(e))
+            warn(f"{e}; trying the previous checkpoint")
+    why = "; ".join(errors) if errors else "no checkpoint.npz (set [output] checkpoint_every = N to write them)"
+    raise InputError(f"{directory}: cannot resume: {why}")

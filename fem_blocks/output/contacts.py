@@ -16,11 +16,13 @@ from .vtu import write_vtu
 
 
 class ContactsWriter:
-    def __init__(self, contact, directory: str, append: bool = False, basename: str = "contacts"):
+    def __init__(self, contact, directory: str, append: bool = False, basename: str = "contacts",
+                 keep_until_time: float | None = None):
         self.contact, self.dir, self.base = contact, directory, basename
         os.makedirs(directory, exist_ok=True)
         pvd = os.path.join(directory, f"{basename}.pvd")
-        self.series = PvdSeries.open_existing(pvd) if append and os.path.exists(pvd) else PvdSeries(pvd)
+        self.series = PvdSeries.open_existing(pvd, keep_until_time) if append and os.path.exists(pvd) \
+            else PvdSeries(pvd)
         self.frame = len(self.series.entries)
 
     def arrays(self):

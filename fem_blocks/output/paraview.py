@@ -25,11 +25,12 @@ class BodiesWriter:
     """Writes `paraview/blocks.pvd` + one `.vtu` per frame for a `Simulation`."""
 
     def __init__(self, sim, directory: str, stress: bool = True, append: bool = False,
-                 basename: str = "blocks"):
+                 basename: str = "blocks", keep_until_time: float | None = None):
         self.sim, self.dir, self.stress, self.base = sim, directory, stress, basename
         os.makedirs(directory, exist_ok=True)
         pvd = os.path.join(directory, f"{basename}.pvd")
-        self.series = PvdSeries.open_existing(pvd) if append and os.path.exists(pvd) else PvdSeries(pvd)
+        self.series = PvdSeries.open_existing(pvd, keep_until_time) if append and os.path.exists(pvd) \
+            else PvdSeries(pvd)
         self.frame = len(self.series.entries) if hasattr(self.series, "entries") else 0
         self._build_static()
 
@@ -87,15 +88,17 @@ class BodiesWriter:
         vel = np.zeros((self.n_points, 2))
         stress = {k: [] for k in ("triangle", "quad")}
         for gr, offs, n in self.layout:
+            # from the bodies, not gr.Q: Simulation.set_step (a stage with another h) rebuilds its groups
             k = len(gr.members)
             R = np.stack([sim.bodies[b].R for b in gr.members])
-            Q = gr.Q.T.reshape(k, n, 2)
-            U = gr.U.T.reshape(k, n, 2)
+            Qc = np.column_stack([sim.bodies[b].q for b in gr.members])
+            Q = Qc.T.reshape(k, n, 2)
+            U = np.stack([sim.bodies[b].u for b in gr.members]).reshape(k, n, 2)
             idx = (offs[:, None] + np.arange(n)[None, :]).ravel()
             disp[idx] = _rotate_vectors(Q, R).reshape(-1, 2)
             vel[idx] = _rotate_vectors(U, R).reshape(-1, 2)
             if self.stress:
-                S = gr.type.stress_operator @ gr.Q  # (3 nc, k), type frame (sxx, syy, sxy)
+                S = gr.type.stress_operator @ Qc  # (3 nc, k), type frame (sxx, syy, sxy)
                 nc = S.shape[0] // 3
                 s = S.T.reshape(k, nc, 3)
                 T = np.empty((k, nc, 2, 2))
