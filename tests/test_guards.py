@@ -1,0 +1,106 @@
+"""Numerical safety: NaN/Inf, penetration and energy-creation guards stop the run with a message naming the step,
+the body or contact and the quantity, after writing the outputs and a checkpoint of the last good step; solver
+policies on_nonconvergence = "fail" | "refine"."""
+import json
+import os
+import sys
+
+import numpy as np
+import pytest
+
+from fem_blocks.case import load_case
+from fem_blocks.dynamics import Simulation
+from fem_blocks.output.checkpoint import read_checkpoint
+from fem_blocks.output.history import read_history
+from fem_blocks.runner import RunStopped, run_case
+
+pytestmark = pytest.mark.dolfinx
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from test_run_contact import CASE  # noqa: E402  (3-brick prism on a foundation, gravity to equilibrium)
+
+
+def _case(tmp_path, text):
+    p = tmp_path / "c.toml"
+    p.write_text(text)
+    return load_case(str(p))
+
+
+def _inject(monkeypatch, at_step, action):
+    orig = Simulation.step
+
+    def step(self):
+        info = orig(self)
+        if self.step_count == at_step:
+            action(self)
+            info = self.info(info.contact)
+        return info
+    monkeypatch.setattr(Simulation, "step", step)
+
+
+def _check_stopped_outputs(out, failed_step):
+    h = read_history(out / "history.csv")
+    assert int(h["step"][-1]) == failed_step  # the failing step's row is kept (to see what went wrong)
+    ck = read_checkpoint(out / "checkpoint.npz")
+    assert int(ck["sim.step"]) == failed_step - 1  # the checkpoint is the last good state
+    s = json.loads((out / "summary.json").read_text())
+    assert s["status"].startswith("stopped:")
+
+
+def test_nan_in_a_velocity_stops_with_body_and_step(tmp_path, monkeypatch):
+    case = _case(tmp_path, CASE)
+    _inject(monkeypatch, 5, lambda sim: sim.bodies[1].u.__setitem__(0, np.nan))
+    with pytest.raises(RunStopped) as e:
+        run_case(case, str(tmp_path / "out"), progress=False)
+    msg = str(e.value)
+    assert "step 5" in msg and "velocity of body 'brick1'" in msg and "NaN/Inf" in msg and "--resume" in msg
+    _check_stopped_outputs(tmp_path / "out", 5)
+
+
+def test_energy_created_from_nothing_stops_the_run(tmp_path, monkeypatch):
+    case = _case(tmp_path, CASE)
+
+    def kick(sim):  # 1 m/s on every node of one brick: kinetic energy far above the gravity work put in
+        sim.bodies[0].u[:] = 1.0
+    _inject(monkeypatch, 3, kick)
+    with pytest.raises(RunStopped) as e:
+        run_case(case, str(tmp_path / "out"), progress=False)
+    assert "step 3" in str(e.value) and "energy grew" in str(e.value)
+    _check_stopped_outputs(tmp_path / "out", 3)
+
+
+def test_energy_balance_holds_on_a_converged_run(tmp_path):
+    """The same case without injection: E - E_0 - W <= 0 (no energy created), so the guard stays silent."""
+    s = run_case(_case(tmp_path, CASE), str(tmp_path / "out"), progress=False)
+    assert s["status"] == "completed" and s["energy_created_ratio_max"] <= 1e-6
+
+
+def test_penetration_beyond_the_limit_names_the_contact(tmp_path):
+    text = CASE.replace("tol = 1e-10\nmax_sweeps = 100000", "tol = 1e-12\nmax_sweeps = 1") \
+        .replace("[[stages]]", "[checks]\nmax_penetration = 1e-9\n\n[[stages]]")
+    with pytest.raises(RunStopped) as e:
+        run_case(_case(tmp_path, text), str(tmp_path / "out"), progress=False)
+    msg = str(e.value)
+    assert "penetration" in msg and "exceeds 1e-09 m" in msg and "bodies" in msg
+
+
+def test_nonconvergence_policy_fail(tmp_path):
+    text = CASE.replace("tol = 1e-10\nmax_sweeps = 100000", 'tol = 1e-12\nmax_sweeps = 2\non_nonconvergence = "fail"')
+    with pytest.raises(RunStopped) as e:
+        run_case(_case(tmp_path, text), str(tmp_path / "out"), progress=False)
+    assert "step 1 " in str(e.value) and "did not converge in 2 sweeps" in str(e.value)
+    _check_stopped_outputs(tmp_path / "out", 1)
+
+
+def test_nonconvergence_policy_refine_halves_the_step(tmp_path):
+    """A step that does not converge is redone with 2, then 4 sub-steps; rows carry their h; the nominal time grid
+    is kept; the stage's steps stay the nominal ones."""
+    text = CASE.replace("tol = 1e-10\nmax_sweeps = 100000",
+                        'tol = 1e-12\nmax_sweeps = 3\non_nonconvergence = "refine"\nmax_refinements = 2') \
+        .replace("duration = 1.0", "duration = 0.004")
+    s = run_case(_case(tmp_path, text), str(tmp_path / "out"), progress=False)
+    h = read_history(tmp_path / "out" / "history.csv")
+    hs = h["h"][1:]
+    assert np.all(hs == 2.5e-4)  # never converges in 3 sweeps: every step refined to the limit, 4 sub-steps
+    assert len(hs) == 16 and s["contact"]["refined_steps"] == 4
+    assert h["time"][-1] == pytest.approx(0.004, abs=1e-15)
+    assert np.allclose(h["time"][4::4], [0.001, 0.002, 0.003, 0.004], rtol=0, atol=1e-15)
