@@ -342,6 +342,35 @@ class Case:
     variant: str = ""  # "" or "quick x2" (reduced-resolution variant, part of the fingerprint)
 
 
+def _check_simple_polygon(t, key, verts):
+    """Edges of a polygon must not cross each other (a bow-tie has no inside)."""
+    if verts is None:
+        return
+    P = np.asarray(verts, dtype=float)
+    n = len(P)
+
+    def cross(o, a, b):
+        return (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
+    for i in range(n):
+        a, b = P[i], P[(i + 1) % n]
+        for j in range(i + 1, n):
+            if j == i or (j + 1) % n == i or j == (i + 1) % n:
+                continue  # adjacent edges share a vertex
+            c, d = P[j], P[(j + 1) % n]
+            d1, d2, d3, d4 = cross(c, d, a), cross(c, d, b), cross(a, b, c), cross(a, b, d)
+            if d1 * d2 < 0 and d3 * d4 < 0:
+                raise t.error(key, f"edges {i} and {j} of the polygon cross each other: expected a simple polygon "
+                                   "(vertices in order around the boundary)")
+
+
+def _plausible(t, key, v_si, lo, hi, unit, units):
+    """A value far outside what any building material has is a unit-system mix-up, not a material."""
+    if not (lo <= v_si <= hi):
+        raise t.error(key, f"= {t.data[key]!r} ({v_si:.3g} {unit} in SI): expected {lo:g} to {hi:g} {unit} for a "
+                           f"building material; check `units` (this file: {units!r}; mm-N-MPa takes E in MPa and "
+                           "rho in t/mm^3, e.g. 2.5e-9 for 2500 kg/m^3)")
+
+
 def fingerprint(case: Case) -> str:
     """SHA-256 of what determines a run: the case file's bytes, the mesh files it names and the variant
     (--quick). A resumed run compares it with the checkpoint's."""
@@ -397,6 +426,8 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
             thickness=t.number("thickness", 1.0, lo=0, lo_open=True, dim="length"),
             plane=t.string("plane", "stress", choices=("stress", "strain")),
             alpha=ray[0], beta=ray[1])
+        _plausible(t, "rho", materials[mname].rho, 1.0, 1e5, "kg/m^3", units)
+        _plausible(t, "E", materials[mname].E, 1e3, 1e13, "Pa", units)
         t.done()
 
     block_types = {}
@@ -464,7 +495,9 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
         if rname in names:
             raise t.error("name", f"= {rname!r}: duplicate body name")
         names.add(rname)
-        r = _parse_rigid(t, U, rname, t.points("vertices"))
+        verts = t.points("vertices")
+        _check_simple_polygon(t, "vertices", verts)
+        r = _parse_rigid(t, U, rname, verts)
         r.group = t.string("group", "rigid")
         rigid.append(r)
         t.done()
@@ -648,6 +681,7 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
         out.done()
     root.done()
     rigid_names = {r.name: r for r in rigid}
+    driven_now: dict = {}  # body -> driven dofs after the stages so far (stages accumulate)
     for i, st in enumerate(stages):
         for key in ("drivers", "forces"):
             for body, dofs in getattr(st, key).items():
@@ -664,7 +698,15 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
             if ref is not None and ref[0] not in rigid_names:
                 raise InputError(f"{source}: stages[{i}].{key}.body = {ref[0]!r}: expected a rigid body among "
                                  f"{sorted(rigid_names)}")
-        if st.stop_after_peak is not None and st.stop_after_peak[1] not in rigid_names[st.stop_after_peak[0]].drivers:
+        for body, dofs in st.drivers.items():
+            for dof, spec in dofs.items():
+                driven_now.setdefault(body, set(rigid_names[body].drivers))
+                (driven_now[body].add if spec is not None else driven_now[body].discard)(dof)
+        for body, dofs in st.forces.items():
+            for dof in dofs:
+                driven_now.setdefault(body, set(rigid_names[body].drivers)).discard(dof)
+        if st.stop_after_peak is not None and st.stop_after_peak[1] not in driven_now.get(
+                st.stop_after_peak[0], set(rigid_names[st.stop_after_peak[0]].drivers)):
             raise InputError(f"{source}: stages[{i}].stop_after_peak.dof = {st.stop_after_peak[1]!r}: expected a "
                              f"driven dof of {st.stop_after_peak[0]!r} (its reaction is the force)")
     if "curve" in output:
@@ -704,6 +746,12 @@ def _parse_rigid(t: Table, U: dict, rname: str, vertices) -> RigidSpec:
                 raise ft.error(dof, "this dof is driven; a driven dof cannot also carry a force")
             forces[dof] = ft.history(dof, "force" if dof != "rz" else None)
         ft.done()
+    if rho is not None and mass is not None:
+        raise t.error("mass", "given together with rho: give rho [kg/m^3] (mass and inertia from the polygon) or "
+                              "mass [kg] (and inertia), not both")
+    if rho is not None and inertia is not None:
+        raise t.error("inertia", "given together with rho (the inertia then comes from the polygon): give it with "
+                                 "mass instead")
     if rho is None and mass is None and not (len(drivers) == 3):
         raise t.error("rho", "missing; give rho [kg/m^3] or mass [kg] (only a body with all three dofs "
                              "driven may omit both)")
@@ -735,11 +783,12 @@ def _parse_wall(w: Table, U: dict, materials, block_types, blocks, rigid, names)
     try:
         if kind == "running_bond":
             ops = w.raw("openings", [])
-            if not isinstance(ops, list) or not all(isinstance(o, list) and len(o) == 4 for o in ops):
+            if not isinstance(ops, list) or not all(isinstance(o, list) and len(o) == 4 and all(
+                    isinstance(v, NUMBER) and not isinstance(v, bool) and math.isfinite(v) for v in o) for o in ops):
                 raise w.error("openings", "expected a list of [x0, y0, x1, y1] rectangles [m]")
             ops = [[float(v) * U["length"] for v in o] for o in ops]
-            lay = builders.running_bond(w.integer("courses", required=True, lo=1),
-                                        w.integer("bricks_per_course", required=True, lo=1), L, H, joint, expanded,
+            lay = builders.running_bond(w.integer("courses", required=True, lo=1, hi=2000),
+                                        w.integer("bricks_per_course", required=True, lo=1, hi=2000), L, H, joint, expanded,
                                         w.boolean("half_bricks", True), openings=ops, name=name)
         elif kind == "courses":
             rows = w.raw("rows")
@@ -749,7 +798,7 @@ def _parse_wall(w: Table, U: dict, materials, block_types, blocks, rigid, names)
                      for it in row] if isinstance(row, list) else row for row in rows]
             lay = builders.courses(rows, L, H, joint, expanded, name=f"{w.source}: wall.rows")
         else:
-            lay = builders.stack_prism(w.integer("bricks", required=True, lo=1), L, H, joint, expanded, name=name)
+            lay = builders.stack_prism(w.integer("bricks", required=True, lo=1, hi=10000), L, H, joint, expanded, name=name)
     except InputError:
         raise
     builders.Layout(lay).check_no_overlap(name)
@@ -841,7 +890,7 @@ def _parse_arch(a: Table, U: dict, materials, block_types, blocks, rigid, names)
         raise a.error("material", f"= {mat!r}: expected one of the [materials] {sorted(materials)}")
     span = a.number("span", required=True, lo=0, lo_open=True, dim="length")
     depth = a.number("ring_depth", required=True, lo=0, lo_open=True, dim="length")
-    n = a.integer("voussoirs", required=True, lo=3)
+    n = a.integer("voussoirs", required=True, lo=3, hi=10000)
     ph = a.number("pier_height", required=True, lo=0, lo_open=True, dim="length")
     pw = a.number("pier_width", required=True, lo=0, lo_open=True, dim="length")
     joint = a.number("joint", 0.0, lo=0, dim="length")

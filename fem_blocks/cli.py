@@ -56,6 +56,9 @@ def _run(case_path: str, out: str, quiet: bool, quick: bool = False, resume: boo
     from .runner import RunStopped, run_case
     try:
         summary = run_case(case, out, progress=not quiet, resume=resume, force=force)
+    except InputError as e:  # found while building or starting the model (overlaps, meshes): name the case file
+        msg = str(e)
+        raise InputError(msg if msg.startswith(case.source) else f"{case.source}: {msg}") from None
     except RunStopped as e:
         print(f"fem-blocks: run stopped: {e}", file=sys.stderr)
         return e.code

@@ -23,22 +23,7 @@ BAD_DIR = os.path.join(HERE, "bad_cases")
 FILES = sorted(glob.glob(os.path.join(BAD_DIR, "*.toml")))
 
 # file name -> what happens today (the validator accepts the case, or the message misses the file/key)
-XFAIL = {
-    "22_units_inconsistent_rho.toml":
-        "accepted: no plausibility check, a mm-N-MPa file with SI E/rho (rho = 1.8e15 kg/m^3) runs (exit 0)",
-    "38_overlapping_blocks.toml":
-        "rejected at model build, but the message names neither the file nor a key ('bodies a and b overlap ...')",
-    "39_overlapping_block_rigid.toml":
-        "rejected at model build, but the message names neither the file nor a key ('bodies block0 and base ...')",
-    "40_rigid_rho_and_mass.toml":
-        "accepted: rigid body with both rho and mass (mass silently wins), runs (exit 0)",
-    "41_rigid_self_crossing.toml":
-        "accepted: self-crossing rigid polygon (checked for [block_types] polygons, not for rigid bodies), exit 0",
-    "64_stop_peak_freed_dof.toml":
-        "accepted: stop_after_peak on a dof the same stage frees (the check looks at the initial drivers only)",
-    "96_opening_not_number.toml":
-        "crash: ValueError from float() on a non-number wall.openings item escapes the CLI (traceback, no exit 2)",
-}
+XFAIL: dict = {}  # file name -> reason, for a known validator gap (none open)
 
 
 def expected_text(path: str) -> str:
