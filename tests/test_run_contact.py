@@ -121,6 +121,11 @@ def test_interface_law_keys_validated_with_units(tmp_path):
     mm = base.replace('name = "prism"', 'name = "prism"\nunits = "mm-N-MPa"').replace("c_N = 1e10", "c_N = 10.0")
     mm = mm.replace("c_T = 5e9", "c_T = 5.0").replace("w = 20.0", "w = 0.02")
     case.write_text(mm)
+    with pytest.raises(InputError, match=r"materials\.brick\.rho: = 2000\.0 .*check `units`"):
+        load_case(str(case))  # SI density in a mm-N-MPa file: 2e15 kg/m^3, a unit mix-up
+    mm = mm.replace("E = 5e9", "E = 5000.0").replace("rho = 2000.0", "rho = 2e-9").replace("thickness = 0.1",
+                                                                                          "thickness = 100.0")
+    case.write_text(mm)
     c = load_case(str(case))
     assert c.interfaces[0].params["c_N"] == pytest.approx(1e10)  # 10 MPa/mm = 1e10 N/m^3
     assert c.interfaces[0].params["w"] == pytest.approx(20.0)    # 0.02 N/mm = 20 J/m^2
