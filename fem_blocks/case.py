@@ -598,6 +598,7 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
                        seed=ct.integer("seed", 0, lo=0),
                        on_nonconvergence=ct.string("on_nonconvergence", "warn", choices=NONCONV),
                        max_refinements=ct.integer("max_refinements", 4, lo=1, hi=12),
+                       solver=ct.string("solver", "nlgs", choices=("nlgs", "newton")),
                        criterion=ct.string("criterion", "change", choices=("change", "residual")),
                        check_every=ct.integer("check_every", 10, lo=1))
         ct.done()
@@ -656,7 +657,8 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
                              f"interface (orientation 'any') or two ('bed' and 'head'), got {orients}")
     if interfaces and not contact:
         contact = dict(geometry="frozen", redetect_every=1, tol=1e-6, max_sweeps=2000, omega=1.0, order="given",
-                       seed=0, on_nonconvergence="warn", max_refinements=4, criterion="change", check_every=10)
+                       seed=0, on_nonconvergence="warn", max_refinements=4, criterion="change", check_every=10,
+                       solver="nlgs")
 
     checks = dict(max_penetration=None, max_energy_growth=10.0)
     ck = root.table("checks")

@@ -80,6 +80,7 @@ class ContactOptions:
     on_nonconvergence: str = "warn"
     max_refinements: int = 4  # "refine": at most 2^max_refinements sub-steps per step
     criterion: str = "change"   # "change": ‖ΔP‖/‖P‖ between sweeps; "residual": natural-map residual ‖F‖/‖q‖
+    solver: str = "nlgs"        # "nlgs" | "newton" (global semismooth Newton, NLGS start and fallback; 2D Coulomb)
     check_every: int = 10
 
     def __post_init__(self):
@@ -90,6 +91,8 @@ class ContactOptions:
         check_range("contact.omega", self.omega, 0.0, 2.0, lo_open=True, hi_open=True, expected="0 < omega < 2")
         if self.order not in ("given", "reversed", "shuffled"):
             raise InputError(f"contact.order = {self.order!r}: expected 'given', 'reversed' or 'shuffled'")
+        if self.solver not in ("nlgs", "newton"):
+            raise InputError(f"contact.solver = {self.solver!r}: expected 'nlgs' or 'newton'")
         if self.criterion not in ("change", "residual"):
             raise InputError(f"contact.criterion = {self.criterion!r}: expected 'change' or 'residual'")
         check_range("contact.check_every", self.check_every, 1, expected="check_every >= 1")
@@ -295,19 +298,30 @@ class ContactStep:
             from ..laws import S_UN, S_UT
             ueff = self.state[:, [S_UN, S_UT]] + h * (1 - th) * vi
             ueff[:, 0] -= gbar  # u = u_eff + h theta v_shifted (v_shifted = v_N + gbar/(h theta))
-            res, trial = nlgs.solve_cohesive(self.Wdel, q.ravel(), self.mu, self.law, self.par, self.state, ueff,
-                                             cs.area, h, th, r0=self.P.ravel(), tol=self.opts.tol,
-                                             max_sweeps=self.opts.max_sweeps, omega=self.opts.omega,
-                                             order=self.opts.order, seed=self.opts.seed + self.steps,
-                                             criterion=self.opts.criterion, check_every=self.opts.check_every)
+            if self.opts.solver == "newton":
+                from ..solver.newton import solve_cohesive_newton
+                res, trial = solve_cohesive_newton(self.Wdel, q.ravel(), self.mu, self.law, self.par, self.state,
+                                                   ueff, cs.area, h, th, r0=self.P.ravel(), tol=self.opts.tol,
+                                                   max_sweeps_total=self.opts.max_sweeps)
+            else:
+                res, trial = nlgs.solve_cohesive(self.Wdel, q.ravel(), self.mu, self.law, self.par, self.state,
+                                                 ueff, cs.area, h, th, r0=self.P.ravel(), tol=self.opts.tol,
+                                                 max_sweeps=self.opts.max_sweeps, omega=self.opts.omega,
+                                                 order=self.opts.order, seed=self.opts.seed + self.steps,
+                                                 criterion=self.opts.criterion, check_every=self.opts.check_every)
             vs = res.u.reshape(-1, 2)
             u_new = ueff + h * th * vs
             _commit_all(self.law, self.par, self.state, trial, u_new, cs.area)
         else:
-            res = nlgs.solve_block_csr(self.Wdel, q.ravel(), self.mu, r0=self.P.ravel(), tol=self.opts.tol,
-                                       max_sweeps=self.opts.max_sweeps, omega=self.opts.omega,
-                                       order=self.opts.order, seed=self.opts.seed + self.steps,
-                                       criterion=self.opts.criterion, check_every=self.opts.check_every)
+            if self.opts.solver == "newton":
+                from ..solver.newton import solve_newton
+                res = solve_newton(self.Wdel, q.ravel(), self.mu, r0=self.P.ravel(), tol=self.opts.tol,
+                                   max_sweeps_total=self.opts.max_sweeps)
+            else:
+                res = nlgs.solve_block_csr(self.Wdel, q.ravel(), self.mu, r0=self.P.ravel(), tol=self.opts.tol,
+                                           max_sweeps=self.opts.max_sweeps, omega=self.opts.omega,
+                                           order=self.opts.order, seed=self.opts.seed + self.steps,
+                                           criterion=self.opts.criterion, check_every=self.opts.check_every)
             from ..laws import S_UN, S_UT
             vs = res.u.reshape(-1, 2)
             self.state[:, S_UN] += h * ((1 - th) * vi[:, 0] + th * (vs[:, 0] - gbar / (h * th)))

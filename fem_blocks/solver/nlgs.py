@@ -649,7 +649,8 @@ def _run_cohesive(indptr, indices, blocks, diag_pos, q, mu, r, order_kind, omega
 
 def solve_cohesive(W: BlockCSR, q, mu, law, par, st, ueff, area, h: float, theta: float, r0=None,
                    tol: float = 1e-8, max_sweeps: int = 10000, omega: float = 1.0, order: str = "given",
-                   seed: int = 0, max_outer: int = 100, criterion: str = "change", check_every: int = 10):
+                   seed: int = 0, max_outer: int = 100, criterion: str = "change", check_every: int = 10,
+                   x0=None):
     """NLGS with interface laws (laws.py) per contact. Returns (NLGSResult, trial internal variables).
     `q` includes the Signorini shift; `ueff` = u_i + h(1-θ)v_i - hθ shift e_N per contact (nc, 2)."""
     if criterion not in ("change", "residual"):
@@ -661,7 +662,7 @@ def solve_cohesive(W: BlockCSR, q, mu, law, par, st, ueff, area, h: float, theta
     par = np.ascontiguousarray(par, dtype=np.float64)
     st = np.ascontiguousarray(st, dtype=np.float64)
     from ..laws import S_BETA
-    trial = np.ascontiguousarray(st[:, S_BETA].copy())
+    trial = np.ascontiguousarray(st[:, S_BETA].copy() if x0 is None else np.array(x0, dtype=np.float64))
     ueff = np.ascontiguousarray(ueff, dtype=np.float64)
     area = np.ascontiguousarray(area, dtype=np.float64)
     if n == 0:

@@ -1,0 +1,261 @@
+"""Global semismooth Newton (Alart–Curnier) for 2D frictional contact, with NLGS as start and fallback.
+
+Same problem as solver/nlgs.py: u = W r + q, Signorini–Coulomb per contact (normal first). Gauss–Seidel
+converges slowly when W couples many contacts strongly (stiff quasi-static steps: W ≈ K⁻¹/h² over a wall of
+elastic bricks): its sweeps count grows with the size of the wall. Newton on the Alart–Curnier function
+(Alart & Curnier 1991; thesis §6.3) treats all contacts at once:
+
+    F_N = r_N - P_{R+}(r_N - ρ_N u_N),
+    F_T = r_T - P_{[-μ x⁺, μ x⁺]}(r_T - ρ_T u_T),   x = r_N - ρ_N u_N,
+
+with ρ_N = 1/W_αα,NN and ρ_T = 1/W_αα,TT. F is piecewise linear in r; a generalized Jacobian is
+J = D + E W with 2×2 block-diagonal D, E chosen per contact by its case (open, stick, slip), so J has the
+block pattern of W. Each iteration solves J Δr = -F with a sparse LU (scipy SuperLU), then a backtracking
+line search on ½‖F‖² (Armijo). When the line search fails (Newton's direction is not a descent direction
+where the cases change), a few NLGS sweeps are taken from the current iterate and Newton resumes.
+
+Stop: the FCLIB natural-map residual ‖F_nat‖/‖q‖ <= tol (the same measure as NLGS's "residual" criterion).
+"""
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from numba import njit
+
+from ..errors import InputError
+from ..laws import compression_stiffness, linear_part
+from . import nlgs
+from .nlgs import BlockCSR, NLGSResult
+
+
+def _rho(W: BlockCSR):
+    d = W.blocks[W.diag_pos]
+    wn, wt = d[:, 0, 0], d[:, 1, 1]
+    scale = np.max(np.abs(W.blocks)) if W.blocks.size else 1.0
+    rn = np.where(wn > 1e-14 * scale, 1.0 / np.where(wn > 0, wn, 1.0), 1.0 / max(scale, 1e-300))
+    rt = np.where(wt > 1e-14 * scale, 1.0 / np.where(wt > 0, wt, 1.0), 1.0 / max(scale, 1e-300))
+    return rn, rt
+
+
+def alart_curnier(r, u, mu, rn, rt, jacobian=False):
+    """F (2n,) and, if asked, the 2×2 blocks D, E (n, 2, 2) of J = D + E W (vectorised over contacts)."""
+    R = r.reshape(-1, 2)
+    U = u.reshape(-1, 2)
+    xN = R[:, 0] - rn * U[:, 0]
+    closed = xN > 0
+    FN = np.where(closed, rn * U[:, 0], R[:, 0])
+    xT = R[:, 1] - rt * U[:, 1]
+    lim = mu * np.maximum(xN, 0.0)
+    stick = closed & (np.abs(xT) <= lim)
+    slip = closed & ~stick
+    s = np.sign(xT)
+    FT = np.where(stick, rt * U[:, 1], np.where(slip, R[:, 1] - lim * s, R[:, 1]))
+    F = np.column_stack([FN, FT]).ravel()
+    if not jacobian:
+        return F
+    n = len(mu)
+    D = np.zeros((n, 2, 2))
+    E = np.zeros((n, 2, 2))
+    D[~closed, 0, 0] = 1.0
+    E[closed, 0, 0] = rn[closed]
+    D[~closed, 1, 1] = 1.0  # open: F_T = r_T
+    E[stick, 1, 1] = rt[stick]
+    D[slip, 1, 1] = 1.0
+    D[slip, 1, 0] = -(mu * s)[slip]
+    E[slip, 1, 0] = (mu * s * rn)[slip]
+    return F, D, E
+
+
+@njit(cache=True)
+def _cohesive_terms(law, par, st, x, ueff, v, area, h, theta, S, c, mue, cmp):
+    """Per contact at fixed internal variables x: P̃ = P + S v + c (adhesive impulse h A r_adh(u), u = u_eff + hθ v),
+    friction coefficient, and compliance cmp of the compliant laws in compression (v'_N = v_N + cmp P̃_N)."""
+    n = law.shape[0]
+    for a in range(n):
+        uN = ueff[a, 0] + h * theta * v[2 * a]
+        tension = uN > 1e-15
+        kN, kT, fN, fT, m = linear_part(law[a], par[a], st[a], x[a], tension)
+        S[a, 0] = h * area[a] * kN * h * theta
+        S[a, 1] = h * area[a] * kT * h * theta
+        c[a, 0] = h * area[a] * (kN * ueff[a, 0] + fN)
+        c[a, 1] = h * area[a] * (kT * ueff[a, 1] + fT)
+        mue[a] = m
+        cmp[a] = 0.0
+        if law[a] != 0 and not tension:
+            kc = compression_stiffness(law[a], par[a]) * area[a]
+            if kc > 0.0:
+                cmp[a] = 1.0 / (h * h * theta * kc)
+
+
+def _newton(W: BlockCSR, q, mu, r, tol, max_iter, gs, max_sweeps_total, coh=None):
+    """Core iteration. coh = (law, par, st, x, ueff, area, h, theta) for interface laws at fixed x, else None.
+    `gs(r, k)` runs k Gauss–Seidel sweeps from r -> (r, sweeps). Returns (r, u, iterations, sweeps, fallbacks,
+    change, residual)."""
+    n = W.n
+    Wsp = sp.bsr_matrix((W.blocks, W.indices, W.indptr), shape=(2 * n, 2 * n))
+    rows = np.repeat(np.arange(n), np.diff(W.indptr))
+    rn, rt = _rho(W)
+    qnorm = float(np.linalg.norm(q)) or 1.0
+    S = np.zeros((n, 2))
+    c = np.zeros((n, 2))
+    mue = mu.copy()
+    cmp = np.zeros(n)
+
+    def transformed(r_, u_):
+        """(P̃, v') and the terms used: the plain problem when coh is None."""
+        if coh is None:
+            return r_, u_
+        law, par, st, x, ueff, area, h, th = coh
+        _cohesive_terms(law, par, st, x, ueff, u_, area, h, th, S, c, mue, cmp)
+        Pt = r_.reshape(-1, 2) + S * u_.reshape(-1, 2) + c
+        vp = u_.reshape(-1, 2).copy()
+        vp[:, 0] += cmp * Pt[:, 0]
+        return Pt.ravel(), vp.ravel()
+
+    def residual(r_, u_):
+        if coh is None:
+            return float(nlgs.natural_map(r_, u_, mu, 2)) / qnorm
+        law, par, st, x, ueff, area, h, th = coh
+        return float(nlgs.natural_map_cohesive(W.indptr, W.indices, W.blocks, q, mu, r_, law, par, st, x, ueff,
+                                               area, h, th)) / qnorm
+
+    def merit(r_, u_):
+        Pt, vp = transformed(r_, u_)
+        F = alart_curnier(Pt, vp, mue, rn, rt)
+        return 0.5 * float(F @ F)
+
+    u = Wsp @ r + q
+    res = residual(r, u)
+    change = 0.0
+    n_it = n_gs = n_fb = 0
+    # proximal regularisation of the Jacobian, J = D + E (W + eps I): W is singular for hyperstatic contact
+    # sets (more contact points than the boundary dofs they constrain), where the plain Newton direction is
+    # meaningless. eps adapts like a Levenberg–Marquardt parameter.
+    wdiag = float(np.mean(np.abs(W.blocks[W.diag_pos][:, [0, 1], [0, 1]])))
+    eps_min, eps_max = 1e-12 * wdiag, 1e-1 * wdiag
+    eps = 1e-6 * wdiag
+    while res > tol and n_it < max_iter and n_gs < max_sweeps_total:
+        Pt, vp = transformed(r, u)
+        F, D, E = alart_curnier(Pt, vp, mue, rn, rt, jacobian=True)
+        if coh is not None:  # chain rule through P̃ = P + S v + c, v' = v + C P̃: J = D' + E' W
+            D = D.copy()
+            D[:, :, 0] += E[:, :, 0] * cmp[:, None]
+            E = D * S[:, None, :] + E
+        f0 = 0.5 * float(F @ F)
+        Jb = np.einsum("kij,kjl->kil", E[rows], W.blocks)
+        Jb[W.diag_pos] += D + eps * E
+        J = sp.bsr_matrix((Jb, W.indices, W.indptr), shape=(2 * n, 2 * n)).tocsc()
+        n_it += 1
+        try:
+            dr = spla.splu(J).solve(-F)
+            ok = bool(np.all(np.isfinite(dr)))
+        except RuntimeError:  # exactly singular Jacobian
+            ok = False
+        accepted = False
+        t = 1.0
+        if ok:
+            du = Wsp @ dr
+            for _ in range(30):
+                r_t, u_t = r + t * dr, u + t * du
+                if merit(r_t, u_t) <= (1.0 - 2e-4 * t) * f0:
+                    accepted = True
+                    break
+                t *= 0.5
+        if accepted:
+            change = float(np.linalg.norm(r_t - r) / (np.linalg.norm(r_t) or 1.0))
+            r, u = r_t, u_t
+            eps = max(eps_min, eps * 0.1) if t == 1.0 else min(eps_max, eps * (10.0 if t < 0.1 else 1.0))
+        else:  # not a descent direction here: Gauss–Seidel moves the cases, then Newton again
+            eps = min(eps_max, eps * 100.0)
+            r, k = gs(r, 10)
+            n_gs += k
+            n_fb += 1
+            u = Wsp @ r + q
+        res = residual(r, u)
+    return r, u, n_it, n_gs, n_fb, change, res
+
+
+def solve_newton(W: BlockCSR, q, mu, r0=None, tol: float = 1e-8, max_iter: int = 200,
+                 gs_sweeps: int = 20, max_sweeps_total: int = 100000) -> NLGSResult:
+    """Semismooth Newton on the Alart–Curnier function, NLGS-started (`gs_sweeps` sweeps) and NLGS fallback.
+
+    Returns an NLGSResult; `sweeps` counts Newton iterations + Gauss–Seidel sweeps (message says which)."""
+    q, mu, r = _prepare(W, q, mu, r0, tol)
+    if W.n == 0:
+        return NLGSResult(r, q.copy(), 0, True, 0.0, 0.0, 0.0, "no contact")
+
+    def gs(r_, k):
+        res = nlgs.solve_block_csr(W, q, mu, r0=r_, tol=tol, max_sweeps=k, criterion="residual", check_every=k)
+        return res.r.copy(), res.sweeps
+
+    n_gs0 = 0
+    if gs_sweeps:
+        r, n_gs0 = gs(r, gs_sweeps)
+    r, u, n_it, n_gs, n_fb, change, res = _newton(W, q, mu, r, tol, max_iter, gs, max_sweeps_total)
+    return _result(r, u, n_it, n_gs0 + n_gs, n_fb, change, res, tol, q)
+
+
+def solve_cohesive_newton(W: BlockCSR, q, mu, law, par, st, ueff, area, h: float, theta: float, r0=None,
+                          tol: float = 1e-8, max_iter: int = 200, gs_sweeps: int = 20,
+                          max_sweeps_total: int = 100000, max_outer: int = 100):
+    """Newton for the contact problem with interface laws (laws.py), same contract as nlgs.solve_cohesive:
+    staggered — Newton at fixed internal variables x (β, damage), then x updated from the converged jumps,
+    until x stops changing. At fixed x each law is piecewise linear in the jump u = u_eff + hθ v (tension /
+    compression branches), so the transformed problem P̃ = P + S v + c, v' = v + cmp P̃_N e_N keeps the
+    Alart–Curnier form and J = D' + E' W. Returns (NLGSResult, trial internal variables)."""
+    q, mu, r = _prepare(W, q, mu, r0, tol)
+    law = np.ascontiguousarray(law, dtype=np.int64)
+    par = np.ascontiguousarray(par, dtype=np.float64)
+    st = np.ascontiguousarray(st, dtype=np.float64)
+    from ..laws import S_BETA
+    x = np.ascontiguousarray(st[:, S_BETA].copy())
+    ueff = np.ascontiguousarray(ueff, dtype=np.float64)
+    area = np.ascontiguousarray(area, dtype=np.float64)
+    if W.n == 0:
+        return NLGSResult(r, q.copy(), 0, True, 0.0, 0.0, 0.0, "no contact"), x
+    coh = (law, par, st, x, ueff, area, float(h), float(theta))
+
+    def gs(r_, k):
+        res, _ = nlgs.solve_cohesive(W, q, mu, law, par, st, ueff, area, h, theta, r0=r_, tol=tol, max_sweeps=k,
+                                     max_outer=1, criterion="residual", check_every=k, x0=x)
+        return res.r.copy(), res.sweeps
+
+    n_it = n_gs = n_fb = 0
+    if gs_sweeps:
+        r, n_gs = gs(r, gs_sweeps)
+    converged_x = False
+    for _ in range(max_outer):
+        r, u, i1, g1, f1, change, res = _newton(W, q, mu, r, tol, max_iter, gs, max_sweeps_total, coh)
+        n_it, n_gs, n_fb = n_it + i1, n_gs + g1, n_fb + f1
+        dx = nlgs._update_internal(law, par, st, ueff, u, float(h), float(theta), x)
+        if dx <= 1e-12:
+            converged_x = True
+            break
+    res = float(nlgs.natural_map_cohesive(W.indptr, W.indices, W.blocks, q, mu, r, law, par, st, x, ueff, area,
+                                          float(h), float(theta))) / (float(np.linalg.norm(q)) or 1.0)
+    out = _result(r, u, n_it, n_gs, n_fb, change, res, tol, q)
+    if not converged_x:
+        out.converged = False
+        out.message += "; internal variables still changing"
+    return out, x
+
+
+def _prepare(W, q, mu, r0, tol):
+    if W.dim != 2:
+        raise InputError(f"newton: dim = {W.dim}: the global Newton solver is 2D")
+    q, mu = nlgs._check(W, q, mu, tol, 1, 1.0, "given", 1)
+    n = W.n
+    r = np.zeros(2 * n) if r0 is None else np.array(r0, dtype=np.float64).ravel()
+    if r.size != 2 * n or not np.all(np.isfinite(r)):
+        raise InputError(f"r0: expected {2 * n} finite values")
+    return q, mu, r
+
+
+def _result(r, u, n_it, n_gs, n_fb, change, res, tol, q):
+    converged = res <= tol
+    msg = (f"{'converged' if converged else 'not converged'}: {n_it} Newton iterations, {n_gs} Gauss-Seidel "
+           f"sweeps ({n_fb} fallbacks), residual {res:.3g} (tolerance {tol:g})")
+    qnorm = float(np.linalg.norm(q)) or 1.0
+    return NLGSResult(r, u, n_it + n_gs, bool(converged), change, res, res * qnorm, msg)
