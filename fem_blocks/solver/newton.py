@@ -127,6 +127,9 @@ def _newton(W: BlockCSR, q, mu, r, tol, max_iter, gs, max_sweeps_total, coh=None
         return 0.5 * float(F @ F)
 
     u = Wsp @ r + q
+    if coh is not None:  # scale ρ on the transformed problem: P̃ ≈ (W⁻¹ + S) v, so ρ ≈ 1/W_αα + S_α
+        transformed(r, u)
+        rn, rt = rn + S[:, 0], rt + S[:, 1]
     res = residual(r, u)
     change = 0.0
     n_it = n_gs = n_fb = 0
