@@ -515,6 +515,8 @@ def _figures(case, sim, model, out_dir) -> dict:
         write_curve(os.path.join(out_dir, "force_displacement.png"), hist, body, fk, dk, title=case.name)
         F = np.abs(hist[f"{body}.{fk}"])
         D = np.abs(hist[f"{body}.{dk}"])
+        if F.size == 0 or not np.any(np.isfinite(F)):
+            return out
         k = int(np.argmax(F))
         out["peak_force_kN"] = float(F[k] / 1e3)
         out["displacement_at_peak_mm"] = float(D[k] * 1e3)
