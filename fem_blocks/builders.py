@@ -30,6 +30,7 @@ class Block:
     y: float
     course: int
     group: str = "bricks"
+    parent: int = -1  # index of the brick this block is a half of (split_bricks), -1: a whole block
 
     @property
     def size_key(self):
@@ -80,6 +81,21 @@ class Layout:
                 if ox > tol and oy > tol:
                     raise InputError(f"{source}: blocks {order[i]} and {order[j]} overlap")
                 j += 1
+
+
+def split_bricks(blocks: list, brick_length: float) -> list:
+    """Potential brick cracks (Lourenço's micro-model): every block at least 3/4 of a full brick long is
+    replaced by its two halves, which share `parent` = the block's index in `blocks`; shorter blocks (half
+    bricks, pieces cut by openings) stay whole. The halves are joined by an interface of orientation "crack"."""
+    out = []
+    for k, b in enumerate(blocks):
+        if b.length >= 0.75 * brick_length:
+            half = 0.5 * b.length
+            out.append(Block(half, b.height, b.x, b.y, b.course, b.group, parent=k))
+            out.append(Block(half, b.height, b.x + half, b.y, b.course, b.group, parent=k))
+        else:
+            out.append(b)
+    return out
 
 
 def _rect(x0, y0, x1, y1):

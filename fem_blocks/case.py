@@ -262,6 +262,7 @@ class BlockSpec:
     group: str = "blocks"
     clamps: list = field(default_factory=list)
     tractions: list = field(default_factory=list)
+    parent: int = -1  # split_bricks: the two halves of one brick share a parent id (crack interface)
 
 
 @dataclass
@@ -645,13 +646,21 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
             alert=t.number("alert", 1e-3, lo=0, lo_open=True, dim="length"),
             placement=t.string("placement", "positions", choices=("positions", "nodes")),
             positions=tuple(float(x) for x in pos), candidate=cand,
-            orientation=t.string("orientation", "any", choices=("any", "bed", "head"))))
+            orientation=t.string("orientation", "any", choices=("any", "bed", "head", "crack"))))
         t.done()
     pairs = {}
     for itf in interfaces:
         pairs.setdefault(tuple(sorted(itf.groups)), []).append(itf)
     for key, lst in pairs.items():
-        orients = sorted(x.orientation for x in lst)
+        orients = sorted(x.orientation for x in lst if x.orientation != "crack")
+        n_crack = sum(x.orientation == "crack" for x in lst)
+        if n_crack > 1 or (n_crack and not orients):
+            raise InputError(f"{source}: interfaces {[x.name for x in lst]}: a 'crack' interface (between the halves "
+                             f"of split bricks) needs the joint interface(s) of the same group pair, and one "
+                             f"crack interface per pair")
+        if n_crack and not any(b.parent >= 0 for b in blocks):
+            raise InputError(f"{source}: interfaces {[x.name for x in lst if x.orientation == 'crack']}: "
+                             "orientation 'crack' needs split bricks ([wall] split_bricks = true)")
         if not (orients == ["any"] or orients == ["bed", "head"]):
             raise InputError(f"{source}: interfaces {[x.name for x in lst]}: the group pair {list(key)} takes one "
                              f"interface (orientation 'any') or two ('bed' and 'head'), got {orients}")
@@ -803,6 +812,11 @@ def _parse_wall(w: Table, U: dict, materials, block_types, blocks, rigid, names)
             lay = builders.stack_prism(w.integer("bricks", required=True, lo=1, hi=10000), L, H, joint, expanded, name=name)
     except InputError:
         raise
+    if w.boolean("split_bricks", False):
+        if not expanded:
+            raise w.error("split_bricks", "needs expanded = true (the crack between two halves has no joint "
+                                          "thickness; thick joints would give the crack the joint's g0)")
+        lay = builders.split_bricks(lay, L)
     builders.Layout(lay).check_no_overlap(name)
     sizes = {}
     for k, b in enumerate(lay):
@@ -816,7 +830,7 @@ def _parse_wall(w: Table, U: dict, materials, block_types, blocks, rigid, names)
             raise w.error("group", f"body name {bname!r} already used")
         names.add(bname)
         blocks.append(BlockSpec(name=bname, type=sizes[b.size_key], position=(b.x + x0, b.y + y0), angle=0.0,
-                                group=group))
+                                group=group, parent=b.parent))
     xs0 = min(b.x for b in lay) + x0
     xs1 = max(b.x + b.length for b in lay) + x0
     ybot = min(b.y for b in lay) + y0

@@ -80,5 +80,9 @@ def build_model(case: Case) -> Model:
         specs = [InterfaceSpec(name=i.name, groups=i.groups, law=i.law, mu=i.mu, g0=i.g0, alert=i.alert,
                                placement=i.placement, positions=i.positions, candidate=i.candidate,
                                orientation=i.orientation, params=i.params) for i in case.interfaces]
-        contact = ContactStep(specs, groups, ContactOptions(**case.contact), body_names=names)
+        parent = [-1] * len(names)
+        index = {n: k for k, n in enumerate(names)}
+        for b in case.blocks:
+            parent[index[b.name]] = b.parent
+        contact = ContactStep(specs, groups, ContactOptions(**case.contact), body_names=names, body_parent=parent)
     return Model(bodies, block_types, names, np.asarray(case.gravity, dtype=float), groups, contact)

@@ -451,8 +451,10 @@ def build_table(interfaces, group_index: dict) -> InterfaceTable:
     by_pair: dict = {}
     for k, itf in enumerate(interfaces):
         ga, gb = (group_index[g] for g in itf.groups)
-        by_pair.setdefault((min(ga, gb), max(ga, gb)), []).append((k, itf.orientation))
         positions[k, :len(itf.positions)] = itf.positions
+        if itf.orientation == "crack":  # assigned after detection, by parent brick (ContactStep._assign_laws)
+            continue
+        by_pair.setdefault((min(ga, gb), max(ga, gb)), []).append((k, itf.orientation))
     for (ga, gb), lst in by_pair.items():
         orients = sorted(o for _, o in lst)
         if len(lst) == 1 and orients[0] == "any":

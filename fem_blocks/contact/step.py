@@ -58,8 +58,8 @@ class InterfaceSpec:
             raise InputError(f"{n}.placement = {self.placement!r}: expected 'positions' or 'nodes'")
         for p in self.positions:
             check_range(f"{n}.positions", p, 0.0, 1.0, lo_open=True, hi_open=True, expected="0 < position < 1")
-        if self.orientation not in ("any", "bed", "head"):
-            raise InputError(f"{n}.orientation = {self.orientation!r}: expected 'any', 'bed' or 'head'")
+        if self.orientation not in ("any", "bed", "head", "crack"):
+            raise InputError(f"{n}.orientation = {self.orientation!r}: expected 'any', 'bed', 'head' or 'crack'")
         from ..laws import law_parameters
         prm = dict(self.params)
         if self.law != "mixed":
@@ -111,8 +111,12 @@ def _commit_all(law, par, st, trial, u_new, area):
 class ContactStep:
     """The `contact` hook of `dynamics.Simulation` (solve / on_step_change)."""
 
-    def __init__(self, interfaces, body_groups, options: ContactOptions | None = None, body_names=None):
+    def __init__(self, interfaces, body_groups, options: ContactOptions | None = None, body_names=None,
+                 body_parent=None):
         self.interfaces = list(interfaces)
+        # split bricks: contacts between two bodies with the same parent id >= 0 use the pair's "crack" interface
+        self.body_parent = (-np.ones(len(body_groups), dtype=np.int64) if body_parent is None
+                            else np.asarray(body_parent, dtype=np.int64))
         self.opts = options or ContactOptions()
         self.group_names = sorted(set(body_groups))
         gid = {g: i for i, g in enumerate(self.group_names)}
@@ -153,12 +157,26 @@ class ContactStep:
     def _assign_laws(self):
         """Per-contact law code, parameters (per unit area) and friction from the contact's interface."""
         cs = self.cs
+        self._assign_cracks()
         codes = np.array([itf.law_code for itf in self.interfaces], dtype=np.int64)
         pars = np.array([itf.law_par for itf in self.interfaces])
         self.law = codes[cs.interface]
         self.par = np.ascontiguousarray(pars[cs.interface])
         self.mu = self.par[:, 0].copy()
         self.cohesive = bool(np.any(self.law != 0))
+
+    def _assign_cracks(self):
+        """Contacts between the two halves of one split brick take the crack interface of their group pair."""
+        cs = self.cs
+        gid = {g: i for i, g in enumerate(self.group_names)}
+        for k, itf in enumerate(self.interfaces):
+            if itf.orientation != "crack" or len(cs.gap) == 0:
+                continue
+            ga, gb = (gid[g] for g in itf.groups)
+            pa, pb = self.body_parent[cs.cand_body], self.body_parent[cs.ant_body]
+            g1, g2 = self.body_group[cs.cand_body], self.body_group[cs.ant_body]
+            same = (pa >= 0) & (pa == pb) & (((g1 == ga) & (g2 == gb)) | ((g1 == gb) & (g2 == ga)))
+            cs.interface[same] = k
 
     def _geometry(self, sim, first: bool):
         s = self.scene
