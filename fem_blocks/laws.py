@@ -25,6 +25,10 @@ contact's tributary area A), with u = (u_N, u_T) the displacement jump since the
   D = 1 - exp(-(λ-1)/λ_e)/λ, with λ_f (λ_e) interpolated between modes I and II by the mode ratio
   m = (u_T/δ_II)²/λ² so that pure modes dissipate G_I and G_II. Dissipation Y ΔD with Y = ½(k_n⟨u_N⟩₊² + k_s u_T²).
 
+Compressive cap (any law, optional `f_c` [Pa]): r̃_N <= f_c A (elastic–perfectly plastic crushing). At the cap
+the joint closes further; the closure u_p <= 0 (state S_UP) shifts the contact surface (Signorini on g - g0 - u_p,
+so unloading does not spring back), the laws see the elastic jump u - u_p, and f_c A |Δu_p| is dissipated.
+
 Compression: Signorini is always kept on r̃. For coulomb, brittle and fremond it is rigid (g - g0 >= 0); the
 elastic and mixed laws have a compliant joint in compression (stiffness c_N, k_n): g̃ + r̃_N/(k A) >= 0 ⊥
 r̃_N >= 0, so the normal spring acts in tension through r_adh and in compression through r̃ (on which
@@ -41,18 +45,18 @@ COULOMB, ELASTIC, BRITTLE, DUGDALE, FREMOND, MIXED = 0, 1, 2, 3, 4, 5
 LAW_NAMES = {"coulomb": COULOMB, "elastic": ELASTIC, "brittle": BRITTLE, "dugdale": DUGDALE,
              "fremond": FREMOND, "mixed": MIXED}
 # parameter columns (per unit area)
-P_MU, P_CN, P_CT, P_RC, P_SC, P_LC, P_W, P_B, P_P, P_MUR, P_MUKIND, P_FT, P_C, P_GI, P_GII, P_SOFT = range(16)
-NPAR = 16
+P_MU, P_CN, P_CT, P_RC, P_SC, P_LC, P_W, P_B, P_P, P_MUR, P_MUKIND, P_FT, P_C, P_GI, P_GII, P_SOFT, P_FC = range(17)
+NPAR = 17
 # state columns
-S_BETA, S_UN, S_UT, S_DISS, S_HIST, S_BROKEN = range(6)
-NSTATE = 6
+S_BETA, S_UN, S_UT, S_DISS, S_HIST, S_BROKEN, S_UP = range(7)
+NSTATE = 7
 
 LAW_KEYS = {
-    "coulomb": {"mu"},
-    "elastic": {"mu", "c_N", "c_T"},
-    "brittle": {"mu", "variant", "c_N", "c_T", "r_c", "s_c", "l_c"},
-    "fremond": {"mu", "mu_r", "friction", "c_N", "c_T", "w", "b", "p"},
-    "mixed": {"k_n", "k_s", "f_t", "c", "G_I", "G_II", "tan_phi", "softening"},
+    "coulomb": {"mu", "f_c"},
+    "elastic": {"mu", "c_N", "c_T", "f_c"},
+    "brittle": {"mu", "variant", "c_N", "c_T", "r_c", "s_c", "l_c", "f_c"},
+    "fremond": {"mu", "mu_r", "friction", "c_N", "c_T", "w", "b", "p", "f_c"},
+    "mixed": {"k_n", "k_s", "f_t", "c", "G_I", "G_II", "tan_phi", "softening", "f_c"},
 }
 
 
@@ -73,6 +77,9 @@ def law_parameters(law: str, params: dict, name: str) -> tuple[int, np.ndarray]:
             return default
         return check_range(f"{name}.{k}", params[k], lo, lo_open=lo_open, expected=expected)
 
+    p[P_FC] = get("f_c", 0.0, lo_open=False, expected="compressive strength f_c > 0 [Pa] (omit: no cap)")
+    if "f_c" in params and p[P_FC] <= 0.0:
+        raise InputError(f"{name}.f_c = {params['f_c']!r}: expected compressive strength f_c > 0 [Pa] (omit: no cap)")
     if law != "mixed":
         p[P_MU] = get("mu", None if law == "coulomb" else 0.0, expected="mu >= 0")
     if law == "coulomb":

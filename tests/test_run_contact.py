@@ -145,7 +145,7 @@ def test_cohesive_case_writes_law_state_to_paraview_and_checkpoint(tmp_path):
     ck = read_checkpoint(out / "checkpoint.npz")
     h = read_history(out / "history.csv")
     assert int(ck["sim.step"]) == int(h["step"][-1])  # written at the end of the stage
-    assert ck["contact.state"].shape == (24, 6) and np.array_equal(np.unique(ck["contact.law"]), [0, 4])
+    assert ck["contact.state"].shape == (24, 7) and np.array_equal(np.unique(ck["contact.law"]), [0, 4])
     assert np.allclose(ck["contact.state"][ck["contact.law"] == 4, 0], 1.0)  # beta intact under gravity
     files = sorted(f for f in os.listdir(out / "paraview") if f.startswith("contacts_"))
     m = meshio.read(out / "paraview" / files[-1])

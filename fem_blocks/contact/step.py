@@ -163,7 +163,23 @@ class ContactStep:
         self.law = codes[cs.interface]
         self.par = np.ascontiguousarray(pars[cs.interface])
         self.mu = self.par[:, 0].copy()
-        self.cohesive = bool(np.any(self.law != 0))
+        from ..laws import P_FC
+        self.cohesive = bool(np.any(self.law != 0) or np.any(self.par[:, P_FC] > 0))  # caps: cohesive kernels
+
+    def _crushing(self, P, ueff, v, x, h, th):
+        """Plastic closure increment Δu_p <= 0 of the contacts whose r̃_N reached the cap h f_c A: the penetration
+        of the effective surface hθ v'_N (v' = v_N + cmp r̃_N for the compliant laws)."""
+        from ..laws import P_FC
+        from ..solver.newton import _cohesive_terms
+        n = len(P)
+        self._cap_force = self.par[:, P_FC] * self.cs.area
+        if not np.any(self._cap_force > 0):
+            return np.zeros(n)
+        S, c, mue, cmp, capv = np.zeros((n, 2)), np.zeros((n, 2)), np.zeros(n), np.zeros(n), np.zeros(n)
+        _cohesive_terms(self.law, self.par, self.state, x, ueff, v, self.cs.area, h, th, S, c, mue, cmp, capv)
+        Pt = P[:, 0] + S[:, 0] * v[0::2] + c[:, 0]
+        at_cap = np.isfinite(capv) & (Pt >= capv * (1 - 1e-9))
+        return np.where(at_cap, np.minimum(0.0, h * th * (v[0::2] + cmp * Pt)), 0.0)
 
     def _assign_cracks(self):
         """Contacts between the two halves of one split brick take the crack interface of their group pair."""
@@ -307,6 +323,8 @@ class ContactStep:
             gt = self.gap_ref + kin.local_velocity(self.G, s.gather("q"), s.U_offset)[:, 0]
         else:
             gt = cs.gap - cs.g0
+        from ..laws import S_UP
+        gt = gt - self.state[:, S_UP]  # crushed joints: the contact surface moved by the plastic closure u_p <= 0
         gbar = gt + h * (1 - th) * vi[:, 0]
         q = vfree.copy()
         q[:, 0] += gbar / (h * th)
@@ -329,7 +347,13 @@ class ContactStep:
                                                  criterion=self.opts.criterion, check_every=self.opts.check_every)
             vs = res.u.reshape(-1, 2)
             u_new = ueff + h * th * vs
+            dup = self._crushing(res.r.reshape(-1, 2), ueff, res.u, trial, h, th)
+            u_new[:, 0] -= dup  # the laws see the elastic jump
             _commit_all(self.law, self.par, self.state, trial, u_new, cs.area)
+            if np.any(dup):
+                from ..laws import S_DISS
+                self.state[:, S_UP] += dup
+                self.state[:, S_DISS] += self._cap_force * np.abs(dup)
         else:
             if self.opts.solver == "newton":
                 from ..solver.newton import solve_newton

@@ -42,11 +42,11 @@ class ContactsWriter:
                 "area": cs.area.copy()}
         st = getattr(c, "state", None)
         if st is not None and len(st) == len(cs.gap):
-            from ..laws import MIXED, S_BETA, S_DISS, S_UN, S_UT
+            from ..laws import MIXED, S_BETA, S_DISS, S_UN, S_UP, S_UT
             law = c.law
             damage = np.where(law == MIXED, st[:, S_BETA], np.where(law >= 2, 1.0 - st[:, S_BETA], 0.0))
             data.update(law=law.astype(np.int64), damage=damage, opening=st[:, S_UN].copy(),
-                        slip=st[:, S_UT].copy(), dissipated=st[:, S_DISS].copy())
+                        slip=st[:, S_UT].copy(), dissipated=st[:, S_DISS].copy(), crushing=st[:, S_UP].copy())
         return x, data
 
     def write(self, time: float) -> str:

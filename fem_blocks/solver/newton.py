@@ -25,7 +25,7 @@ import scipy.sparse.linalg as spla
 from numba import njit
 
 from ..errors import InputError
-from ..laws import compression_stiffness, linear_part
+from ..laws import P_FC, compression_stiffness, linear_part
 from . import nlgs
 from .nlgs import BlockCSR, NLGSResult
 
@@ -39,17 +39,20 @@ def _rho(W: BlockCSR):
     return rn, rt
 
 
-def alart_curnier(r, u, mu, rn, rt, jacobian=False):
-    """F (2n,) and, if asked, the 2×2 blocks D, E (n, 2, 2) of J = D + E W (vectorised over contacts)."""
+def alart_curnier(r, u, mu, rn, rt, jacobian=False, cap=None):
+    """F (2n,) and, if asked, the 2×2 blocks D, E (n, 2, 2) of J = D + E W (vectorised over contacts).
+    `cap` (n,): compressive cap on r_N (inf: none): F_N = r_N - P_[0, cap](x), friction bound μ P_[0, cap](x)."""
     R = r.reshape(-1, 2)
     U = u.reshape(-1, 2)
     xN = R[:, 0] - rn * U[:, 0]
-    closed = xN > 0
-    FN = np.where(closed, rn * U[:, 0], R[:, 0])
+    crushed = np.zeros(len(mu), dtype=bool) if cap is None else xN >= cap
+    closed = (xN > 0) & ~crushed
+    FN = np.where(crushed, R[:, 0] - (0.0 if cap is None else cap), np.where(closed, rn * U[:, 0], R[:, 0]))
     xT = R[:, 1] - rt * U[:, 1]
-    lim = mu * np.maximum(xN, 0.0)
-    stick = closed & (np.abs(xT) <= lim)
-    slip = closed & ~stick
+    lim = mu * (np.maximum(xN, 0.0) if cap is None else np.clip(xN, 0.0, cap))
+    active = closed | crushed
+    stick = active & (np.abs(xT) <= lim)
+    slip = active & ~stick
     s = np.sign(xT)
     FT = np.where(stick, rt * U[:, 1], np.where(slip, R[:, 1] - lim * s, R[:, 1]))
     F = np.column_stack([FN, FT]).ravel()
@@ -58,18 +61,19 @@ def alart_curnier(r, u, mu, rn, rt, jacobian=False):
     n = len(mu)
     D = np.zeros((n, 2, 2))
     E = np.zeros((n, 2, 2))
-    D[~closed, 0, 0] = 1.0
+    D[~closed, 0, 0] = 1.0  # open: F_N = r_N; crushed: F_N = r_N - cap
     E[closed, 0, 0] = rn[closed]
-    D[~closed, 1, 1] = 1.0  # open: F_T = r_T
+    D[~active, 1, 1] = 1.0  # open: F_T = r_T
     E[stick, 1, 1] = rt[stick]
     D[slip, 1, 1] = 1.0
-    D[slip, 1, 0] = -(mu * s)[slip]
-    E[slip, 1, 0] = (mu * s * rn)[slip]
+    sl = slip & closed  # the friction bound depends on x_N below the cap only
+    D[sl, 1, 0] = -(mu * s)[sl]
+    E[sl, 1, 0] = (mu * s * rn)[sl]
     return F, D, E
 
 
 @njit(cache=True)
-def _cohesive_terms(law, par, st, x, ueff, v, area, h, theta, S, c, mue, cmp):
+def _cohesive_terms(law, par, st, x, ueff, v, area, h, theta, S, c, mue, cmp, capv):
     """Per contact at fixed internal variables x: P̃ = P + S v + c (adhesive impulse h A r_adh(u), u = u_eff + hθ v),
     friction coefficient, and compliance cmp of the compliant laws in compression (v'_N = v_N + cmp P̃_N)."""
     n = law.shape[0]
@@ -82,6 +86,7 @@ def _cohesive_terms(law, par, st, x, ueff, v, area, h, theta, S, c, mue, cmp):
         c[a, 0] = h * area[a] * (kN * ueff[a, 0] + fN)
         c[a, 1] = h * area[a] * (kT * ueff[a, 1] + fT)
         mue[a] = m
+        capv[a] = h * par[a, P_FC] * area[a] if par[a, P_FC] > 0.0 else np.inf
         cmp[a] = 0.0
         if law[a] != 0 and not tension:
             kc = compression_stiffness(law[a], par[a]) * area[a]
@@ -102,13 +107,14 @@ def _newton(W: BlockCSR, q, mu, r, tol, max_iter, gs, max_sweeps_total, coh=None
     c = np.zeros((n, 2))
     mue = mu.copy()
     cmp = np.zeros(n)
+    capv = np.full(n, np.inf)
 
     def transformed(r_, u_):
         """(P̃, v') and the terms used: the plain problem when coh is None."""
         if coh is None:
             return r_, u_
         law, par, st, x, ueff, area, h, th = coh
-        _cohesive_terms(law, par, st, x, ueff, u_, area, h, th, S, c, mue, cmp)
+        _cohesive_terms(law, par, st, x, ueff, u_, area, h, th, S, c, mue, cmp, capv)
         Pt = r_.reshape(-1, 2) + S * u_.reshape(-1, 2) + c
         vp = u_.reshape(-1, 2).copy()
         vp[:, 0] += cmp * Pt[:, 0]
@@ -123,7 +129,7 @@ def _newton(W: BlockCSR, q, mu, r, tol, max_iter, gs, max_sweeps_total, coh=None
 
     def merit(r_, u_):
         Pt, vp = transformed(r_, u_)
-        F = alart_curnier(Pt, vp, mue, rn, rt)
+        F = alart_curnier(Pt, vp, mue, rn, rt, cap=capv if coh is not None else None)
         return 0.5 * float(F @ F)
 
     u = Wsp @ r + q
@@ -141,7 +147,7 @@ def _newton(W: BlockCSR, q, mu, r, tol, max_iter, gs, max_sweeps_total, coh=None
     eps = 1e-6 * wdiag
     while res > tol and n_it < max_iter and n_gs < max_sweeps_total:
         Pt, vp = transformed(r, u)
-        F, D, E = alart_curnier(Pt, vp, mue, rn, rt, jacobian=True)
+        F, D, E = alart_curnier(Pt, vp, mue, rn, rt, jacobian=True, cap=capv if coh is not None else None)
         if coh is not None:  # chain rule through P̃ = P + S v + c, v' = v + C P̃: J = D' + E' W
             D = D.copy()
             D[:, :, 0] += E[:, :, 0] * cmp[:, None]

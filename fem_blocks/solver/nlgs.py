@@ -481,6 +481,20 @@ def fclib_residual(W, q, mu, r, dim: int = 2) -> tuple[float, float]:
 # P̃ = P + P_adh satisfies Signorini–Coulomb with the exact local operator
 #   v = W' P̃ + q',  W' = A⁻¹ W_αα,  q' = A⁻¹ (v_loc - h W_αα (K u_eff + f)),  A = I + h² θ W_αα K.
 from ..laws import compression_stiffness as _kcomp, internal_update as _internal_update, linear_part as _linear_part  # noqa: E402,E501
+from ..laws import P_FC  # noqa: E402
+
+
+@njit(cache=True)
+def _cap(pn, pt, m10, m11, q1, mu, capP):
+    """Compressive cap r̃_N <= capP (impulse h f_c A): at the cap the normal impulse is fixed and the tangential
+    one solves v_T = m10 pn + m11 pt + q1 with Coulomb at pn (stick, or slide against v_T)."""
+    if capP <= 0.0 or pn <= capP:
+        return pn, pt
+    pn = capP
+    b = m10 * pn + q1
+    if m11 > 0.0 and abs(b) <= m11 * mu * pn:
+        return pn, -b / m11
+    return pn, (-mu * pn if b > 0.0 else mu * pn)
 
 
 @njit(cache=True)
@@ -520,6 +534,7 @@ def _local_cohesive(w00, w01, w10, w11, v0, v1, law, par, st, x, ue0, ue1, area,
             if kc > 0.0:
                 cmp = 1.0 / (h * h * theta * kc)  # compliant Signorini: v_N + cmp P_N >= 0
         pn, pt, case = local_2d(m00 + cmp, m01, m10, m11, q0, q1, mue)
+        pn, pt = _cap(pn, pt, m10, m11, q1, mue, h * par[P_FC] * area)
         vn = m00 * pn + m01 * pt + q0
         vtt = m10 * pn + m11 * pt + q1
         uN = ue0 + h * theta * vn
@@ -560,6 +575,7 @@ def _sweep_cohesive(indptr, indices, blocks, diag_pos, q, mu, r, order, omega, l
         w00, w01, w10, w11 = blocks[d, 0, 0], blocks[d, 0, 1], blocks[d, 1, 0], blocks[d, 1, 1]
         if law[a] == 0:
             rn, rt, case = local_2d(w00, w01, w10, w11, v0, v1, mu[a])
+            rn, rt = _cap(rn, rt, w10, w11, v1, mu[a], h * par[a, P_FC] * area[a])
         else:
             rn, rt = _local_cohesive(w00, w01, w10, w11, v0, v1, law[a], par[a], st[a], trial[a], ueff[a, 0],
                                      ueff[a, 1], area[a], h, theta)
@@ -598,6 +614,15 @@ def natural_map_cohesive(indptr, indices, blocks, q, mu, r, law, par, st, trial,
             kc = _kcomp(law[a], par[a]) * area[a]
             if kc > 0.0:
                 v0 += p0 / (h * h * theta * kc)
+        capP = h * par[a, P_FC] * area[a]
+        if capP > 0.0:  # capped cone: Alart–Curnier residual (rho = 1), zero exactly at the solutions
+            y0 = min(max(p0 - v0, 0.0), capP)
+            lim = m * y0
+            y1 = min(max(p1 - v1, -lim), lim)
+            f0 = p0 - y0
+            f1 = p1 - y1
+            s += f0 * f0 + f1 * f1
+            continue
         x0 = p0 - (v0 + m * abs(v1))
         x1 = p1 - v1
         ax1 = abs(x1)
