@@ -208,12 +208,14 @@ def solve_newton(W: BlockCSR, q, mu, r0=None, tol: float = 1e-8, max_iter: int =
 
 def solve_cohesive_newton(W: BlockCSR, q, mu, law, par, st, ueff, area, h: float, theta: float, r0=None,
                           tol: float = 1e-8, max_iter: int = 200, gs_sweeps: int = 20,
-                          max_sweeps_total: int = 100000, max_outer: int = 100):
+                          max_sweeps_total: int = 100000, max_outer: int = 1000, max_total_iter: int | None = None):
     """Newton for the contact problem with interface laws (laws.py), same contract as nlgs.solve_cohesive:
     staggered — Newton at fixed internal variables x (β, damage), then x updated from the converged jumps,
     until x stops changing. At fixed x each law is piecewise linear in the jump u = u_eff + hθ v (tension /
     compression branches), so the transformed problem P̃ = P + S v + c, v' = v + cmp P̃_N e_N keeps the
-    Alart–Curnier form and J = D' + E' W. Returns (NLGSResult, trial internal variables)."""
+    Alart–Curnier form and J = D' + E' W. The whole step is bounded by `max_total_iter` Newton iterations (default
+    10 x max_iter) and `max_sweeps_total` fallback sweeps over all outer solves; beyond, it reports non-convergence.
+    Returns (NLGSResult, trial internal variables).
     q, mu, r = _prepare(W, q, mu, r0, tol)
     law = np.ascontiguousarray(law, dtype=np.int64)
     par = np.ascontiguousarray(par, dtype=np.float64)
@@ -244,8 +246,12 @@ def solve_cohesive_newton(W: BlockCSR, q, mu, law, par, st, ueff, area, h: float
     lo = np.where(law == FREMOND, 0.0, st[:, S_BETA])
     hi = np.where(law == FREMOND, st[:, S_BETA], 1.0)
     omega, res_prev = 1.0, None
-    for _ in range(max_outer):
-        r, u, i1, g1, f1, change, res = _newton(W, q, mu, r, tol, max_iter, gs, max_sweeps_total, coh)
+    budget = max_total_iter if max_total_iter is not None else 10 * max_iter
+    for _ in range(max_outer):  # `budget` Newton iterations and max_sweeps_total sweeps bound the whole step
+        if n_it >= budget or n_gs >= max_sweeps_total:
+            break
+        r, u, i1, g1, f1, change, res = _newton(W, q, mu, r, tol, min(max_iter, budget - n_it), gs,
+                                                max_sweeps_total - n_gs, coh)
         n_it, n_gs, n_fb = n_it + i1, n_gs + g1, n_fb + f1
         x_old = x.copy()
         dx = nlgs._update_internal(law, par, st, ueff, u, float(h), float(theta), x)  # x <- g(x_old)
