@@ -215,7 +215,7 @@ def solve_cohesive_newton(W: BlockCSR, q, mu, law, par, st, ueff, area, h: float
     compression branches), so the transformed problem P̃ = P + S v + c, v' = v + cmp P̃_N e_N keeps the
     Alart–Curnier form and J = D' + E' W. The whole step is bounded by `max_total_iter` Newton iterations (default
     10 x max_iter) and `max_sweeps_total` fallback sweeps over all outer solves; beyond, it reports non-convergence.
-    Returns (NLGSResult, trial internal variables).
+    Returns (NLGSResult, trial internal variables)."""
     q, mu, r = _prepare(W, q, mu, r0, tol)
     law = np.ascontiguousarray(law, dtype=np.int64)
     par = np.ascontiguousarray(par, dtype=np.float64)
