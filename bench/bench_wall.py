@@ -1,8 +1,25 @@
-"""Running-bond walls of deformable bricks under gravity (dry joints, velocity reset, theta = 1):
-setup time, wall-clock per step and its split, NLGS sweeps, contacts, contact updates per second.
+"""Scaling: running-bond walls of deformable bricks under gravity, run to equilibrium (speed issue, benchmark 2).
 
-Usage: .venv/bin/python bench/bench_wall.py [n_bricks ...]   (default: 100 1000)
+Each wall: bricks 0.25 × 0.06 m (Q1, 0.03 m, lumped mass, E = 5 GPa), about twice as wide as high, on a rigid
+fixed floor; θ = 1 with velocity reset (quasi-static), h = 1e-3 s, NLGS tolerance 1e-4 on the change, at most
+1000 sweeps per step. Joints: dry (Coulomb μ = 0.7) or Frémond–Cangémi (`--joints fremond`: c_N = 0.5e10,
+c_T = 0.3e10 N/m³, w = 18 J/m², μ = 0.7; the floor joint stays dry).
+
+Reported per wall:
+* setup: building the bodies (meshing and factoring each block type once, placing instances) + the first
+  step's scene, detection, boundary Delassus blocks W_bb and Delassus assembly (not the first solve);
+* the transient: steps to equilibrium (floor reaction = weight within 1e-3 and at most 2 sweeps per step over
+  5 consecutive steps; cap `--max-steps`), its wall time and sweeps;
+* the cost of a step at equilibrium (mean over 20 steps after it): ms/step, sweeps/step, NLGS µs per contact
+  update and the split (local quantities, NLGS, velocity correction);
+* peak RSS, the floor reaction / weight at the end.
+With several sizes it fits the exponent a of cost ∝ contacts^a (least squares in log–log) for the time per step at
+equilibrium, the time per sweep and the time to equilibrium.
+
+Usage: .venv/bin/python bench/bench_wall.py [n_bricks ...] [--joints dry|fremond] [--max-steps N]
+(default sizes 100 1000; 10000 takes several minutes and about 1 GB).
 """
+import argparse
 import os
 import resource
 import sys
@@ -17,8 +34,10 @@ from fem_blocks.contact.step import ContactOptions, ContactStep, InterfaceSpec  
 from fem_blocks.dynamics import Simulation  # noqa: E402
 from fem_blocks.meshing import mesh_rectangle  # noqa: E402
 
+FREMOND = dict(c_N=0.5e10, c_T=0.3e10, w=18.0, mu=0.7)
 
-def wall(n_bricks, steps=int(os.environ.get("BENCH_STEPS", 50)), h=1e-3):
+
+def wall(n_bricks, joints="dry", h=1e-3, max_steps=300, steady_steps=20):
     per = max(2, int(round(np.sqrt(n_bricks * 0.25 / 0.5))))  # about twice as wide as high (in bricks)
     courses = max(1, int(round(n_bricks / per)))
     t0 = time.perf_counter()
@@ -32,37 +51,76 @@ def wall(n_bricks, steps=int(os.environ.get("BENCH_STEPS", 50)), h=1e-3):
     W = per * 0.25
     floor = RigidBody([(-0.1, -0.2), (W + 0.1, -0.2), (W + 0.1, 0), (-0.1, 0)],
                       drivers={k: Driver("velocity", 0.0) for k in ("x", "y", "rz")})
-    cs = ContactStep([InterfaceSpec("j", ("b", "b"), mu=0.7), InterfaceSpec("f", ("b", "g"), mu=0.7)],
+    joint = (InterfaceSpec("j", ("b", "b"), mu=0.7) if joints == "dry" else
+             InterfaceSpec("j", ("b", "b"), law="fremond", params=dict(FREMOND)))
+    cs = ContactStep([joint, InterfaceSpec("f", ("b", "g"), mu=0.7)],
                      ["b"] * len(bodies) + ["g"], ContactOptions(tol=1e-4, max_sweeps=1000))
     sim = Simulation(bodies + [floor], h=h, theta=1.0, contact=cs, velocity_reset=True)
     t_build = time.perf_counter() - t0
-    sim.step()  # first step: scene, detection, W_bb, Delassus, then a cold NLGS solve
-    t_setup = t_build + cs.timers["detection"]  # detection timer includes W_bb and the Delassus assembly
+    weight = sum(1800.0 * b.length * b.height * 0.12 for b in blocks) * 9.81
+
+    t1 = time.perf_counter()
+    info = sim.step()  # first step: scene, detection, W_bb, Delassus, then a cold NLGS solve
+    t_setup = t_build + cs.timers["detection"]  # the detection timer includes W_bb and the Delassus assembly
+    sweeps, quiet, steps = info.contact["sweeps"], 0, 1
+    limit_steps = int(not info.contact.get("converged", True))
+    while steps < max_steps and quiet < 5:
+        info = sim.step()
+        steps += 1
+        sweeps += info.contact["sweeps"]
+        limit_steps += int(not info.contact.get("converged", True))
+        ok = abs(floor.reaction[1] / weight - 1.0) < 1e-3 and info.contact["sweeps"] <= 2
+        quiet = quiet + 1 if ok else 0
+    t_eq = time.perf_counter() - t1
     for k in cs.timers:
         cs.timers[k] = 0.0
-    sweeps = 0
-    t1 = time.perf_counter()
-    for _ in range(steps):
+    s_sweeps = 0
+    t2 = time.perf_counter()
+    for _ in range(steady_steps):
         info = sim.step()
-        sweeps += info.contact["sweeps"]
-    dt = (time.perf_counter() - t1) / steps
+        s_sweeps += info.contact["sweeps"]
+    dt = (time.perf_counter() - t2) / steady_steps
     nc = info.contact["contacts"]
-    weight = sum(1800.0 * b.length * b.height * 0.12 for b in blocks) * 9.81
     rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-    tm = {k: v / steps * 1e3 for k, v in cs.timers.items()}
-    return dict(bricks=len(blocks), contacts=nc, setup_s=t_setup, ms_per_step=dt * 1e3,
-                sweeps_per_step=sweeps / steps, us_per_update=cs.timers["nlgs"] / max(sweeps * nc, 1) * 1e6 * steps / steps,
+    tm = {k: v / steady_steps * 1e3 for k, v in cs.timers.items()}
+    return dict(bricks=len(blocks), contacts=nc, setup_s=t_setup, eq_steps=steps if quiet >= 5 else None,
+                steps=steps, eq_s=t_eq, eq_sweeps=sweeps, limit_steps=limit_steps, ms_per_step=dt * 1e3,
+                sweeps_per_step=s_sweeps / steady_steps,
+                us_per_update=cs.timers["nlgs"] / max(s_sweeps * nc, 1) * 1e6,
+                ms_per_sweep=cs.timers["nlgs"] / max(s_sweeps, 1) * 1e3,
                 split=tm, floor_reaction_over_weight=floor.reaction[1] / weight, rss_mb=rss)
 
 
+def fit_exponent(x, y):
+    """Least-squares slope a of log y = a log x + b."""
+    return float(np.polyfit(np.log(x), np.log(y), 1)[0])
+
+
 if __name__ == "__main__":
-    sizes = [int(a) for a in sys.argv[1:]] or [100, 1000]
-    print("| bricks | contacts | setup [s] | ms/step | sweeps/step | NLGS µs/update | split ms/step (local, nlgs, "
-          "correction) | floor reaction / weight | peak RSS [MB] |")
-    print("|---|---|---|---|---|---|---|---|---|")
-    for n in sizes:
-        r = wall(n)
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("sizes", nargs="*", type=int, default=[100, 1000])
+    ap.add_argument("--joints", choices=("dry", "fremond"), default="dry")
+    ap.add_argument("--max-steps", type=int, default=300)
+    a = ap.parse_args()
+    print(f"joints: {a.joints}")
+    print("| bricks | contacts | setup [s] | steps to equilibrium | time to equilibrium [s] (sweeps; steps at the "
+          "sweep limit) | ms/step at equilibrium | sweeps/step | ms/sweep | NLGS µs/update | split ms/step (local, "
+          "nlgs, correction) | floor reaction / weight | peak RSS [MB] |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
+    rows = []
+    for n in a.sizes:
+        r = wall(n, a.joints, max_steps=a.max_steps)
+        rows.append(r)
         s = r["split"]
-        print(f"| {r['bricks']} | {r['contacts']} | {r['setup_s']:.2f} | {r['ms_per_step']:.1f} | "
-              f"{r['sweeps_per_step']:.1f} | {r['us_per_update']:.3f} | {s['local']:.1f}, {s['nlgs']:.1f}, "
-              f"{s['correction']:.1f} | {r['floor_reaction_over_weight']:.6f} | {r['rss_mb']:.0f} |", flush=True)
+        eq = r["eq_steps"] if r["eq_steps"] is not None else f"not reached in {r['steps']}"
+        print(f"| {r['bricks']} | {r['contacts']} | {r['setup_s']:.2f} | {eq} | {r['eq_s']:.1f} ({r['eq_sweeps']}; "
+              f"{r['limit_steps']}) | {r['ms_per_step']:.1f} | {r['sweeps_per_step']:.1f} | {r['ms_per_sweep']:.2f} | "
+              f"{r['us_per_update']:.3f} | {s['local']:.1f}, {s['nlgs']:.1f}, {s['correction']:.1f} | "
+              f"{r['floor_reaction_over_weight']:.6f} | {r['rss_mb']:.0f} |", flush=True)
+    if len(rows) >= 2:
+        c = [r["contacts"] for r in rows]
+        print(f"\nexponents vs contacts: time per step at equilibrium "
+              f"{fit_exponent(c, [r['ms_per_step'] for r in rows]):.2f}, time per sweep "
+              f"{fit_exponent(c, [r['ms_per_sweep'] for r in rows]):.2f}, time to equilibrium "
+              f"{fit_exponent(c, [r['eq_s'] for r in rows]):.2f}, setup "
+              f"{fit_exponent(c, [r['setup_s'] for r in rows]):.2f}")
