@@ -707,7 +707,8 @@ class RigidBody3D:
     @classmethod
     def box(cls, lx: float, ly: float, lz: float, origin=(0.0, 0.0, 0.0), rho: float | None = None,
             mass: float | None = None, **kw) -> "RigidBody3D":
-        """Box [0,lx]x[0,ly]x[0,lz] + origin with the closed-form inertia m (b² + c²)/12 (box_inertia)."""
+        """Box [0,lx]x[0,ly]x[0,lz] + origin with the closed-form inertia m (b² + c²)/12 (box_inertia) unless
+        `inertia` is given."""
         from .meshing import box_corners
         name = kw.get("name", "rigid")
         for k, v in (("lx", lx), ("ly", ly), ("lz", lz)):
@@ -715,7 +716,9 @@ class RigidBody3D:
         if mass is None and rho is not None:
             check_range(f"{name}.rho", rho, 0.0, lo_open=True, expected="rho > 0 [kg/m^3]")
             mass = rho * lx * ly * lz
-        inertia = None if mass is None or mass == 0.0 else box_inertia(mass, lx, ly, lz)
+        inertia = kw.pop("inertia", None)
+        if inertia is None and mass is not None and mass != 0.0:
+            inertia = box_inertia(mass, lx, ly, lz)
         return cls(box_corners(lx, ly, lz, origin), mass=mass, inertia=inertia, **kw)
 
     def _inertia(self, inertia) -> np.ndarray:

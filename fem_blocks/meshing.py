@@ -37,6 +37,8 @@ class BlockMesh:
     node_ids: np.ndarray | None = field(default=None, repr=False)
     cell_ids: np.ndarray | None = field(default=None, repr=False)
 
+    gdim = 2
+
     @classmethod
     def from_cells(cls, points, cells, cell_type: str | None = None, source: str = "mesh") -> "BlockMesh":
         """BlockMesh of given arrays: boundary edges from the cells, all untagged (tag 0)."""
@@ -397,6 +399,8 @@ def validate(mesh: BlockMesh, source: str = "mesh") -> None:
     Checks: array shapes/dtypes, finite coordinates, cell indices in range, every node used,
     inverted or degenerate elements (area <= 1e-10 x mean), non-convex quads, duplicate nodes
     (closer than 1e-12 x bounding-box size), non-manifold edges and vertices, a single connected piece."""
+    if isinstance(mesh, BlockMesh3D):
+        return validate3d(mesh, source)
     P, C = mesh.points, mesh.cells
     node_id = getattr(mesh, "node_ids", None)
     cell_id = getattr(mesh, "cell_ids", None)
@@ -701,7 +705,7 @@ def _extract3d(gmsh, source: str) -> BlockMesh3D:
         centre = -centre
     neg = np.flatnonzero(centre <= 0)
     if neg.size:
-        raise InputError(f"{source}: element {cell_tags[neg[0]]} is inverted or degenerate "
+        raise InputError(f"{source}: element {cell_tags[neg[0]]} (gmsh tag) is inverted or degenerate "
                          f"(det J {centre[neg[0]]:.3g} at its centre); {neg.size} such element(s)")
     bfaces, _ = boundary_faces_from_cells(cells, cell_type, source, lambda i: f"{int(node_ids[i])} (gmsh tag)",
                                           lambda i: f"{int(cell_tags[i])} (gmsh tag)")
