@@ -14,6 +14,9 @@ displacement is R q, so Mhat_rot^-1 = R Mhat^-1 R^T never needs a new factorizat
 A `RigidBody` (2D) has dofs (vx, vy, omega) about its centre of mass, mass diag(m, m, I); each dof
 is free (applied force, constant or piecewise linear in time) or driven (prescribed velocity or
 displacement history); the reaction on a driven dof is an output.
+
+3D: `BlockType3D` (same prototype on a BlockMesh3D, dofs 3*node + c), `DeformableBody3D` (instance placed by a
+3x3 rotation and a translation), `RigidBody3D` (dofs (v, omega), mass and inertia tensor from the geometry).
 """
 from __future__ import annotations
 

@@ -11,6 +11,7 @@ Linear elasticity, small strain, P1 (triangles) / Q1 (quads), 2D:
 
 with t the thickness. Returned as scipy CSR in the BlockMesh node order, dof `2*node + c`.
 The cell-centroid stress operator S (3 nc x 2n) is plain numpy (no dolfinx).
+3D (BlockMesh3D, P1 tetrahedra / Q1 hexahedra, dof `3*node + c`): assemble_operators_3d, stress_operator_3d.
 """
 from __future__ import annotations
 

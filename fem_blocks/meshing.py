@@ -6,6 +6,11 @@ offsets can give different node counts), then instanced by translation and rotat
 `BlockMesh`: points (n,2), cells (nc,3|4) counter-clockwise, cell_type "triangle"|"quad",
 boundary_edges (ne,2) oriented with the body on the left (outer loop CCW, holes CW), edge_tags
 (ne,) and tag_names {name: id} from gmsh physical curves ("untagged" = 0 for the rest).
+
+`BlockMesh3D` (3D blocks: a box, a hexahedral block given by its 8 corners, a .msh/.geo file): points (n,3),
+cells (nc,4|8) positively oriented, cell_type "tetrahedron"|"hexahedron", boundary_faces (nf,3|4) with outward
+right-hand-rule normals, face_tags (nf,) (side 0..5 of a generated block, physical surface tag of a file, -1
+untagged), tag_names; see docs/architecture.md.
 """
 from __future__ import annotations
 

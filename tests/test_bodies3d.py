@@ -620,7 +620,9 @@ def test_rigid_drivers_forces_and_W():
     phi = np.array([0.1, 0.2, -0.3])
     body.rotate(phi)
     Rt = rotation3d(phi)
-    assert np.allclose(Rt, rotation3d(phi, np.linalg.norm(phi)) if False else Rt)
+    assert np.allclose(Rt, rotation3d(phi / np.linalg.norm(phi), np.linalg.norm(phi)), rtol=0, atol=1e-15)
+    assert np.allclose(Rt @ Rt.T, np.eye(3), atol=1e-15) and np.allclose(Rt @ phi, phi, atol=1e-15)
+    assert np.allclose(rotation3d([0, 0, 2.0], np.pi / 2) @ [1, 0, 0], [0, 1, 0], atol=1e-15)
     assert np.allclose(body.orientation, Rt) and np.allclose(body.q[3:], phi)
     I = body.inertia
     assert np.allclose(I, Rt @ body.inertia0 @ Rt.T) and np.allclose(np.linalg.eigvalsh(I),
@@ -644,3 +646,24 @@ def test_rigid_drivers_forces_and_W():
         RigidBody3D.box(1, 1, 1, mass=1.0, inertia=(1.0, 1.0, 3.0))
     with pytest.raises(InputError, match="dof 'w'"):
         RigidBody3D.box(1, 1, 1, rho=1.0, forces={"w": 1.0})
+
+
+def test_load_geo3d_tetrahedra_and_hexahedra(tmp_path):
+    p = tmp_path / "box.geo"
+    p.write_text('SetFactory("OpenCASCADE");\nBox(1) = {0, 0, 0, 1, 0.5, 0.3};\n'
+                 'Physical Surface("xmin") = {1};\nPhysical Volume("block") = {1};\n')
+    from fem_blocks.meshing import load_geo3d
+    m = load_geo3d(str(p), size=0.2)
+    assert m.cell_type == "tetrahedron" and m.volume() == pytest.approx(0.15, rel=1e-12)
+    assert flux_volume(m) == pytest.approx(0.15, rel=1e-12)
+    xmin = m.face_tags == m.tag_names["xmin"]
+    assert np.allclose(face_normals(m)[xmin], [-1, 0, 0]) and m.face_areas()[xmin].sum() == pytest.approx(0.15)
+    assert m.tag_names["untagged"] == -1 and np.count_nonzero(m.face_tags == -1) == len(xmin) - xmin.sum()
+    h = tmp_path / "hex.geo"
+    h.write_text('SetFactory("OpenCASCADE");\nBox(1) = {0, 0, 0, 1, 0.5, 0.3};\n'
+                 'Transfinite Curve {:} = 3;\nTransfinite Surface {:};\nRecombine Surface {:};\n'
+                 'Transfinite Volume {1};\nRecombine Volume {1};\nPhysical Volume("block") = {1};\n')
+    m = load_geo3d(str(h), cell="hexahedron")
+    assert m.cells.shape == (8, 8) and m.volume() == pytest.approx(0.15, rel=1e-12)
+    with pytest.raises(InputError, match="produces hexahedron elements"):
+        load_geo3d(str(h), cell="tetrahedron")
