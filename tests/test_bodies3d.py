@@ -9,7 +9,7 @@ from fem_blocks.bodies import (BlockType3D, Clamp3D, DeformableBody3D, Driver, M
 from fem_blocks.errors import InputError
 from fem_blocks.fem_backend import (assemble_operators_3d, elasticity_matrix_3d, stress_operator_3d,
                                     von_mises_3d)
-from fem_blocks.meshing import (HEX_SIDES, BlockMesh3D, box_corners, face_quadrature, load_msh3d,
+from fem_blocks.meshing import (HEX_SIDES, BlockMesh3D, box_corners, load_msh3d,
                                 mesh_box, mesh_hexahedron, validate3d)
 
 E, NU, RHO = 12e9, 0.22, 1900.0
@@ -133,6 +133,21 @@ def test_voussoir_block_volume_and_outward_faces(cell, structured):
     # corners of the block are nodes of the mesh
     d = np.linalg.norm(m.points[:, None, :] - C[None], axis=2).min(axis=0)
     assert np.all(d < 1e-13)
+
+
+def test_dome_voussoir_block():
+    """Voussoir of a spherical dome (radii 5 and 5.5, elevations 0.3-0.45, azimuths 0.1-0.35): its 8 corners
+    span planar faces (symmetric trapezoids), so the hexahedral, Kuhn-tetrahedral and unstructured meshes all
+    have the polyhedron's volume (1e-12)."""
+    def sph(r, t, p):
+        return [r * np.cos(t) * np.cos(p), r * np.cos(t) * np.sin(p), r * np.sin(t)]
+    C = np.array([sph(r, t, p) for t in (0.3, 0.45) for r, p in ((5, 0.1), (5.5, 0.1), (5.5, 0.35), (5, 0.35))])
+    V = trilinear_volume(C)
+    for cell, structured in (("hexahedron", True), ("tetrahedron", True), ("tetrahedron", False)):
+        m = mesh_hexahedron(C, size=0.12, cell=cell, structured=structured)
+        assert m.volume() == pytest.approx(V, rel=1e-12) and flux_volume(m) == pytest.approx(V, rel=1e-12)
+        top = m.face_tags == m.tag_names["top"]
+        assert np.all(face_normals(m)[top] @ [0, 0, 1] > 0.5)  # the upper bed joint faces up
 
 
 def test_warped_block_is_the_trilinear_block():
