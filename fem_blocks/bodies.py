@@ -14,6 +14,9 @@ displacement is R q, so Mhat_rot^-1 = R Mhat^-1 R^T never needs a new factorizat
 A `RigidBody` (2D) has dofs (vx, vy, omega) about its centre of mass, mass diag(m, m, I); each dof
 is free (applied force, constant or piecewise linear in time) or driven (prescribed velocity or
 displacement history); the reaction on a driven dof is an output.
+
+3D: `BlockType3D` (same prototype on a BlockMesh3D, dofs 3*node + c), `DeformableBody3D` (instance placed by a
+3x3 rotation and a translation), `RigidBody3D` (dofs (v, omega), mass and inertia tensor from the geometry).
 """
 from __future__ import annotations
 
@@ -434,3 +437,375 @@ class RigidBody:
         """Inverse mass with driven dofs removed: diag(1/m, 1/m, 1/I), zero on driven dofs."""
         w = np.divide(1.0, self.mass, out=np.zeros(3), where=~self.driven)
         return np.diag(w)
+
+
+# ============================================================================= 3D
+def rotation3d(axis, angle: float | None = None) -> np.ndarray:
+    """Rotation matrix exp([w]x) (Rodrigues): `rotation3d(w)` for a rotation vector w (angle |w| about w/|w|),
+    or `rotation3d(axis, angle)`."""
+    w = np.asarray(axis, dtype=float).reshape(3)
+    if angle is not None:
+        nrm = np.linalg.norm(w)
+        if nrm == 0.0:
+            raise InputError(f"rotation axis = {axis!r}: expected a non-zero vector")
+        w = w / nrm * float(angle)
+    th = np.linalg.norm(w)
+    if th == 0.0:
+        return np.eye(3)
+    k = w / th
+    Kx = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+    return np.eye(3) + np.sin(th) * Kx + (1.0 - np.cos(th)) * (Kx @ Kx)
+
+
+def check_rotation3d(R, name: str = "rotation") -> np.ndarray:
+    R = np.asarray(R, dtype=float)
+    if R.shape != (3, 3) or not np.all(np.isfinite(R)) or not np.allclose(R @ R.T, np.eye(3), atol=1e-10) \
+            or np.linalg.det(R) <= 0:
+        raise InputError(f"{name}: expected a 3x3 rotation matrix (orthogonal, det = +1)")
+    return R
+
+
+def solid_properties(mesh):
+    """Volume V, centroid c and second moment S = ∫ (x - c)(x - c)^T dV of a BlockMesh3D, exact for its
+    geometry: tetrahedra in closed form, ∫_tet x x^T = V_e/20 (sum_a x_a x_a^T + (sum_a x_a)(sum_a x_a)^T);
+    trilinear hexahedra by 3x3x3 Gauss (x x^T det J is of degree 4 per reference direction)."""
+    from .meshing import cell_jacobians_3d, gauss_hex, hex_shape_functions
+    P = mesh.points[mesh.cells]
+    if mesh.cell_type == "tetrahedron":
+        Ve = cell_jacobians_3d(mesh.points, mesh.cells, "tetrahedron") / 6.0
+        V = Ve.sum()
+        c = np.einsum("c,cai->i", Ve, P) / (4.0 * V)
+        Y = P - c
+        s = Y.sum(axis=1)
+        S = np.einsum("c,cai,caj->ij", Ve, Y, Y) / 20.0 + np.einsum("c,ci,cj->ij", Ve, s, s) / 20.0
+        return float(V), c, S
+    X, W = gauss_hex(3)
+    dJ = cell_jacobians_3d(mesh.points, mesh.cells, "hexahedron", X)  # (nc, k)
+    x = np.einsum("ka,cai->cki", hex_shape_functions(X), P)  # (nc, k, 3)
+    w = dJ * W[None, :]
+    V = w.sum()
+    c = np.einsum("ck,cki->i", w, x) / V
+    y = x - c
+    S = np.einsum("ck,cki,ckj->ij", w, y, y)
+    return float(V), c, S
+
+
+def inertia_from_second_moment(rho_or_scale: float, S: np.ndarray) -> np.ndarray:
+    """Inertia tensor about the centroid, I = rho (tr(S) 1 - S)."""
+    return rho_or_scale * (np.trace(S) * np.eye(3) - S)
+
+
+def box_inertia(mass: float, lx: float, ly: float, lz: float) -> np.ndarray:
+    """Closed form for a homogeneous box: diag(m (ly² + lz²), m (lx² + lz²), m (lx² + ly²)) / 12."""
+    return mass / 12.0 * np.diag([ly * ly + lz * lz, lx * lx + lz * lz, lx * lx + ly * ly])
+
+
+class BlockType3D(BlockType):
+    """Prototype of identical 3D deformable blocks: BlockMesh3D + material -> K, M, C (assembled once) and the
+    cached StepOperator (factor of Mhat = M + h theta C + h^2 theta^2 K and W_bb over the boundary dofs
+    3*node + c). `material.thickness` and `material.plane` play no role in 3D."""
+
+    gdim = 3
+
+    def __init__(self, mesh, material: Material, mass: str = "lumped", name: str = "block"):
+        from . import fem_backend, meshing
+        if mass not in ("lumped", "consistent"):
+            raise InputError(f"{name}.mass = {mass!r}: expected 'lumped' or 'consistent'")
+        if not isinstance(mesh, meshing.BlockMesh3D):
+            raise InputError(f"{name}: expected a 3D mesh (BlockMesh3D), got {type(mesh).__name__}")
+        meshing.validate3d(mesh, source=name)
+        self.mesh, self.material, self.mass_kind, self.name = mesh, material, mass, name
+        m = material
+        ops = fem_backend.assemble_operators_3d(mesh, m.E, m.nu, m.rho)
+        self.K = ops.K.tocsr()
+        self.M = (ops.M_lumped if mass == "lumped" else ops.M_consistent).tocsr()
+        self.C = (m.alpha * self.M + m.beta * self.K).tocsr()
+        self.n_nodes = mesh.points.shape[0]
+        self.ndof = 3 * self.n_nodes
+        self.boundary_nodes = np.asarray(mesh.boundary_nodes(), dtype=np.int64)
+        self.bnode_index = -np.ones(self.n_nodes, dtype=np.int64)
+        self.bnode_index[self.boundary_nodes] = np.arange(self.boundary_nodes.size)
+        self.boundary_dofs = (3 * self.boundary_nodes[:, None] + np.arange(3)[None, :]).ravel()
+        self._ops: dict = {}
+        self._stress = None
+
+    @property
+    def stress_operator(self) -> sp.csr_matrix:
+        """S (6 nc x 3n): cell-centroid stress (sxx, syy, szz, syz, sxz, sxy) in the type frame from q."""
+        if self._stress is None:
+            from . import fem_backend
+            self._stress = fem_backend.stress_operator_3d(self.mesh, self.material.E, self.material.nu).tocsr()
+        return self._stress
+
+    def traction_load(self, tag: str, traction: np.ndarray) -> np.ndarray:
+        """Nodal forces of a uniform traction (type frame, N/m^2) on the faces tagged `tag`:
+        F_a = t ∫_faces N_a dA (exact: 3-point rule on triangles, 2x2 Gauss on bilinear quadrangles)."""
+        from .meshing import face_quadrature
+        mesh = self.mesh
+        if tag not in mesh.tag_names:
+            raise InputError(f"{self.name}: boundary tag {tag!r} not found; expected one of {sorted(mesh.tag_names)}")
+        faces = mesh.boundary_faces[mesh.face_tags == mesh.tag_names[tag]]
+        N, w = face_quadrature(mesh.points, faces)
+        wa = np.einsum("fka,fk->fa", N, w)  # ∫ N_a dA per face corner
+        nodal = np.bincount(faces.ravel(), weights=wa.ravel(), minlength=self.n_nodes)
+        return (nodal[:, None] * np.asarray(traction, dtype=float).reshape(1, 3)).ravel()
+
+
+@dataclass
+class Clamp3D:
+    """Zero-velocity condition on nodes selected by a global box (xmin, xmax, ymin, ymax, zmin, zmax) or a face
+    tag; `components` a non-empty subset of "xyz" (global components)."""
+
+    box: tuple | None = None
+    tag: str | None = None
+    components: str = "xyz"
+
+
+class DeformableBody3D:
+    """Instance of a BlockType3D placed by a rotation R (3x3, default identity) about the type origin, then a
+    translation: x = R X + c. Displacements and velocities q, u are stored in the type frame (3*node + c), so
+    the type's K, M, factor and W_bb are shared; global displacement = R q per node, and the boundary Delassus
+    block in the global frame is diag(R) W_bb diag(R)^T."""
+
+    kind = 0
+    gdim = 3
+
+    def __init__(self, block_type: BlockType3D, position=(0.0, 0.0, 0.0), R=None,
+                 clamps: Sequence[Clamp3D] = (), tractions: Sequence[Traction] = (), name: str = "block"):
+        self.type, self.name = block_type, name
+        self.position = np.asarray(position, dtype=float).reshape(3)
+        self.R = np.eye(3) if R is None else check_rotation3d(R, f"{name}.rotation")
+        self.tractions = list(tractions)
+        for tr in self.tractions:
+            tr.history = as_history(tr.history, f"{name}.traction.history")
+            if tr.tag not in block_type.mesh.tag_names:
+                raise InputError(f"{name}.traction.tag = {tr.tag!r}: expected one of "
+                                 f"{sorted(block_type.mesh.tag_names)}")
+            if np.asarray(tr.value, dtype=float).shape != (3,):
+                raise InputError(f"{name}.traction.value: expected 3 components (tx, ty, tz) [Pa]")
+        self.clamped = self._clamped_dofs(clamps)
+        self.q = np.zeros(block_type.ndof)
+        self.u = np.zeros(block_type.ndof)
+
+    @property
+    def reference_points(self) -> np.ndarray:
+        return self.type.mesh.points @ self.R.T + self.position
+
+    def current_points(self) -> np.ndarray:
+        return (self.type.mesh.points + self.q.reshape(-1, 3)) @ self.R.T + self.position
+
+    def displacement_global(self) -> np.ndarray:
+        return self.q.reshape(-1, 3) @ self.R.T
+
+    def velocity_global(self) -> np.ndarray:
+        return self.u.reshape(-1, 3) @ self.R.T
+
+    def _clamped_dofs(self, clamps) -> np.ndarray:
+        mask = np.zeros(self.type.ndof, dtype=bool)
+        X = self.reference_points
+        for c in clamps:
+            comps = c.components
+            if not comps or any(k not in "xyz" for k in comps) or len(set(comps)) != len(comps):
+                raise InputError(f"{self.name}.clamp.components = {comps!r}: expected a non-empty subset of 'xyz'")
+            if (c.box is None) == (c.tag is None):
+                raise InputError(f"{self.name}.clamp: give exactly one of box or tag")
+            if c.box is not None:
+                b = np.asarray(c.box, dtype=float).ravel()
+                if b.shape != (6,):
+                    raise InputError(f"{self.name}.clamp.box: expected (xmin, xmax, ymin, ymax, zmin, zmax)")
+                eps = 1e-9 * np.ptp(X, axis=0).max()
+                nodes = np.flatnonzero(np.all((X >= b[0::2] - eps) & (X <= b[1::2] + eps), axis=1))
+                if nodes.size == 0:
+                    raise InputError(f"{self.name}.clamp: the box {tuple(b)} selects no node")
+            else:
+                m = self.type.mesh
+                if c.tag not in m.tag_names:
+                    raise InputError(f"{self.name}.clamp.tag = {c.tag!r}: expected one of {sorted(m.tag_names)}")
+                nodes = np.unique(m.boundary_faces[m.face_tags == m.tag_names[c.tag]])
+                if nodes.size == 0:
+                    raise InputError(f"{self.name}.clamp.tag = {c.tag!r}: no face carries this tag")
+            if len(comps) == 3:
+                type_comps = [0, 1, 2]
+            else:
+                # global component i is one type-frame component only if R is a signed permutation
+                A = np.abs(self.R)
+                if not np.allclose(A, np.rint(A), atol=1e-12):
+                    raise InputError(f"{self.name}.clamp.components = {comps!r}: single components can be clamped "
+                                     f"only on blocks whose rotation maps axes to axes")
+                type_comps = [int(np.argmax(A["xyz".index(k)])) for k in comps]
+            for j in type_comps:
+                mask[3 * nodes + j] = True
+        return mask
+
+    def external_load(self, t: float, g: np.ndarray) -> np.ndarray:
+        """F(t) in the type frame: gravity + tractions."""
+        f = self.type.gravity_load(self.R.T @ g) if np.any(g) else np.zeros(self.type.ndof)
+        for tr in self.tractions:
+            f = f + tr.history(t) * self.type.traction_load(tr.tag, self.R.T @ np.asarray(tr.value, float))
+        return f
+
+
+DOF_NAMES_3D = ("x", "y", "z", "rx", "ry", "rz")
+
+
+class RigidBody3D:
+    """3D rigid body with dofs (vx, vy, vz, wx, wy, wz): velocity of its centre of mass and angular velocity
+    (global frame). Mass matrix diag(m, m, m) ⊕ I with I = Rot I0 Rot^T the inertia tensor about the centre of
+    mass in the current orientation Rot. Geometry: a BlockMesh3D, or the 8 corners of a hexahedral block (gmsh
+    order), or `RigidBody3D.box(...)`. Each dof is free (optional applied force/moment history) or driven
+    (Driver: prescribed velocity or displacement history), as the 2D RigidBody."""
+
+    kind = 1
+    gdim = 3
+
+    def __init__(self, geometry, rho: float | None = None, mass: float | None = None, inertia=None,
+                 drivers: dict | None = None, forces: dict | None = None, name: str = "rigid"):
+        from .meshing import BlockMesh3D, HEX_FACES, check_hex_corners, validate3d
+        self.name = name
+        if isinstance(geometry, BlockMesh3D):
+            validate3d(geometry, name)
+            mesh = geometry
+            faces = geometry.boundary_faces
+        else:
+            C = check_hex_corners(geometry, name)
+            mesh = BlockMesh3D(C, np.arange(8, dtype=np.int64)[None, :], "hexahedron", HEX_FACES.copy(),
+                               np.arange(6, dtype=np.int64), {}, name)
+            faces = HEX_FACES.copy()
+        V, c, S = solid_properties(mesh)
+        n_driven = len(drivers or {})
+        if mass is None and rho is None and n_driven == 6:
+            mass, I0 = 0.0, np.zeros((3, 3))  # fully driven: its inertia plays no role
+        elif mass is None:
+            if rho is None:
+                raise InputError(f"{name}: give rho (density) or mass")
+            check_range(f"{name}.rho", rho, 0.0, lo_open=True, expected="rho > 0 [kg/m^3]")
+            mass = rho * V
+            I0 = inertia_from_second_moment(rho, S) if inertia is None else self._inertia(inertia)
+        elif mass == 0.0 and n_driven == 6:
+            I0 = np.zeros((3, 3))
+        else:
+            check_range(f"{name}.mass", mass, 0.0, lo_open=True, expected="mass > 0 [kg]")
+            I0 = inertia_from_second_moment(mass / V, S) if inertia is None else self._inertia(inertia)
+        self.mass = float(mass)
+        self.inertia0 = I0  # about the centre of mass, reference orientation
+        self.volume = V
+        self.center0 = c
+        self.points_rel = mesh.points - c  # surface/vertex points relative to the centre of mass
+        self.boundary_faces = np.asarray(faces, dtype=np.int64)
+        self.orientation = np.eye(3)
+        self.drivers: dict[int, Driver] = {}
+        for k, d in (drivers or {}).items():
+            i = self._dof(k)
+            self.drivers[i] = d if isinstance(d, Driver) else Driver(*d, name=f"{name}.driver.{k}")
+        self.forces: dict[int, History] = {}
+        for k, f in (forces or {}).items():
+            i = self._dof(k)
+            if i in self.drivers:
+                raise InputError(f"{name}.forces.{k}: dof {k!r} is driven; a driven dof cannot also carry a force")
+            self.forces[i] = as_history(f, f"{name}.forces.{k}")
+        self.q = np.zeros(6)  # displacement of the centre of mass, accumulated rotation vector increments
+        self.u = np.zeros(6)
+        self.reaction = np.zeros(6)
+
+    @classmethod
+    def box(cls, lx: float, ly: float, lz: float, origin=(0.0, 0.0, 0.0), rho: float | None = None,
+            mass: float | None = None, **kw) -> "RigidBody3D":
+        """Box [0,lx]x[0,ly]x[0,lz] + origin with the closed-form inertia m (b² + c²)/12 (box_inertia) unless
+        `inertia` is given."""
+        from .meshing import box_corners
+        name = kw.get("name", "rigid")
+        for k, v in (("lx", lx), ("ly", ly), ("lz", lz)):
+            check_range(f"{name}.{k}", v, 0.0, lo_open=True, expected=f"{k} > 0 [m]")
+        if mass is None and rho is not None:
+            check_range(f"{name}.rho", rho, 0.0, lo_open=True, expected="rho > 0 [kg/m^3]")
+            mass = rho * lx * ly * lz
+        inertia = kw.pop("inertia", None)
+        if inertia is None and mass is not None and mass != 0.0:
+            inertia = box_inertia(mass, lx, ly, lz)
+        return cls(box_corners(lx, ly, lz, origin), mass=mass, inertia=inertia, **kw)
+
+    def _inertia(self, inertia) -> np.ndarray:
+        I = np.asarray(inertia, dtype=float)
+        if I.shape == (3,):
+            I = np.diag(I)
+        if I.shape != (3, 3) or not np.all(np.isfinite(I)) or not np.allclose(I, I.T, rtol=1e-12,
+                                                                               atol=1e-300):
+            raise InputError(f"{self.name}.inertia: expected a symmetric 3x3 tensor or 3 principal values [kg m^2]")
+        ev = np.linalg.eigvalsh(I)
+        if ev.min() <= 0 or ev[0] + ev[1] < ev[2] * (1 - 1e-12):
+            raise InputError(f"{self.name}.inertia: expected a positive definite tensor whose principal values "
+                             f"satisfy the triangle inequality I1 + I2 >= I3")
+        return I
+
+    def _dof(self, k) -> int:
+        if k in DOF_NAMES_3D:
+            return DOF_NAMES_3D.index(k)
+        if isinstance(k, (int, np.integer)) and 0 <= k < 6:
+            return int(k)
+        raise InputError(f"{self.name}: dof {k!r}: expected one of {DOF_NAMES_3D}")
+
+    def set_driver(self, dof, driver: "Driver | None"):
+        """Drive a dof (removing any applied force on it) or free it (driver None)."""
+        i = self._dof(dof)
+        if driver is None:
+            self.drivers.pop(i, None)
+            if self.mass == 0.0:
+                raise InputError(f"{self.name}: dof {DOF_NAMES_3D[i]!r} cannot be freed: the body has no mass "
+                                 f"(give rho or mass)")
+        else:
+            self.drivers[i] = driver
+            self.forces.pop(i, None)
+
+    def set_force(self, dof, history):
+        i = self._dof(dof)
+        if i in self.drivers:
+            self.set_driver(dof, None)
+        self.forces[i] = as_history(history, f"{self.name}.forces.{DOF_NAMES_3D[i]}")
+
+    @property
+    def driven(self) -> np.ndarray:
+        m = np.zeros(6, dtype=bool)
+        m[list(self.drivers)] = True
+        return m
+
+    @property
+    def center(self) -> np.ndarray:
+        return self.center0 + self.q[:3]
+
+    @property
+    def inertia(self) -> np.ndarray:
+        """Inertia tensor about the centre of mass in the current orientation: Rot I0 Rot^T."""
+        return self.orientation @ self.inertia0 @ self.orientation.T
+
+    @property
+    def mass_matrix(self) -> np.ndarray:
+        Mm = np.zeros((6, 6))
+        Mm[:3, :3] = self.mass * np.eye(3)
+        Mm[3:, 3:] = self.inertia
+        return Mm
+
+    def rotate(self, dphi):
+        """Compose the orientation with an incremental rotation vector dphi (global frame):
+        Rot <- exp([dphi]x) Rot; q[3:] accumulates dphi."""
+        dphi = np.asarray(dphi, dtype=float).reshape(3)
+        self.orientation = rotation3d(dphi) @ self.orientation
+        self.q[3:] += dphi
+
+    def current_points(self) -> np.ndarray:
+        return self.center + self.points_rel @ self.orientation.T
+
+    def applied_force(self, t: float, g: np.ndarray) -> np.ndarray:
+        f = np.zeros(6)
+        f[:3] = self.mass * np.asarray(g, dtype=float).reshape(3)
+        for i, hist in self.forces.items():
+            f[i] += hist(t)
+        return f
+
+    @property
+    def W(self) -> np.ndarray:
+        """Inverse of the mass matrix restricted to the free dofs (zero rows/columns on driven dofs)."""
+        free = ~self.driven
+        W = np.zeros((6, 6))
+        if free.any():
+            W[np.ix_(free, free)] = np.linalg.inv(self.mass_matrix[np.ix_(free, free)])
+        return W

@@ -11,6 +11,7 @@ Linear elasticity, small strain, P1 (triangles) / Q1 (quads), 2D:
 
 with t the thickness. Returned as scipy CSR in the BlockMesh node order, dof `2*node + c`.
 The cell-centroid stress operator S (3 nc x 2n) is plain numpy (no dolfinx).
+3D (BlockMesh3D, P1 tetrahedra / Q1 hexahedra, dof `3*node + c`): assemble_operators_3d, stress_operator_3d.
 """
 from __future__ import annotations
 
@@ -194,3 +195,146 @@ def von_mises(s: np.ndarray, nu: float, plane: str) -> np.ndarray:
     s = np.asarray(s).reshape(-1, 3)
     szz = nu * (s[:, 0] + s[:, 1]) if plane == "strain" else 0.0
     return np.sqrt(0.5 * ((s[:, 0] - s[:, 1]) ** 2 + (s[:, 1] - szz) ** 2 + (szz - s[:, 0]) ** 2) + 3 * s[:, 2] ** 2)
+
+
+# ============================================================================= 3D
+# Linear elasticity, small strain, P1 tetrahedra / Q1 hexahedra (BlockMesh3D):
+#     K = ∫ sigma(u) : eps(v) dx,  sigma = lambda tr(eps) I + 2 mu eps,
+#     lambda = E nu / ((1 + nu)(1 - 2 nu)),  mu = E / (2 (1 + nu)),
+#     M = rho ∫ u . v dx (consistent); lumped: vertex quadrature on tetrahedra, row sum on hexahedra.
+# Q1: K with 2x2x2 Gauss (exact on parallelepipeds, the standard full integration), M with 3x3x3 Gauss (exact on
+# any trilinear hexahedron: N_a N_b det J is of degree 4 per reference direction). Dofs `3*node + c`.
+
+def check_elastic_3d(E, nu):
+    """E > 0, -1 < nu < 0.5; InputError naming the field otherwise."""
+    check_range("E", E, 0.0, lo_open=True, expected="E > 0 [Pa]")
+    check_range("nu", nu, -1.0, 0.5, lo_open=True, hi_open=True, expected="-1 < nu < 0.5")
+
+
+def lame_3d(E, nu):
+    """(lambda, mu) of 3D isotropic elasticity."""
+    return E * nu / ((1 + nu) * (1 - 2 * nu)), E / (2 * (1 + nu))
+
+
+def _check_mesh3d(mesh):
+    if getattr(mesh, "gdim", 2) != 3 or mesh.cell_type not in ("tetrahedron", "hexahedron"):
+        raise InputError(f"{getattr(mesh, 'source', 'mesh')}: expected a 3D mesh (BlockMesh3D of tetrahedra or "
+                         f"hexahedra), got cell_type {getattr(mesh, 'cell_type', None)!r}")
+
+
+def assemble_operators_3d(mesh, E, nu, rho) -> FEOperators:
+    """K, M (consistent and lumped) of a BlockMesh3D with dolfinx, scipy CSR (3n x 3n) in the BlockMesh3D
+    node order, dof 3*node + c."""
+    check_elastic_3d(E, nu)
+    check_range("rho", rho, 0.0, lo_open=True, expected="rho > 0 [kg/m^3]")
+    _check_mesh3d(mesh)
+    import ufl
+    from mpi4py import MPI
+    from dolfinx import cpp, fem, mesh as dmesh
+    from dolfinx.fem.petsc import assemble_matrix
+    from dolfinx.io import gmshio
+
+    hexa = mesh.cell_type == "hexahedron"
+    cells = np.asarray(mesh.cells, dtype=np.int64)
+    if hexa:  # gmsh -> dolfinx (tensor-product) vertex order
+        cells = cells[:, cpp.io.perm_gmsh(cpp.mesh.CellType.hexahedron, 8)]
+    domain = gmshio.ufl_mesh(5 if hexa else 4, 3)  # one ufl.Mesh per dolfinx mesh (0.5.2 requirement)
+    msh = dmesh.create_mesh(MPI.COMM_SELF, cells, np.ascontiguousarray(mesh.points, dtype=np.float64), domain)
+    with _quiet_jit():
+        V = fem.VectorFunctionSpace(msh, ("Lagrange", 1))
+    n = mesh.points.shape[0]
+    if V.dofmap.index_map.size_local != n:
+        raise InputError(f"{mesh.source}: dolfinx built {V.dofmap.index_map.size_local} nodes for {n} mesh nodes")
+    d2g = np.empty(n, dtype=np.int64)
+    d2g[V.dofmap.list.array] = msh.geometry.dofmap.array
+    node = np.asarray(msh.geometry.input_global_indices, dtype=np.int64)[d2g]
+    perm = (3 * node[:, None] + np.arange(3)[None, :]).ravel()
+
+    lam_, mu_ = lame_3d(E, nu)
+    lam, mu = fem.Constant(msh, float(lam_)), fem.Constant(msh, float(mu_))
+    rho_c = fem.Constant(msh, float(rho))
+    u, v = ufl.TrialFunction(V), ufl.TestFunction(V)
+    eps = lambda w: ufl.sym(ufl.grad(w))  # noqa: E731
+    sig = lambda w: lam * ufl.tr(eps(w)) * ufl.Identity(3) + 2 * mu * eps(w)  # noqa: E731
+    if hexa:
+        dx_k = ufl.dx(metadata={"quadrature_degree": 2})  # 2 Gauss points per direction
+        dx_m = ufl.dx(metadata={"quadrature_degree": 4})  # 3 Gauss points per direction
+    else:
+        dx_k = dx_m = ufl.dx  # P1: exact by the estimated degrees (0 and 2)
+    with _quiet_jit():
+        k_form = fem.form(ufl.inner(sig(u), eps(v)) * dx_k)
+        m_form = fem.form(rho_c * ufl.inner(u, v) * dx_m)
+    mats = []
+    for f in (k_form, m_form):
+        A = assemble_matrix(f)
+        A.assemble()
+        mats.append(_petsc_to_scipy(A, perm))
+        A.destroy()
+    Ks, Ms = mats
+    if not hexa:
+        import warnings
+        with warnings.catch_warnings(), _quiet_jit():
+            warnings.simplefilter("ignore", UserWarning)  # "requested degree 2" of the vertex rule
+            ml_form = fem.form(rho_c * ufl.inner(u, v) * ufl.dx(metadata={"quadrature_rule": "vertex"}))
+        ML = assemble_matrix(ml_form)
+        ML.assemble()
+        Ml = sp.diags(_petsc_to_scipy(ML, perm).diagonal()).tocsr()
+        ML.destroy()
+    else:
+        Ml = sp.diags(np.asarray(Ms.sum(axis=1)).ravel()).tocsr()  # row-sum lumping (Q1)
+    return FEOperators(Ks, Ms, Ml)
+
+
+def elasticity_matrix_3d(E, nu) -> np.ndarray:
+    """D (6x6) with (sxx, syy, szz, syz, sxz, sxy) = D (exx, eyy, ezz, gyz, gxz, gxy), g = engineering shear."""
+    lam, mu = lame_3d(E, nu)
+    D = np.zeros((6, 6))
+    D[:3, :3] = lam
+    D[np.arange(3), np.arange(3)] += 2 * mu
+    D[np.arange(3, 6), np.arange(3, 6)] = mu
+    return D
+
+
+def centroid_gradients_3d(mesh) -> np.ndarray:
+    """dN_a/dx at each cell centroid: (nc, nv, 3) (exact constant for P1, value at xi = 0 for Q1)."""
+    from .meshing import hex_shape_gradients
+    P = mesh.points[mesh.cells]  # (nc, nv, 3)
+    if mesh.cell_type == "tetrahedron":
+        dN = np.array([[-1.0, -1.0, -1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+    else:
+        dN = hex_shape_gradients(np.zeros((1, 3)))[0]
+    J = np.einsum("cai,aj->cij", P, dN)  # dx_i / dxi_j
+    return np.einsum("aj,cji->cai", dN, np.linalg.inv(J))
+
+
+def strain_operator_3d(mesh) -> np.ndarray:
+    """Element B matrices at the centroids (nc, 6, 3 nv): (exx, eyy, ezz, gyz, gxz, gxy) = B q_e,
+    q_e = (u_x, u_y, u_z) per cell node."""
+    G = centroid_gradients_3d(mesh)
+    nc, nv = mesh.cells.shape
+    B = np.zeros((nc, 6, 3 * nv))
+    for i in range(3):
+        B[:, i, i::3] = G[:, :, i]
+    B[:, 3, 1::3], B[:, 3, 2::3] = G[:, :, 2], G[:, :, 1]  # gyz = du_y/dz + du_z/dy
+    B[:, 4, 0::3], B[:, 4, 2::3] = G[:, :, 2], G[:, :, 0]  # gxz
+    B[:, 5, 0::3], B[:, 5, 1::3] = G[:, :, 1], G[:, :, 0]  # gxy
+    return B
+
+
+def stress_operator_3d(mesh, E, nu) -> sp.csr_matrix:
+    """S (6 nc x 3n): cell-centroid Cauchy stress (sxx, syy, szz, syz, sxz, sxy) = D B(centroid) q."""
+    check_elastic_3d(E, nu)
+    _check_mesh3d(mesh)
+    DB = np.einsum("ij,cjk->cik", elasticity_matrix_3d(E, nu), strain_operator_3d(mesh))
+    nc, nv = mesh.cells.shape
+    dofs = (3 * mesh.cells[:, :, None] + np.arange(3)[None, None, :]).reshape(nc, 3 * nv)
+    rows = np.broadcast_to((6 * np.arange(nc))[:, None, None] + np.arange(6)[None, :, None], DB.shape)
+    cols = np.broadcast_to(dofs[:, None, :], DB.shape)
+    return sp.csr_matrix((DB.ravel(), (rows.ravel(), cols.ravel())), shape=(6 * nc, 3 * mesh.points.shape[0]))
+
+
+def von_mises_3d(s: np.ndarray) -> np.ndarray:
+    """von Mises stress of (sxx, syy, szz, syz, sxz, sxy) rows."""
+    s = np.asarray(s).reshape(-1, 6)
+    return np.sqrt(0.5 * ((s[:, 0] - s[:, 1]) ** 2 + (s[:, 1] - s[:, 2]) ** 2 + (s[:, 2] - s[:, 0]) ** 2)
+                   + 3 * (s[:, 3] ** 2 + s[:, 4] ** 2 + s[:, 5] ** 2))
