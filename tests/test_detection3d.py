@@ -346,3 +346,44 @@ def test_bad_input():
         detect([(V, F + 1), box((0, 0, 1))])
     with pytest.raises(InputError, match="tri_rule"):
         detect([box(), box((0, 0, 1))], d3.simple_table(tri_rule=2))
+
+
+def test_running_bond_wall_count_and_area():
+    # rows of n bricks 0.5 x 0.3 x 0.25, odd rows shifted by a quarter brick: 4 points per head joint;
+    # on each bed joint every lower brick keeps its 4 points except the 2 beyond the upper row's end
+    n, rows, L, T, H = 20, 10, 0.5, 0.3, 0.25
+    bodies = [box((i * L + (L / 2 if k % 2 else 0), 0, k * H), (L, T, H)) for k in range(rows) for i in range(n)]
+    cs, flat = detect(bodies)
+    n_head, n_bed = rows * (n - 1) * 4, (rows - 1) * (4 * n - 2)
+    assert len(cs) == n_head + n_bed
+    bed = np.abs(cs.n[:, 2]) > 0.5
+    assert bed.sum() == n_bed and np.array_equal(cs.n[bed], np.tile([0, 0, -1.0], (n_bed, 1)))  # upper = antagonist
+    assert abs(cs.area.sum() - (rows * (n - 1) * H * T + (rows - 1) * (n * L - L / 2) * T)) < 1e-12
+    assert np.all(cs.cand_body < cs.ant_body) and np.all(np.abs(cs.gap) < 1e-15)
+    check_interpolation(cs, flat)
+
+
+def test_delassus3d_vs_dense():
+    # 3 bodies (deformable, rigid, deformable) in a column: W_del = G W Gᵀ with G assembled densely
+    bodies = [box((0, 0, 2)), box((0, 0, 1)), box((0.1, 0.2, 0))]
+    kind = np.array([0, 1, 0])
+    cs, _ = detect(bodies, kind=kind)
+    assert len(cs) == 8
+    centers = np.array([b[0].mean(0) for b in bodies])
+    G = k3.build_G(cs, kind, None, centers)
+    size = np.where(kind == 0, 24, 6)
+    off = np.concatenate([[0], np.cumsum(size)])
+    rng = np.random.default_rng(4)
+    Ws = [(lambda A: A @ A.T)(rng.normal(size=(m, m))) for m in size]
+    W_offset = np.concatenate([[0], np.cumsum(size ** 2)[:-1]])
+    D = k3.assemble_delassus(G, np.concatenate([w.ravel() for w in Ws]), W_offset, size, 3)
+    Gd = np.zeros((3 * len(cs), off[-1]))
+    for j in range(off[-1]):
+        e = np.zeros(off[-1])
+        e[j] = 1.0
+        Gd[:, j] = k3.local_velocity(G, e, off).ravel()
+    from scipy.linalg import block_diag
+    ref = Gd @ block_diag(*Ws) @ Gd.T
+    dense = D.to_scipy().toarray()
+    assert np.abs(dense - ref).max() < 1e-12 * np.abs(ref).max()
+    assert np.all(D.indices[D.diag_pos] == np.arange(len(cs)))

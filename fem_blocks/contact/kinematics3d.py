@@ -158,3 +158,102 @@ def accumulate_impulse(G: GBlocks3D, P, n_total: int, U_offset) -> np.ndarray:
     _accumulate(G.side_body, G.side_dofs, G.side_G, np.ascontiguousarray(P, dtype=float).reshape(-1, 3),
                 np.asarray(U_offset, dtype=np.int64), out)
     return out
+
+
+# ----------------------------------------------------------------------------- Delassus operator (3D)
+@njit(cache=True)
+def _assemble_rows3(nc, order, ent_contact, ent_side, starts, side_body, side_dofs, side_G, W_flat, W_offset,
+                    W_size):
+    """Row-by-row block-CSR assembly of w^{ab} = Σ_{shared body} G^a_s W_b G^b_s'ᵀ (3 x 3 blocks), columns
+    sorted, duplicates (both sides on one body) summed in place. Same algorithm as delassus._assemble_rows."""
+    nd = side_dofs.shape[2]
+    marker = -np.ones(nc, dtype=np.int64)
+    counts = np.zeros(nc, dtype=np.int64)
+    for a in range(nc):
+        for s in range(2):
+            b = side_body[a, s]
+            for e in range(starts[b], starts[b + 1]):
+                c = ent_contact[order[e]]
+                if marker[c] != a:
+                    marker[c] = a
+                    counts[a] += 1
+    indptr = np.zeros(nc + 1, dtype=np.int64)
+    for a in range(nc):
+        indptr[a + 1] = indptr[a] + counts[a]
+    nnz = indptr[nc]
+    indices = np.empty(nnz, dtype=np.int64)
+    blocks = np.zeros((nnz, 3, 3))
+    diag_pos = np.empty(nc, dtype=np.int64)
+    pos_of = -np.ones(nc, dtype=np.int64)
+    marker[:] = -1
+    GW = np.zeros((3, nd))
+    for a in range(nc):
+        k = indptr[a]
+        for s in range(2):
+            b = side_body[a, s]
+            for e in range(starts[b], starts[b + 1]):
+                c = ent_contact[order[e]]
+                if marker[c] != a:
+                    marker[c] = a
+                    indices[k] = c
+                    k += 1
+        row = indices[indptr[a]:indptr[a + 1]]
+        row.sort()
+        for kk in range(indptr[a], indptr[a + 1]):
+            pos_of[indices[kk]] = kk
+        diag_pos[a] = pos_of[a]
+        for s in range(2):
+            b = side_body[a, s]
+            off = W_offset[b]
+            sz = W_size[b]
+            for e in range(starts[b], starts[b + 1]):
+                ee = order[e]
+                c = ent_contact[ee]
+                sc = ent_side[ee]
+                GW[:, :] = 0.0
+                for i in range(nd):
+                    di = side_dofs[a, s, i]
+                    if di < 0:
+                        continue
+                    for j in range(nd):
+                        dj = side_dofs[c, sc, j]
+                        if dj < 0:
+                            continue
+                        w = W_flat[off + di * sz + dj]
+                        if w == 0.0:
+                            continue
+                        for r in range(3):
+                            GW[r, j] += side_G[a, s, r, i] * w
+                kk = pos_of[c]
+                for r in range(3):
+                    for q in range(3):
+                        acc = 0.0
+                        for j in range(nd):
+                            acc += GW[r, j] * side_G[c, sc, q, j]
+                        blocks[kk, r, q] += acc
+    return indptr, indices, blocks, diag_pos
+
+
+def assemble_delassus(G: GBlocks3D, W_flat, W_offset, W_size, nb: int):
+    """Block-CSR 3D Delassus operator w^{ab} = G^a W H^b (3 x 3 blocks, local order (n, t, s)) from the G blocks
+    and the per-body dense W stored flat (row-major square block of size W_size[b] at W_offset[b]; deformable:
+    3 dofs per boundary node, rigid: 6 x 6). Returns solver.nlgs.BlockCSR."""
+    from ..solver.nlgs import BlockCSR
+
+    nc = G.side_body.shape[0]
+    W_size = np.asarray(W_size, dtype=np.int64)
+    if len(W_size) != nb or np.asarray(W_offset).shape != (nb,):
+        raise InputError(f"W_offset / W_size: expected {nb} entries (one per body)")
+    if nc and np.any(G.side_dofs.max(axis=2) >= W_size[G.side_body]):
+        raise InputError("G blocks: a dof index exceeds its body's W size")
+    ent_body = G.side_body.ravel()
+    ent_contact = np.repeat(np.arange(nc, dtype=np.int64), 2)
+    ent_side = np.tile(np.array([0, 1], dtype=np.int64), nc)
+    order = np.argsort(ent_body, kind="stable").astype(np.int64)
+    starts = np.zeros(nb + 1, dtype=np.int64)
+    starts[1:] = np.cumsum(np.bincount(ent_body, minlength=nb))
+    indptr, indices, blocks, diag_pos = _assemble_rows3(
+        nc, order, ent_contact, ent_side, starts, np.ascontiguousarray(G.side_body, dtype=np.int64),
+        np.ascontiguousarray(G.side_dofs, dtype=np.int64), np.ascontiguousarray(G.side_G, dtype=np.float64),
+        np.ascontiguousarray(W_flat, dtype=float), np.asarray(W_offset, dtype=np.int64), W_size)
+    return BlockCSR(indptr, indices, blocks, diag_pos)
