@@ -218,9 +218,9 @@ def test_areas_of_skewed_and_warped_candidate_faces():
     assert len(cs) == 4 and abs(cs.area.sum() - exact) < 1e-14
     # 0.25/0.75 cells of a skewed quad are not equal: compare each with its own exact bilinear integral
     Vw = V.copy()
-    Vw[1, 2] = 2e-4
-    Vw[3, 2] = 1e-4
-    cs, _ = detect([(Vw, F), slab])
+    Vw[1, 2] = 0.05
+    Vw[3, 2] = 0.03
+    cs, _ = detect([(Vw, F), slab], d3.simple_table(alert=0.1))
     X = Vw[[0, 1, 2, 3]]
     c0, a, b, d = X.mean(0), (-X[0] + X[1] + X[2] - X[3]) / 4, (-X[0] - X[1] + X[2] + X[3]) / 4, \
         (X[0] - X[1] + X[2] - X[3]) / 4
@@ -229,6 +229,20 @@ def test_areas_of_skewed_and_warped_candidate_faces():
     J = np.linalg.norm(np.cross(a + W[..., None] * d, b + U[..., None] * d), axis=-1)
     A_fine = (np.outer(gw, gw) * J).sum()
     assert len(cs) == 4 and abs(cs.area.sum() - A_fine) < 1e-12 * A_fine
+    # the same warped face as antagonist (body 1, under a cube): projections interpolate on the bilinear patch
+    up = box((0.3, 0.3, 0.06), (0.5, 0.5, 0.5))
+    Vf = Vw.copy()
+    Vf[:, 2] = -Vf[:, 2]
+    Vf[4:, 2] = -1.0
+    Ff = F[:, ::-1]  # mirrored in z: reverse the orientation; the warped face is now the top (face 0)
+    cs, flat = detect([up, (Vf, Ff)], d3.simple_table(alert=0.1))
+    assert len(cs) == 4 and np.all(cs.ant_face == 6)
+    check_frame(cs)
+    check_interpolation(cs, flat)
+    for k in range(4):
+        r = d3.project_point(Vf, Ff, 0, cs.point[k])
+        assert r["inside"] and abs(r["gap"] - cs.gap[k]) < 1e-15 and np.abs(r["n"] - cs.n[k]).max() < 1e-15
+        assert r["gap"] > 0.06 - 0.05 and np.abs(cs.point[k] - r["x"] - r["gap"] * r["n"]).max() < 1e-13
 
 
 def test_many_blocks_contact_count():

@@ -321,6 +321,8 @@ def _project(coef, nv, f, p0, p1, p2, out):
     ar = ax * rx + ay * ry + az * rz
     br = bxx * rx + by * ry + bz * rz
     det = aa * bb - ab * ab
+    if not det > 0.0:
+        return False
     u = (bb * ar - ab * br) / det
     v = (aa * br - ab * ar) / det
     if nv[f] == 3:
