@@ -216,6 +216,16 @@ def test_areas_of_skewed_and_warped_candidate_faces():
     cs, _ = detect([(V, F), slab])
     exact = 0.5 * np.linalg.norm(np.cross(Xs[2] - Xs[0], Xs[1] - Xs[3]))
     assert len(cs) == 4 and abs(cs.area.sum() - exact) < 1e-14
+    # planar bilinear quad: |x_ξ × x_η| is affine in (ξ, η), so the area of the unit cell around the point
+    # (ξ, η) = (±1/2, ±1/2) is |x_ξ × x_η| at that point (the four are different on this skewed quad)
+    X = Xs[[0, 1, 2, 3]]
+    a, b, d = (-X[0] + X[1] + X[2] - X[3]) / 4, (-X[0] - X[1] + X[2] + X[3]) / 4, (X[0] - X[1] + X[2] - X[3]) / 4
+    xi = cs.cand_w @ [-1.0, 1, 1, -1]  # bilinear weights reproduce the corner coordinates
+    eta = cs.cand_w @ [-1.0, -1, 1, 1]
+    assert np.abs(np.abs(xi) - 0.5).max() < 1e-15 and np.abs(np.abs(eta) - 0.5).max() < 1e-15
+    J = np.linalg.norm(np.cross(a + eta[:, None] * d, b + xi[:, None] * d), axis=1)
+    assert np.abs(cs.area - J).max() < 1e-15
+    assert np.ptp(cs.area) > 0.02  # not a uniform split
     # 0.25/0.75 cells of a skewed quad are not equal: compare each with its own exact bilinear integral
     Vw = V.copy()
     Vw[1, 2] = 0.05
