@@ -186,7 +186,10 @@ def _assemble_rows3(nc, order, ent_contact, ent_side, starts, side_body, side_do
     diag_pos = np.empty(nc, dtype=np.int64)
     pos_of = -np.ones(nc, dtype=np.int64)
     marker[:] = -1
-    GW = np.zeros((3, nd))
+    maxsz = 0
+    for b in range(W_size.shape[0]):
+        maxsz = max(maxsz, W_size[b])
+    GW = np.zeros((3, maxsz))
     for a in range(nc):
         k = indptr[a]
         for s in range(2):
@@ -206,31 +209,36 @@ def _assemble_rows3(nc, order, ent_contact, ent_side, starts, side_body, side_do
             b = side_body[a, s]
             off = W_offset[b]
             sz = W_size[b]
+            # GW = G^a_s W_b over all of body b's dofs (once per side), then one 3 x 3 product per neighbour
+            for r in range(3):
+                for j in range(sz):
+                    GW[r, j] = 0.0
+            for i in range(nd):
+                di = side_dofs[a, s, i]
+                if di < 0:
+                    continue
+                g0 = side_G[a, s, 0, i]
+                g1 = side_G[a, s, 1, i]
+                g2 = side_G[a, s, 2, i]
+                base = off + di * sz
+                for j in range(sz):
+                    w = W_flat[base + j]
+                    GW[0, j] += g0 * w
+                    GW[1, j] += g1 * w
+                    GW[2, j] += g2 * w
             for e in range(starts[b], starts[b + 1]):
                 ee = order[e]
                 c = ent_contact[ee]
                 sc = ent_side[ee]
-                GW[:, :] = 0.0
-                for i in range(nd):
-                    di = side_dofs[a, s, i]
-                    if di < 0:
-                        continue
-                    for j in range(nd):
-                        dj = side_dofs[c, sc, j]
-                        if dj < 0:
-                            continue
-                        w = W_flat[off + di * sz + dj]
-                        if w == 0.0:
-                            continue
-                        for r in range(3):
-                            GW[r, j] += side_G[a, s, r, i] * w
                 kk = pos_of[c]
-                for r in range(3):
-                    for q in range(3):
-                        acc = 0.0
-                        for j in range(nd):
-                            acc += GW[r, j] * side_G[c, sc, q, j]
-                        blocks[kk, r, q] += acc
+                for j in range(nd):
+                    dj = side_dofs[c, sc, j]
+                    if dj < 0:
+                        continue
+                    for r in range(3):
+                        gw = GW[r, dj]
+                        for q in range(3):
+                            blocks[kk, r, q] += gw * side_G[c, sc, q, j]
     return indptr, indices, blocks, diag_pos
 
 
