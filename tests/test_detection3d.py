@@ -411,3 +411,29 @@ def test_delassus3d_vs_dense():
     dense = D.to_scipy().toarray()
     assert np.abs(dense - ref).max() < 1e-12 * np.abs(ref).max()
     assert np.all(D.indices[D.diag_pos] == np.arange(len(cs)))
+
+
+@pytest.mark.parametrize("placement", ["positions", "nodes"])
+def test_update_geometry_rigid_motion_and_redetect(placement):
+    bodies = [box((0.1, 0.2, 1 + 2e-4)), box((0, 0, 0), (1.5, 1.3, 1))]
+    table = d3.simple_table(placement=placement)
+    cs, flat = detect(bodies, table)
+    assert len(cs) == 4
+    # a rigid motion of the whole scene: same gaps, rotated frames, moved points
+    R = rot([1, -2, 0.5], 0.7)
+    c = np.array([0.3, -1.0, 2.0])
+    bx2 = flat[0] @ R.T + c
+    up = d3.update_geometry(cs, bx2, flat[3])
+    assert np.abs(up.gap - cs.gap).max() < 1e-14
+    for f in ("n", "t", "s"):
+        assert np.abs(getattr(up, f) - getattr(cs, f) @ R.T).max() < 1e-14
+    assert np.abs(up.point - (cs.point @ R.T + c)).max() < 1e-14 and np.abs(up.ant_w - cs.ant_w).max() < 1e-14
+    # a small motion of the upper body: the same result as a fresh detection
+    bx3 = flat[0].copy()
+    bx3[:8] += [0.01, -0.02, 3e-4]
+    up = d3.update_geometry(cs, bx3, flat[3])
+    fresh = d3.detect(bx3, *flat[1:], np.zeros(2, int), np.zeros(2, int), table)
+    m = d3.match(cs, fresh)
+    assert np.all(m >= 0)
+    for f in ("point", "n", "t", "s", "gap", "ant_w", "ant_ref", "area"):
+        assert np.abs(getattr(up, f)[m] - getattr(fresh, f)).max() < 1e-14, f

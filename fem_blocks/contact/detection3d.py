@@ -884,3 +884,60 @@ def match(old: ContactSet3D, new: ContactSet3D) -> np.ndarray:
     pos = np.minimum(np.searchsorted(co[o], cn), len(co) - 1)
     hit = co[o][pos] == cn
     return np.where(hit, o[pos], -1).astype(np.int64)
+
+
+@njit(cache=True)
+def _update(bx, bfaces, coef, nv, cand_face, cand_slots, cand_w, ant_face, point, n, t, s, gap, ref, ant_w):
+    """Candidate points from their weights, re-projected on the same antagonist faces (see update_geometry)."""
+    out = np.empty(15)
+    w = np.empty(4)
+    bad = -1
+    for c in range(cand_face.shape[0]):
+        for d in range(3):
+            acc = 0.0
+            for k in range(4):
+                node = cand_slots[c, k]
+                if node >= 0:
+                    acc += cand_w[c, k] * bx[node, d]
+            point[c, d] = acc
+        if not _project(coef, nv, ant_face[c], point[c, 0], point[c, 1], point[c, 2], out):
+            bad = c
+            continue
+        _weights(nv[ant_face[c]], out[0], out[1], np.inf, w)
+        for d in range(3):
+            n[c, d] = out[5 + d]
+            t[c, d] = out[8 + d]
+            s[c, d] = out[11 + d]
+        for k in range(4):
+            ant_w[c, k] = w[k]
+        gap[c] = out[14]
+        ref[c, 0] = out[0]
+        ref[c, 1] = out[1]
+    return bad
+
+
+def update_geometry(cs: ContactSet3D, bx, bfaces) -> ContactSet3D:
+    """Same pairs, candidate weights and areas; candidate points, projections (same antagonist faces, weights
+    clamped into the face), frames and gaps recomputed from the current positions `bx` (small-sliding mode).
+    bfaces as given to `detect`."""
+    bx = np.ascontiguousarray(bx, dtype=float)
+    bfaces = np.asarray(bfaces, dtype=np.int64)
+    if bfaces.shape[1] == 3:
+        bfaces = np.column_stack([bfaces, -np.ones(len(bfaces), dtype=np.int64)])
+    bfaces = np.ascontiguousarray(bfaces)
+    coef, nv, *_ = _face_data(bx, bfaces, _GX, _GW)
+    nc = len(cs)
+    # bx slots of the candidate nodes: face corners for position points, the node itself for node points
+    slots = bfaces[cs.cand_face].copy()
+    node_pt = cs.key < 0
+    slots[node_pt] = -1
+    slots[node_pt, 0] = -cs.key[node_pt] - 1
+    out = ContactSet3D(**dict(cs.__dict__))
+    out.point, out.n, out.t, out.s = (np.zeros((nc, 3)) for _ in range(4))
+    out.gap, out.ant_ref, out.ant_w = np.zeros(nc), np.zeros((nc, 2)), np.zeros((nc, 4))
+    bad = _update(bx, bfaces, coef, nv, cs.cand_face, np.ascontiguousarray(slots), cs.cand_w, cs.ant_face,
+                  out.point, out.n, out.t, out.s, out.gap, out.ant_ref, out.ant_w)
+    if bad >= 0:
+        raise InputError(f"contact {bad}: its projection on antagonist face {int(cs.ant_face[bad])} failed "
+                         f"(degenerate face)")
+    return out
