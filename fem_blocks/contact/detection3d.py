@@ -451,7 +451,7 @@ def _grid_pairs3(lo, hi, cell, origin, dims):
     """Pairs (i, j), i < j, of boxes that overlap (closed boxes), each pair once: uniform grid, a pair is
     reported only from the cell holding the min corner of the two boxes' intersection."""
     n = lo.shape[0]
-    nx, ny, nz = dims[0], dims[1], dims[2]
+    ny, nz = dims[1], dims[2]
     cnt = np.zeros(n, dtype=np.int64)
     rng = np.empty((n, 6), dtype=np.int64)
     for e in range(n):
@@ -785,6 +785,8 @@ def detect(bx, bnode_body, bnode_local, bfaces, bface_body, kind, body_group, ta
         raise InputError(f"body_group: expected group ids in [0, {table.pair_iface.shape[0]})")
     if not 0 <= reach_frac <= 1:
         raise InputError("reach_frac: expected 0 <= reach_frac <= 1")
+    if vertical not in (0, 1, 2):
+        raise InputError(f"vertical: expected the index 0, 1 or 2 of the vertical axis, got {vertical!r}")
     if not 0 <= inside_tol < 0.5:
         raise InputError("inside_tol: expected 0 <= inside_tol < 0.5")
     coef, nv, nrm, farea, flo, fhi = _face_data(bx, bfaces, _GX, _GW)
