@@ -84,10 +84,10 @@ def test_fclib_3d_pure_newton_from_zero(name):
 
 @pytest.mark.skipif(not PROBLEMS_3D, reason="FCLIB data not available")
 @pytest.mark.parametrize("name", ["fclib_local_problem_test", "BoxesStack1-i100000-32", "OneObject-i100000-316",
-                                  "Capsules-i97-269"])
+                                  "spheres-in-a-box-98-i10000-256-10", "Capsules-i97-269"])
 def test_nlgs_hands_over_to_newton_when_it_stagnates(name):
     """OneObject: the given order cycles (period 2, residual 1.7e-3 forever); the stacked boxes crawl (1e-8 only
-    after 1.7e5-2.6e5 sweeps). With fallback="newton" the stagnation is detected after a few hundred sweeps."""
+    after 1.7e5-2.6e5 sweeps), the sphere packing too (8e-8 after 1e6 sweeps). With fallback="newton" the stagnation is detected after a few hundred sweeps."""
     p = problem(name)
     res = nlgs.solve(p.W, p.q, p.mu, dim=3, tol=1e-8, max_sweeps=20000, criterion="residual", check_every=10,
                      fallback="newton")

@@ -1,4 +1,4 @@
-"""Global semismooth Newton (Alart–Curnier) for 2D frictional contact, with NLGS as start and fallback.
+"""Global semismooth Newton (Alart–Curnier) for 2D and 3D frictional contact, with NLGS as start and fallback.
 
 Same problem as solver/nlgs.py: u = W r + q, Signorini–Coulomb per contact (normal first). Gauss–Seidel
 converges slowly when W couples many contacts strongly (stiff quasi-static steps: W ≈ K⁻¹/h² over a wall of
@@ -33,10 +33,16 @@ every accepted step with t >= 0.1 (2D: only after full steps): near-parallel con
 W with cosine 0.99999994, one of the two must open) need ε below their tiny eigenvalue, and with the 2D rule ε
 stayed at 1e-4 W_αα while steps of t = 0.25/0.5 alternated, a plateau at 1.8e-6 from Gauss–Seidel starts of 400+
 sweeps (with the 3D rule: 73 iterations from 400 sweeps; from 1000–10000 sweeps still 240–284 iterations, more
-than the default max_iter = 200, because that plateau is only left by the restarts below). Stagnation watch (3D): when 30 iterations have not halved the residual, 20 Gauss–Seidel sweeps and a
+than the default max_iter = 200, because that plateau is only left by the restarts below).
+Stagnation watch (3D): when 30 iterations have not halved the residual, 20 Gauss–Seidel sweeps and a
 restart (ε and the merit memory reset). From r = 0 the non-monotone iteration can wander between cases for
 hundreds of iterations (KaplasTower, 570 contacts: residual between 1e-3 and 5e-2 for 400 iterations); with the
 watch it reaches 1e-8 in 150. The 2D path keeps its rules (memory = 1, no watch, results unchanged).
+
+Choosing the solver: `solve_newton` (20 NLGS sweeps, then Newton) where W couples contacts strongly (stacks,
+packings, stiff walls: Gauss–Seidel stalls or cycles there); `nlgs.solve(..., criterion="residual",
+fallback="newton")` keeps Gauss–Seidel where it converges and hands over to this Newton when a window of 200 sweeps
+does not halve the residual. Every 3D FCLIB problem reaches 1e-8 both ways (tests/test_newton3d.py).
 """
 from __future__ import annotations
 
