@@ -122,7 +122,9 @@ def test_hanging_weight_with_newton(newton_contacts, law, params, strength):
 
 def test_bad_arguments():
     W, q = random_problem(n=5)
+    # 3D is supported by solve_newton (tests/test_newton3d.py), not by the interface-law solver
     with pytest.raises(Exception, match="2D"):
-        newton.solve_newton(nlgs.to_block_csr(np.eye(6), 3), np.zeros(6), 0.3)
+        newton.solve_cohesive_newton(nlgs.to_block_csr(np.eye(6), 3), np.zeros(6), 0.3, np.zeros(2, dtype=int),
+                                     np.zeros((2, 16)), np.zeros((2, 6)), np.zeros((2, 2)), np.ones(2), 1e-3, 0.5)
     with pytest.raises(Exception, match="r0"):
         newton.solve_newton(nlgs.to_block_csr(W, 2), q, 0.3, r0=np.zeros(3))

@@ -415,11 +415,32 @@ def _check(bcsr: BlockCSR, q, mu, tol, max_sweeps, omega, order, check_every):
 
 def solve_block_csr(W: BlockCSR, q, mu, r0=None, tol: float = 1e-8, max_sweeps: int = 10000,
                     omega: float = 1.0, order: str = "given", seed: int = 0, criterion: str = "change",
-                    check_every: int = 1) -> NLGSResult:
+                    check_every: int = 1, fallback: str = "none", stall_sweeps: int = 200,
+                    stall_factor: float = 0.5, newton_max_iter: int = 200) -> NLGSResult:
     """NLGS on block-CSR arrays (2x2 or 3x3 blocks). criterion "change": stop when ‖Δr‖/‖r‖ <= tol over a
-    sweep; "residual": stop when the FCLIB residual ‖F‖/‖q‖ <= tol (checked every `check_every` sweeps)."""
+    sweep; "residual": stop when the FCLIB residual ‖F‖/‖q‖ <= tol (checked every `check_every` sweeps).
+
+    fallback "newton" (criterion "residual" only): Gauss–Seidel runs in windows of `stall_sweeps` sweeps; when a
+    window does not reduce the residual below `stall_factor` times its value at the window's start (stagnation:
+    slow convergence or a cycle), or `max_sweeps` is spent, the global semismooth Newton (solver/newton.py,
+    `newton_max_iter` iterations, no further Gauss–Seidel start) continues from the current reactions. The
+    message says which solver finished; `sweeps` counts sweeps + Newton iterations + Newton's fallback sweeps."""
     if criterion not in ("change", "residual"):
         raise InputError(f"criterion = {criterion!r}: expected 'change' or 'residual'")
+    if fallback not in ("none", "newton"):
+        raise InputError(f"fallback = {fallback!r}: expected 'none' or 'newton'")
+    if fallback == "newton":
+        if criterion != "residual":
+            raise InputError("fallback = 'newton' needs criterion = 'residual' (stagnation is measured on the "
+                             "FCLIB residual)")
+        if int(stall_sweeps) != stall_sweeps or stall_sweeps < 1:
+            raise InputError(f"stall_sweeps = {stall_sweeps!r}: expected an integer >= 1")
+        if not (0.0 < stall_factor < 1.0):
+            raise InputError(f"stall_factor = {stall_factor!r}: expected 0 < stall_factor < 1")
+        if int(newton_max_iter) != newton_max_iter or newton_max_iter < 1:
+            raise InputError(f"newton_max_iter = {newton_max_iter!r}: expected an integer >= 1")
+        return _solve_with_newton_fallback(W, q, mu, r0, tol, max_sweeps, omega, order, seed, check_every,
+                                           int(stall_sweeps), float(stall_factor), int(newton_max_iter))
     q, mu = _check(W, q, mu, tol, max_sweeps, omega, order, check_every)
     n, d = W.n, W.dim
     r = np.zeros(d * n) if r0 is None else np.array(r0, dtype=np.float64).ravel()
@@ -450,16 +471,57 @@ def solve_block_csr(W: BlockCSR, q, mu, r0=None, tol: float = 1e-8, max_sweeps: 
                       cases if d == 3 else None)
 
 
+def _solve_with_newton_fallback(W, q, mu, r0, tol, max_sweeps, omega, order, seed, check_every, window,
+                                factor, newton_max_iter):
+    """Gauss–Seidel in windows of `window` sweeps, then global Newton once it stagnates (see solve_block_csr)."""
+    total = 0
+    res = solve_block_csr(W, q, mu, r0=r0, tol=tol, max_sweeps=min(window, max_sweeps), omega=omega, order=order,
+                          seed=seed, criterion="residual", check_every=check_every)
+    total += res.sweeps
+    cases = res.local_cases.copy() if res.local_cases is not None else None
+    k = 0
+    while not res.converged and total < max_sweeps:
+        k += 1
+        start = res.residual
+        res = solve_block_csr(W, q, mu, r0=res.r, tol=tol, max_sweeps=min(window, max_sweeps - total),
+                              omega=omega, order=order, seed=seed + k, criterion="residual",
+                              check_every=check_every)
+        total += res.sweeps
+        if cases is not None:
+            cases += res.local_cases
+        if not res.converged and res.residual > factor * start:
+            break
+    if res.converged:
+        res.sweeps = total
+        res.message = f"converged in {total} sweeps (Gauss-Seidel alone)"
+        res.local_cases = cases
+        return res
+    from .newton import solve_newton  # noqa: PLC0415 (newton imports this module)
+    nt = solve_newton(W, q, mu, r0=res.r, tol=tol, max_iter=newton_max_iter, gs_sweeps=0)
+    nt.message = (f"Gauss-Seidel stagnated at residual {res.residual:.3g} after {total} sweeps, then Newton: "
+                  f"{nt.message}")
+    nt.sweeps += total
+    nt.local_cases = cases
+    return nt
+
+
 def solve(W, q, mu, dim: int = 2, tol: float = 1e-8, max_sweeps: int = 10000, r0=None, omega: float = 1.0,
-          order: str = "given", seed: int = 0, criterion: str = "change", check_every: int = 1) -> NLGSResult:
+          order: str = "given", seed: int = 0, criterion: str = "change", check_every: int = 1,
+          fallback: str = "none", **fallback_options) -> NLGSResult:
     """Solve u = W r + q with Signorini–Coulomb per contact (FCLIB ordering, normal first, dim = 2 or 3).
-    W: dense array, scipy sparse matrix or BlockCSR. Never raises on non-convergence: see `converged`."""
+    W: dense array, scipy sparse matrix or BlockCSR. Never raises on non-convergence: see `converged`.
+    fallback = "newton": hand over to the global Newton when Gauss–Seidel stagnates (see solve_block_csr;
+    `fallback_options`: stall_sweeps, stall_factor, newton_max_iter)."""
     if dim not in (2, 3):
         raise InputError(f"dim = {dim!r}: expected 2 or 3")
     if isinstance(W, BlockCSR) and W.dim != dim:
         raise InputError(f"dim = {dim}: W is a BlockCSR of {W.dim}x{W.dim} blocks")
+    bad = set(fallback_options) - {"stall_sweeps", "stall_factor", "newton_max_iter"}
+    if bad:
+        raise InputError(f"unknown options {sorted(bad)}: expected stall_sweeps, stall_factor, newton_max_iter")
     return solve_block_csr(to_block_csr(W, dim), q, mu, r0=r0, tol=tol, max_sweeps=max_sweeps, omega=omega,
-                           order=order, seed=seed, criterion=criterion, check_every=check_every)
+                           order=order, seed=seed, criterion=criterion, check_every=check_every,
+                           fallback=fallback, **fallback_options)
 
 
 def fclib_residual(W, q, mu, r, dim: int = 2) -> tuple[float, float]:
