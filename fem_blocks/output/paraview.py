@@ -39,6 +39,25 @@ def von_mises_3d(s: np.ndarray) -> np.ndarray:
                    + 3.0 * (s[..., 3] ** 2 + s[..., 4] ** 2 + s[..., 5] ** 2))
 
 
+def _type_fields(bodies, members, offs, block_type, disp, vel, stress: bool):
+    """Displacements and velocities (global frame: v = R v_type per node) of the bodies `members` of one block
+    type, written into the rows offs[i] + node of disp / vel (n_points, d); returns their global Voigt cell
+    stresses (k, nc, 3 | 6) (stress operator of the type applied to all q at once, then R sigma R^T), or None
+    when stress is False."""
+    d = disp.shape[1]
+    k, n = len(members), block_type.mesh.points.shape[0]
+    R = np.stack([bodies[b].R for b in members])
+    Qc = np.column_stack([bodies[b].q for b in members])  # (d n, k), type frame
+    U = np.stack([bodies[b].u for b in members]).reshape(k, n, d)
+    idx = (np.asarray(offs)[:, None] + np.arange(n)[None, :]).ravel()
+    disp[idx] = _rotate_vectors(Qc.T.reshape(k, n, d), R).reshape(-1, d)
+    vel[idx] = _rotate_vectors(U, R).reshape(-1, d)
+    if not stress:
+        return None
+    S = block_type.stress_operator @ Qc  # (nv nc, k), nv = 3 (2D) or 6 (3D)
+    return rotate_voigt(S.T.reshape(k, -1, 3 if d == 2 else 6), R)
+
+
 class BodiesWriter(SeriesWriter):
     """Writes `paraview/blocks.pvd` + one `.vtu` per frame for a `Simulation`."""
 
@@ -103,18 +122,8 @@ class BodiesWriter(SeriesWriter):
         stress = {k: [] for k in ("triangle", "quad")}
         for gr, offs, n in self.layout:
             # from the bodies, not gr.Q: Simulation.set_step (a stage with another h) rebuilds its groups
-            k = len(gr.members)
-            R = np.stack([sim.bodies[b].R for b in gr.members])
-            Qc = np.column_stack([sim.bodies[b].q for b in gr.members])
-            Q = Qc.T.reshape(k, n, 2)
-            U = np.stack([sim.bodies[b].u for b in gr.members]).reshape(k, n, 2)
-            idx = (offs[:, None] + np.arange(n)[None, :]).ravel()
-            disp[idx] = _rotate_vectors(Q, R).reshape(-1, 2)
-            vel[idx] = _rotate_vectors(U, R).reshape(-1, 2)
-            if self.stress:
-                S = gr.type.stress_operator @ Qc  # (3 nc, k), type frame (sxx, syy, sxy)
-                nc = S.shape[0] // 3
-                sg = rotate_voigt(S.T.reshape(k, nc, 3), R)
+            sg = _type_fields(sim.bodies, gr.members, offs, gr.type, disp, vel, self.stress)
+            if sg is not None:
                 stress[gr.type.mesh.cell_type].append(sg.reshape(-1, 3))
         for i, off, nv in self.rigid_layout:
             body = sim.bodies[i]
@@ -231,16 +240,8 @@ class BodiesWriter3D(SeriesWriter):
         vel = np.zeros((self.n_points, 3))
         sig = np.zeros((self.n_cells, 6))
         for bt, members, offs in self.groups.values():
-            k, n = len(members), bt.mesh.points.shape[0]
-            R = np.stack([bodies[b].R for b in members])
-            Qc = np.column_stack([bodies[b].q for b in members])
-            U = np.stack([bodies[b].u for b in members]).reshape(k, n, 3)
-            idx = (np.asarray(offs)[:, None] + np.arange(n)[None, :]).ravel()
-            disp[idx] = _rotate_vectors(Qc.T.reshape(k, n, 3), R).reshape(-1, 3)
-            vel[idx] = _rotate_vectors(U, R).reshape(-1, 3)
-            if self.stress:
-                S = bt.stress_operator @ Qc  # (6 nc, k), type frame
-                sg = rotate_voigt(S.T.reshape(k, -1, 6), R)
+            sg = _type_fields(bodies, members, offs, bt, disp, vel, self.stress)
+            if sg is not None:
                 for i, b in enumerate(members):
                     sig[self._cell_slices[b]] = sg[i]
         for b, off, nv in self.rigid_layout:
