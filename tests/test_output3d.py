@@ -1,6 +1,5 @@
 """3D outputs: bodies (hexahedra, tetrahedra, rigid polyhedra) and contact points written as .vtu/.pvd, read
 back with meshio and compared with independently computed fields (1e-12); off-screen PNG of a 3D model."""
-import math
 import xml.etree.ElementTree as ET
 
 import meshio
