@@ -4,26 +4,31 @@ Point data: reaction (force of the antagonist on the candidate, global frame, N)
 normal, gap (joint-corrected gap g - g0 at the end of the step, m), status (0 open, 1 stick, 2 slip),
 interface (interface/law id), area (tributary area, m²), and the interface-law state: law (code), damage
 (1 - β for Frémond–Cangémi, 1 - intact for brittle laws, D for the mixed-mode law, 0 for elastic and dry
-joints), opening u_N and slip u_T (jumps since the reference state, m), dissipated (J)."""
+joints), opening u_N and slip u_T (jumps since the reference state, m), dissipated (J).
+`ContactsWriter3D`: the same for 3D contact sets (local frame (n, t, s))."""
 from __future__ import annotations
-
-import os
 
 import numpy as np
 
-from .pvd import PvdSeries
-from .vtu import write_vtu
+from .pvd import SeriesWriter
 
 
-class ContactsWriter:
+def law_state_fields(law: np.ndarray, state: np.ndarray) -> dict:
+    """Point fields of the interface-law state (laws.py columns), the same in 2D and 3D: law (code), damage
+    (1 - β for Frémond–Cangémi and brittle laws, D for the mixed-mode law, 0 for elastic and dry joints),
+    opening u_N, slip u_T, dissipated energy, crushing (plastic normal jump)."""
+    from ..laws import MIXED, S_BETA, S_DISS, S_UN, S_UP, S_UT
+    law = np.asarray(law)
+    damage = np.where(law == MIXED, state[:, S_BETA], np.where(law >= 2, 1.0 - state[:, S_BETA], 0.0))
+    return dict(law=law.astype(np.int64), damage=damage, opening=state[:, S_UN].copy(),
+                slip=state[:, S_UT].copy(), dissipated=state[:, S_DISS].copy(), crushing=state[:, S_UP].copy())
+
+
+class ContactsWriter(SeriesWriter):
     def __init__(self, contact, directory: str, append: bool = False, basename: str = "contacts",
                  keep_until_time: float | None = None):
-        self.contact, self.dir, self.base = contact, directory, basename
-        os.makedirs(directory, exist_ok=True)
-        pvd = os.path.join(directory, f"{basename}.pvd")
-        self.series = PvdSeries.open_existing(pvd, keep_until_time) if append and os.path.exists(pvd) \
-            else PvdSeries(pvd)
-        self.frame = len(self.series.entries)
+        self.contact = contact
+        super().__init__(directory, basename, append, keep_until_time)
 
     def arrays(self):
         c = self.contact
@@ -42,17 +47,42 @@ class ContactsWriter:
                 "area": cs.area.copy()}
         st = getattr(c, "state", None)
         if st is not None and len(st) == len(cs.gap):
-            from ..laws import MIXED, S_BETA, S_DISS, S_UN, S_UP, S_UT
-            law = c.law
-            damage = np.where(law == MIXED, st[:, S_BETA], np.where(law >= 2, 1.0 - st[:, S_BETA], 0.0))
-            data.update(law=law.astype(np.int64), damage=damage, opening=st[:, S_UN].copy(),
-                        slip=st[:, S_UT].copy(), dissipated=st[:, S_DISS].copy(), crushing=st[:, S_UP].copy())
+            data.update(law_state_fields(c.law, st))
         return x, data
 
     def write(self, time: float) -> str:
         x, data = self.arrays()
-        name = f"{self.base}_{self.frame:06d}.vtu"
-        write_vtu(os.path.join(self.dir, name), x, [("vertex", np.arange(len(x)))], point_data=data or None)
-        self.series.add(time, name)
-        self.frame += 1
-        return name
+        return self.write_frame(time, x, [("vertex", np.arange(len(x)))], point_data=data)
+
+
+class ContactsWriter3D(SeriesWriter):
+    """3D contact points (detection3d.ContactSet3D) as a vertex cloud per frame in `contacts.pvd`.
+
+    Point data: reaction = r_N n + r_t t + r_s s (force of the antagonist on the candidate, global frame, N),
+    r_local (r_N, r_t, r_s), r_N, r_T = |(r_t, r_s)|, normal n, t, s, gap (joint-corrected gap, default
+    cs.gap - cs.g0, m), status (0 open, 1 stick, 2 slip; -1 when not given), interface, area (m²), and with a
+    law state the fields of `law_state_fields`. Points: the candidate points cs.point."""
+
+    def __init__(self, directory: str, append: bool = False, basename: str = "contacts",
+                 keep_until_time: float | None = None):
+        super().__init__(directory, basename, append, keep_until_time)
+
+    @staticmethod
+    def arrays(cs, r, law=None, state=None, status=None, gap=None):
+        nc = len(cs.gap)
+        r = np.asarray(r, dtype=float).reshape(nc, 3)
+        data = {"reaction": r[:, :1] * cs.n + r[:, 1:2] * cs.t + r[:, 2:] * cs.s, "r_local": r.copy(),
+                "r_N": r[:, 0].copy(), "r_T": np.hypot(r[:, 1], r[:, 2]), "normal": cs.n.copy(),
+                "t": cs.t.copy(), "s": cs.s.copy(),
+                "gap": np.asarray(cs.gap - cs.g0 if gap is None else gap, dtype=float).reshape(nc),
+                "status": (np.full(nc, -1) if status is None else np.asarray(status)).astype(np.int64),
+                "interface": np.asarray(cs.interface).astype(np.int64), "area": np.asarray(cs.area, float).copy()}
+        if state is not None:
+            data.update(law_state_fields(np.zeros(nc, np.int64) if law is None else law, np.asarray(state)))
+        return np.asarray(cs.point, dtype=float).reshape(nc, 3), data
+
+    def write(self, time: float, cs, r, law=None, state=None, status=None, gap=None) -> str:
+        """One frame: contact set `cs`, local reactions r (nc, 3) = (r_N, r_t, r_s) [N], optional law codes
+        and states (nc, laws.NSTATE), status (nc,), gap (nc,)."""
+        x, data = self.arrays(cs, r, law, state, status, gap)
+        return self.write_frame(time, x, [("vertex", np.arange(len(x)))], point_data=data)

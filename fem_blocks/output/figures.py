@@ -1,12 +1,13 @@
-"""Run figures: force–displacement curve (from history.csv) and crack pattern (deformed blocks, joints
-coloured by damage, or by opening for dry joints)."""
+"""Run figures: force–displacement curve (from history.csv), crack pattern (deformed blocks, joints
+coloured by damage, or by opening for dry joints) and 3D views of 3D bodies (write_blocks_3d)."""
 from __future__ import annotations
 
 import os
+from types import SimpleNamespace
 
 import numpy as np
 
-from .plots import plot_crack_pattern, plot_curve
+from .plots import plot_crack_pattern, plot_curve, plot_polygons_3d
 
 
 def _loop(edges: np.ndarray) -> np.ndarray:
@@ -103,3 +104,43 @@ def write_curve(path, history: dict, body: str, force: str, displacement: str, t
     d, f = curve_arrays(history, body, force, displacement)
     return plot_curve(path, np.abs(d), np.abs(f), f"{body} displacement {displacement} [mm]",
                       f"{body} reaction {force} [kN]", title=title)
+
+
+def body_faces_3d(bodies, amplification: float = 1.0):
+    """Boundary faces of 3D bodies at the reference position + amplification x displacement: list of (k, 3)
+    corner arrays, the body of each face, and the mean |displacement| of its corners (m, not amplified)."""
+    polys, owner, dmag = [], [], []
+    for i, b in enumerate(bodies):
+        if b.kind == 0:
+            X, D, F = b.reference_points, b.displacement_global(), b.type.mesh.boundary_faces
+        else:
+            X = b.center0 + b.points_rel
+            D, F = b.current_points() - X, b.boundary_faces
+        Y = X + amplification * D
+        n = np.linalg.norm(D, axis=1)
+        for f in F:
+            f = f[f >= 0]
+            polys.append(Y[f])
+            owner.append(i)
+            dmag.append(float(n[f].mean()))
+    return polys, np.array(owner, dtype=np.int64), np.array(dmag)
+
+
+def write_blocks_3d(path, bodies, body_values=None, value_label="", title="", amplification=None,
+                    view=(25.0, -60.0), size=(1000, 800)):
+    """PNG of 3D bodies (list, or an object with .bodies) rendered off-screen (plots.plot_polygons_3d),
+    deformed with `amplification` (default auto_amplification), each face coloured by the mean |displacement|
+    of its corners, or by `body_values` (one value per body, e.g. the damage of its joints)."""
+    bodies = list(getattr(bodies, "bodies", bodies))
+    amp = auto_amplification(SimpleNamespace(bodies=bodies)) if amplification is None else float(amplification)
+    polys, owner, dmag = body_faces_3d(bodies, amp)
+    if body_values is None:
+        vals, label = dmag, value_label or "|displacement| [m]"
+    else:
+        bv = np.asarray(body_values, dtype=float).ravel()
+        if len(bv) != len(bodies):
+            from ..errors import InputError
+            raise InputError(f"body_values: expected {len(bodies)} values (one per body), got {len(bv)}")
+        vals, label = bv[owner], value_label
+    return plot_polygons_3d(path, polys, vals, label, title=title, view=view, size=size,
+                            note=f"displacements x{amp:g}")

@@ -5,33 +5,66 @@ Points are the *reference* positions of every deformable node and rigid vertex; 
 Point data: displacement, velocity (global frame). Cell data: Cauchy stress (sxx, syy, sxy),
 von Mises stress (deformable cells; 0 on rigid polygons), body id, body kind (0 deformable,
 1 rigid). Fields are computed per block type with batched array operations (no per-node loop).
+`BodiesWriter3D`: the same for 3D bodies (Voigt stress (sxx, syy, szz, syz, sxz, sxy), 3D von Mises).
 """
 from __future__ import annotations
 
-import os
-
 import numpy as np
 
-from .pvd import PvdSeries
-from .vtu import write_vtu
+from .pvd import SeriesWriter
+
+# Voigt order of the stresses: 2D (xx, yy, xy), 3D (xx, yy, zz, yz, xz, xy)
+_VOIGT = {2: ((0, 0), (1, 1), (0, 1)), 3: ((0, 0), (1, 1), (2, 2), (1, 2), (0, 2), (0, 1))}
 
 
 def _rotate_vectors(V: np.ndarray, R: np.ndarray) -> np.ndarray:
-    """V (k, n, 2) in type frames, R (k, 2, 2) -> global vectors (k, n, 2): v = R v_type."""
+    """V (k, n, d) in type frames, R (k, d, d) -> global vectors (k, n, d): v = R v_type."""
     return np.einsum("kij,knj->kni", R, V)
 
 
-class BodiesWriter:
+def rotate_voigt(s: np.ndarray, R: np.ndarray) -> np.ndarray:
+    """Stresses s (k, nc, 3 | 6) in Voigt order (2D xx, yy, xy; 3D xx, yy, zz, yz, xz, xy) in the type frames of
+    k bodies with rotations R (k, d, d) -> global Voigt stresses: sigma = R sigma_type R^T."""
+    d = R.shape[-1]
+    T = np.empty(s.shape[:2] + (d, d))
+    for c, (i, j) in enumerate(_VOIGT[d]):
+        T[..., i, j] = T[..., j, i] = s[..., c]
+    Tg = np.einsum("kij,kcjl,kml->kcim", R, T, R)
+    return np.stack([Tg[..., i, j] for i, j in _VOIGT[d]], -1)
+
+
+def von_mises_3d(s: np.ndarray) -> np.ndarray:
+    """sqrt(((sxx-syy)^2 + (syy-szz)^2 + (szz-sxx)^2)/2 + 3 (syz^2 + sxz^2 + sxy^2)) of Voigt stresses (..., 6)."""
+    return np.sqrt(0.5 * ((s[..., 0] - s[..., 1]) ** 2 + (s[..., 1] - s[..., 2]) ** 2 + (s[..., 2] - s[..., 0]) ** 2)
+                   + 3.0 * (s[..., 3] ** 2 + s[..., 4] ** 2 + s[..., 5] ** 2))
+
+
+def _type_fields(bodies, members, offs, block_type, disp, vel, stress: bool):
+    """Displacements and velocities (global frame: v = R v_type per node) of the bodies `members` of one block
+    type, written into the rows offs[i] + node of disp / vel (n_points, d); returns their global Voigt cell
+    stresses (k, nc, 3 | 6) (stress operator of the type applied to all q at once, then R sigma R^T), or None
+    when stress is False."""
+    d = disp.shape[1]
+    k, n = len(members), block_type.mesh.points.shape[0]
+    R = np.stack([bodies[b].R for b in members])
+    Qc = np.column_stack([bodies[b].q for b in members])  # (d n, k), type frame
+    U = np.stack([bodies[b].u for b in members]).reshape(k, n, d)
+    idx = (np.asarray(offs)[:, None] + np.arange(n)[None, :]).ravel()
+    disp[idx] = _rotate_vectors(Qc.T.reshape(k, n, d), R).reshape(-1, d)
+    vel[idx] = _rotate_vectors(U, R).reshape(-1, d)
+    if not stress:
+        return None
+    S = block_type.stress_operator @ Qc  # (nv nc, k), nv = 3 (2D) or 6 (3D)
+    return rotate_voigt(S.T.reshape(k, -1, 3 if d == 2 else 6), R)
+
+
+class BodiesWriter(SeriesWriter):
     """Writes `paraview/blocks.pvd` + one `.vtu` per frame for a `Simulation`."""
 
     def __init__(self, sim, directory: str, stress: bool = True, append: bool = False,
                  basename: str = "blocks", keep_until_time: float | None = None):
-        self.sim, self.dir, self.stress, self.base = sim, directory, stress, basename
-        os.makedirs(directory, exist_ok=True)
-        pvd = os.path.join(directory, f"{basename}.pvd")
-        self.series = PvdSeries.open_existing(pvd, keep_until_time) if append and os.path.exists(pvd) \
-            else PvdSeries(pvd)
-        self.frame = len(self.series.entries) if hasattr(self.series, "entries") else 0
+        self.sim, self.stress = sim, stress
+        super().__init__(directory, basename, append, keep_until_time)
         self._build_static()
 
     # ---------------------------------------------------------------- static topology
@@ -89,23 +122,8 @@ class BodiesWriter:
         stress = {k: [] for k in ("triangle", "quad")}
         for gr, offs, n in self.layout:
             # from the bodies, not gr.Q: Simulation.set_step (a stage with another h) rebuilds its groups
-            k = len(gr.members)
-            R = np.stack([sim.bodies[b].R for b in gr.members])
-            Qc = np.column_stack([sim.bodies[b].q for b in gr.members])
-            Q = Qc.T.reshape(k, n, 2)
-            U = np.stack([sim.bodies[b].u for b in gr.members]).reshape(k, n, 2)
-            idx = (offs[:, None] + np.arange(n)[None, :]).ravel()
-            disp[idx] = _rotate_vectors(Q, R).reshape(-1, 2)
-            vel[idx] = _rotate_vectors(U, R).reshape(-1, 2)
-            if self.stress:
-                S = gr.type.stress_operator @ Qc  # (3 nc, k), type frame (sxx, syy, sxy)
-                nc = S.shape[0] // 3
-                s = S.T.reshape(k, nc, 3)
-                T = np.empty((k, nc, 2, 2))
-                T[..., 0, 0], T[..., 1, 1] = s[..., 0], s[..., 1]
-                T[..., 0, 1] = T[..., 1, 0] = s[..., 2]
-                Tg = np.einsum("kij,kcjl,kml->kcim", R, T, R)  # R T R^T
-                sg = np.stack([Tg[..., 0, 0], Tg[..., 1, 1], Tg[..., 0, 1]], -1)
+            sg = _type_fields(sim.bodies, gr.members, offs, gr.type, disp, vel, self.stress)
+            if sg is not None:
                 stress[gr.type.mesh.cell_type].append(sg.reshape(-1, 3))
         for i, off, nv in self.rigid_layout:
             body = sim.bodies[i]
@@ -146,8 +164,98 @@ class BodiesWriter:
     # ---------------------------------------------------------------- write
     def write(self, time: float) -> str:
         point_data, cell_data = self.fields()
-        name = f"{self.base}_{self.frame:06d}.vtu"
-        write_vtu(os.path.join(self.dir, name), self.X, self.cells, point_data=point_data, cell_data=cell_data)
-        self.series.add(time, name)
-        self.frame += 1
-        return name
+        return self.write_frame(time, self.X, self.cells, point_data, cell_data)
+
+
+_VTK_NAME = {"tetrahedron": "tetra", "hexahedron": "hexahedron"}
+_ORDER_3D = ("hexahedron", "tetra", "quad", "triangle")
+
+
+class BodiesWriter3D(SeriesWriter):
+    """3D bodies (DeformableBody3D, RigidBody3D) as one merged grid per frame in `blocks.pvd`.
+
+    `bodies`: a list, or an object with `.bodies` (a 3D simulation); the list is read at every frame, its
+    topology fixed at construction. Points: reference positions (deformable nodes x = R X + c, rigid surface
+    points); deformable cells = the type mesh's tetrahedra/hexahedra, a rigid body = its boundary faces
+    (triangles/quads). Point data: displacement, velocity (global frame; rigid v + w x (x - c)). Cell data:
+    body_id, body_kind (0 deformable, 1 rigid), stress (sxx, syy, szz, syz, sxz, sxy) at the cell centroid
+    (global frame: R sigma_type R^T, batched per block type), von_mises (0 on rigid faces)."""
+
+    def __init__(self, bodies, directory: str, stress: bool = True, append: bool = False,
+                 basename: str = "blocks", keep_until_time: float | None = None):
+        self.source, self.stress = bodies, stress
+        super().__init__(directory, basename, append, keep_until_time)
+        self._build_static()
+
+    @property
+    def bodies(self) -> list:
+        return list(getattr(self.source, "bodies", self.source))
+
+    def _build_static(self):
+        bodies = self.bodies
+        pts, offset = [], 0
+        blocks = {k: [] for k in _ORDER_3D}   # cell name -> [(connectivity, body)]
+        self.groups = {}                      # id(type) -> (type, [body], [point offset])
+        self.rigid_layout = []                # (body, point offset, n points)
+        for b, body in enumerate(bodies):
+            if body.kind == 0:
+                m = body.type.mesh
+                X = body.reference_points
+                blocks[_VTK_NAME[m.cell_type]].append((m.cells + offset, b))
+                g = self.groups.setdefault(id(body.type), (body.type, [], []))
+                g[1].append(b)
+                g[2].append(offset)
+            else:
+                X = body.center0 + body.points_rel
+                F = body.boundary_faces
+                tri = F[:, 3] < 0 if F.shape[1] == 4 else np.ones(len(F), bool)
+                if F.shape[1] == 4 and np.any(~tri):
+                    blocks["quad"].append((F[~tri] + offset, b))
+                if np.any(tri):
+                    blocks["triangle"].append((F[tri, :3] + offset, b))
+                self.rigid_layout.append((b, offset, len(X)))
+            pts.append(X)
+            offset += len(X)
+        self.X = np.concatenate(pts) if pts else np.zeros((0, 3))
+        self.n_points = offset
+        self.cells, cell_body = [], []
+        self._cell_slices = {}  # (cell name, body) -> slice of the merged cell list
+        start = 0
+        for name in _ORDER_3D:
+            if not blocks[name]:
+                continue
+            self.cells.append((name, np.concatenate([c for c, _ in blocks[name]])))
+            for c, b in blocks[name]:
+                self._cell_slices[b] = slice(start, start + len(c))
+                cell_body.append(np.full(len(c), b))
+                start += len(c)
+        self.n_cells = start
+        self.cell_body = np.concatenate(cell_body).astype(np.int64) if cell_body else np.zeros(0, np.int64)
+        self.cell_kind = np.array([bodies[b].kind for b in self.cell_body], dtype=np.int64)
+
+    def fields(self):
+        """Point and cell fields of the current state (global frame)."""
+        bodies = self.bodies
+        disp = np.zeros((self.n_points, 3))
+        vel = np.zeros((self.n_points, 3))
+        sig = np.zeros((self.n_cells, 6))
+        for bt, members, offs in self.groups.values():
+            sg = _type_fields(bodies, members, offs, bt, disp, vel, self.stress)
+            if sg is not None:
+                for i, b in enumerate(members):
+                    sig[self._cell_slices[b]] = sg[i]
+        for b, off, nv in self.rigid_layout:
+            body = bodies[b]
+            cur = body.current_points()
+            disp[off:off + nv] = cur - (body.center0 + body.points_rel)
+            vel[off:off + nv] = body.u[:3] + np.cross(body.u[3:], cur - body.center)
+        point_data = {"displacement": disp, "velocity": vel}
+        cell_data = {"body_id": self.cell_body, "body_kind": self.cell_kind}
+        if self.stress:
+            cell_data["stress"] = sig
+            cell_data["von_mises"] = von_mises_3d(sig)
+        return point_data, cell_data
+
+    def write(self, time: float) -> str:
+        point_data, cell_data = self.fields()
+        return self.write_frame(time, self.X, self.cells, point_data, cell_data)

@@ -111,3 +111,95 @@ def plot_crack_pattern(path, polygons, segments, values, amplification, title=""
     fig.text(0.01, 0.01, f"displacements x{amp:g}", fontsize=10)
     fig.tight_layout(rect=(0, 0.03, 1, 1))
     return _save(fig, path, 130)
+
+
+def _subdivide(polys, rgba):
+    """Split quadrilaterals much larger than the median face into n x n bilinear sub-quads (same colour, no
+    inner edges drawn), so that the painter's depth sort of mplot3d works on faces of similar sizes."""
+    diam = np.array([np.ptp(p, axis=0).max() for p in polys])
+    ref = float(np.median(diam)) if len(diam) else 0.0
+    out, col, edge = [], [], []
+    for p, c, d in zip(polys, rgba, diam):
+        n = int(min(np.ceil(d / (2.0 * ref)), 12)) if ref > 0 else 1
+        if len(p) != 4 or n <= 1:
+            out.append(p)
+            col.append(c)
+            edge.append((0.25, 0.2, 0.15, 0.6))
+            continue
+        g = np.linspace(0.0, 1.0, n + 1)
+        P = ((1 - g)[:, None, None] * ((1 - g)[None, :, None] * p[0] + g[None, :, None] * p[1])
+             + g[:, None, None] * ((1 - g)[None, :, None] * p[3] + g[None, :, None] * p[2]))  # (n+1, n+1, 3)
+        for i in range(n):
+            for j in range(n):
+                out.append(np.array([P[i, j], P[i, j + 1], P[i + 1, j + 1], P[i + 1, j]]))
+                col.append(c)
+                edge.append((0, 0, 0, 0))
+    return out, np.array(col), edge
+
+
+def plot_polygons_3d(path, polygons, values=None, value_label="", title="", view=(25.0, -60.0),
+                     size=(1000, 800), dpi=100, vmin=None, vmax=None, note=""):
+    """Off-screen 3D rendering of planar polygons (block boundary faces) with matplotlib's mplot3d
+    (Poly3DCollection, depth-sorted by the painter's algorithm, light shading by the face normal), coloured
+    by `values` (one per polygon, viridis between vmin and vmax, default their range; NaN grey; None: one
+    masonry colour). `view` = (elevation, azimuth) in degrees; the PNG is exactly size = (width, height)
+    pixels; equal scales on x, y, z. `polygons`: a (m, k, 3) array or a list of (k_i, 3) arrays. Returns path."""
+    polys = []
+    for i, p in enumerate(polygons if polygons is not None else []):
+        p = np.asarray(p, dtype=float)
+        if p.ndim != 2 or p.shape[1] != 3 or len(p) < 3:
+            raise InputError(f"polygons[{i}]: expected a (k >= 3, 3) array of face corners, got shape {p.shape}")
+        polys.append(p)
+    try:
+        w, h = (int(v) for v in size)
+    except (TypeError, ValueError):
+        raise InputError(f"size = {size!r}: expected (width, height) in pixels") from None
+    if not (16 <= w <= 10000 and 16 <= h <= 10000) or (w, h) != tuple(size):
+        raise InputError(f"size = {size!r}: expected integer (width, height) between 16 and 10000 pixels")
+    val = None
+    if values is not None:
+        val = np.asarray(values, dtype=float).ravel()
+        if len(val) != len(polys):
+            raise InputError(f"values: expected {len(polys)} values (one per polygon), got {len(val)}")
+    from matplotlib import colormaps
+    from matplotlib.cm import ScalarMappable
+    from matplotlib.colors import LightSource, Normalize
+    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+    fig = _figure((w / dpi, h / dpi))
+    ax = fig.add_axes((0.0, 0.0, 0.86 if val is not None else 1.0, 0.93), projection="3d")
+    ax.view_init(elev=float(view[0]), azim=float(view[1]))
+    if not polys:
+        _no_data(ax)
+    else:
+        cmap = colormaps["viridis"].with_extremes(bad="0.6")
+        if val is not None:
+            fin = val[np.isfinite(val)]
+            lo = float(vmin) if vmin is not None else (float(fin.min()) if fin.size else 0.0)
+            hi = float(vmax) if vmax is not None else (float(fin.max()) if fin.size else 1.0)
+            norm = Normalize(lo, hi if hi > lo else lo + 1.0)
+            rgba = cmap(norm(np.ma.masked_invalid(val)))
+        else:
+            rgba = np.tile(np.array([0.91, 0.84, 0.75, 1.0]), (len(polys), 1))
+        # Lambert shading by the face normal (Newell's normal of each polygon), light from the viewer's upper left
+        nrm = np.array([np.sum(np.cross(p, np.roll(p, -1, axis=0)), axis=0) for p in polys])
+        nrm /= np.maximum(np.linalg.norm(nrm, axis=1, keepdims=True), 1e-300)
+        ls = LightSource(azdeg=float(view[1]) + 135.0, altdeg=45.0)
+        light = np.array(ls.direction)
+        shade = 0.55 + 0.45 * np.abs(nrm @ light)
+        rgba[:, :3] *= shade[:, None]
+        polys, rgba, edge = _subdivide(polys, rgba)
+        ax.add_collection3d(Poly3DCollection(polys, facecolors=rgba, edgecolors=edge, linewidths=0.3))
+        P = np.concatenate(polys)
+        P = P[np.all(np.isfinite(P), axis=1)]
+        lo3, hi3 = P.min(axis=0), P.max(axis=0)
+        c, r = 0.5 * (lo3 + hi3), 0.5 * max(float((hi3 - lo3).max()), 1e-300)
+        ax.set(xlim=(c[0] - r, c[0] + r), ylim=(c[1] - r, c[1] + r), zlim=(c[2] - r, c[2] + r))
+        ax.set_box_aspect((1, 1, 1))
+        ax.set(xlabel="x [m]", ylabel="y [m]", zlabel="z [m]")
+        if val is not None:
+            cax = fig.add_axes((0.88, 0.15, 0.025, 0.65))
+            fig.colorbar(ScalarMappable(norm=norm, cmap=cmap), cax=cax, label=value_label)
+    fig.text(0.5, 0.965, title, ha="center", va="center", fontsize=12)
+    if note:
+        fig.text(0.01, 0.01, note, fontsize=10)
+    return _save(fig, path, dpi)

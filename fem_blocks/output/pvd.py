@@ -12,6 +12,7 @@ from xml.sax.saxutils import quoteattr
 
 from ..errors import InputError
 from .atomic import atomic_write_text
+from .vtu import write_vtu
 
 
 def _read_entries(path: str) -> list:
@@ -105,3 +106,27 @@ class PvdSeries:
             lines.append(f'<DataSet timestep="{t!r}" group="" part="{part}" file={quoteattr(f)}/>')
         lines += ["</Collection>", "</VTKFile>", ""]
         atomic_write_text(self.path, "\n".join(lines))
+
+
+class SeriesWriter:
+    """Base of the writers of one `.vtu` per frame listed in `DIR/BASENAME.pvd` (bodies, contact points; 2D
+    and 3D). append=True continues an existing series, dropping the frames after keep_until_time
+    (`PvdSeries.open_existing`); `.frame` is the number of the next frame."""
+
+    def __init__(self, directory: str, basename: str, append: bool = False,
+                 keep_until_time: float | None = None):
+        self.dir, self.base = directory, basename
+        os.makedirs(directory, exist_ok=True)
+        pvd = os.path.join(directory, f"{basename}.pvd")
+        self.series = PvdSeries.open_existing(pvd, keep_until_time) if append and os.path.exists(pvd) \
+            else PvdSeries(pvd)
+        self.frame = len(self.series.entries)
+
+    def write_frame(self, time: float, points, cells, point_data=None, cell_data=None) -> str:
+        """Write `BASENAME_<frame>.vtu` (write_vtu arguments) and add it to the series at `time`."""
+        name = f"{self.base}_{self.frame:06d}.vtu"
+        write_vtu(os.path.join(self.dir, name), points, cells, point_data=point_data or None,
+                  cell_data=cell_data or None)
+        self.series.add(time, name)
+        self.frame += 1
+        return name
