@@ -525,3 +525,32 @@ def test_3d_inputs_validated():
         nlgs.solve_cohesive(j.W, q, j.mu, j.law, j.par, j.st, np.zeros((1, 2)), j.area, 1e-2, 1.0)
     with pytest.raises(InputError, match=r"dim = 4"):
         initial_state(j.law, 4)
+
+
+@pytest.mark.parametrize("law, params", [("fremond", dict(c_N=CN, c_T=CT, w=W, mu=0.5)),
+                                         ("brittle", dict(c_N=CN, c_T=CT, r_c=3e5, s_c=5e5, mu=0.5))])
+def test_3d_block_on_four_points_equilibrium_and_isotropy(law, params):
+    """A free 3D rigid block (6 dofs) on four joint points (W_αβ full 3x3 blocks coupled through the rotations),
+    pressed and pushed by an oblique horizontal force at its centre (overturning moment carried by the joint),
+    quasi-static: at rest the contact forces balance the load (force and moment, to 1e-9), and turning the force
+    by 90° about the normal permutes the contact forces (isotropy, to 1e-9). (Laws rigid in compression: with
+    compliant joints as stiff as these, h²kW >> 1, the Gauss–Seidel iteration converges too slowly here.)"""
+    a, H = 0.05, 0.1
+    pts = [(-a, -a, 0.0), (a, -a, 0.0), (a, a, 0.0), (-a, a, 0.0)]
+    center = np.array([0.0, 0.0, H / 2])
+    G = block_rows(3, pts, center, [N3, T3, S3])
+    m, I = 8.0, 0.02
+    Fz, Ft = 4e3, 5e3
+    out = []
+    for phi in (0.2, 0.2 + np.pi / 2):
+        F = np.array([Ft * np.cos(phi), Ft * np.sin(phi), -Fz, 0.0, 0.0, 0.0])
+        j = Joint(law, params, G, A / 4, [m, m, m, I, I, I], force=dict(enumerate(F)), h=1e-3, tol=1e-11)
+        for _ in range(40):
+            j.step()
+        assert np.linalg.norm(j.v) < 1e-9 * Ft * j.h / m  # at rest
+        Fc = np.einsum("aik,ai->k", G, j.P) / j.h
+        assert np.abs(Fc + F).max() <= 1e-9 * Fz
+        assert np.any(j.P[:, 0] < 0) and np.any(j.P[:, 0] > 0)  # tension and compression under the moment
+        assert np.all(j.st[:, S_BROKEN] == 0.0)
+        out.append(np.sort(np.concatenate([j.P[:, 0], np.linalg.norm(j.P[:, 1:], axis=1)])))
+    assert np.allclose(out[0], out[1], rtol=0, atol=1e-9 * np.abs(out[0]).max())
