@@ -442,8 +442,9 @@ EMBED = [
 @pytest.mark.parametrize("law, params", EMBED, ids=[f"{k}-{i}" for i, (k, _) in enumerate(EMBED)])
 def test_3d_run_of_a_2d_problem_equals_2d(law, params):
     """A free rigid block on two contact points (coupled through its rotation), pressed, then sheared and pulled
-    off-centre, dynamic (θ = 1: the rocking does not amplify round-off; no velocity reset). The 3D problem adds z (free, unloaded: tangent s unused),
-    rx and ry (held); its trajectory, impulses and law states equal the 2D ones to 1e-12."""
+    off-centre, dynamic (no velocity reset; θ = 1 so that the rocking does not amplify round-off). The 3D problem
+    adds z (free, unloaded: tangent s unused), rx and ry (held); its trajectory, impulses and law states equal the
+    2D ones to 1e-12 of each quantity's largest value over the run."""
     pts3 = [(0.03, 0.0, 0.0), (0.17, 0.0, 0.0)]
     c3 = np.array([0.1, 0.05, 0.0])
     frame3 = [(0, 1, 0), (1, 0, 0), (0, 0, 1)]
@@ -554,3 +555,56 @@ def test_3d_block_on_four_points_equilibrium_and_isotropy(law, params):
         assert np.all(j.st[:, S_BROKEN] == 0.0)
         out.append(np.sort(np.concatenate([j.P[:, 0], np.linalg.norm(j.P[:, 1:], axis=1)])))
     assert np.allclose(out[0], out[1], rtol=0, atol=1e-9 * np.abs(out[0]).max())
+
+
+def test_cap3_kkt_on_random_anisotropic_blocks():
+    """_cap3 (tangential problem at the cap) on random SPD 3x3 blocks (anisotropic W_TT): p_T in the disk of radius
+    R = μ capP, v_T = W_TN capP + W_TT p_T + q_T, and stick (v_T = 0) or slide (‖p_T‖ = R, v_T = -λ p_T/R, λ >= 0)."""
+    rng = np.random.default_rng(3)
+    nslide = 0
+    for _ in range(300):
+        M = rng.normal(size=(3, 3))
+        w = (M @ M.T + 0.05 * np.eye(3))[None]
+        q = rng.normal(size=3)
+        mu, cap = rng.uniform(0.0, 1.0), rng.uniform(0.1, 2.0)
+        pn, p1, p2 = nlgs._cap3(w, 0, 2 * cap, 0.0, 0.0, q[1], q[2], mu, cap)
+        assert pn == cap
+        p = np.array([p1, p2])
+        v = w[0, 1:, 0] * cap + w[0, 1:, 1:] @ p + q[1:]
+        R = mu * cap
+        assert np.linalg.norm(p) <= R * (1 + 1e-12) + 1e-300
+        if np.linalg.norm(v) > 1e-10 * (np.linalg.norm(q) + cap):
+            nslide += 1
+            assert np.linalg.norm(p) == pytest.approx(R, rel=1e-10)
+            assert abs(v[0] * p[1] - v[1] * p[0]) <= 1e-9 * np.linalg.norm(v) * R  # v_T ∥ p_T
+            assert v @ p <= 0.0
+    assert 50 < nslide < 300  # both cases met
+
+
+@pytest.mark.parametrize("law, params", EMBED + [("mixed", dict(MIXED, k_n=1e8, k_s=5e7, f_t=2e4, c=3e4, G_I=10.0,
+                                                                    G_II=20.0, softening="exponential"))])
+def test_random_coupled_problems_converge_to_zero_natural_map(law, params):
+    """Six contacts with a random SPD Delassus matrix (full 3x3 blocks coupled), random free velocities and jumps:
+    the staggered 3D cohesive NLGS converges and the recomputed natural map of the transformed problem is <= tol;
+    the internal variables returned are those implied by the returned jumps (fixed point of the staggered update)."""
+    rng = np.random.default_rng(7)
+    n = 6
+    code, par = law_parameters(law, params, "j")
+    for trial_no in range(5):
+        M = rng.normal(size=(3 * n, 3 * n))
+        Wd = M @ M.T / (3 * n) + 0.1 * np.eye(3 * n)
+        W3 = nlgs.to_block_csr(Wd, 3)
+        q = rng.normal(size=3 * n) * 0.1
+        lawv = np.full(n, code, dtype=np.int64)
+        parv = np.tile(par, (n, 1))
+        st = initial_state(lawv, 3)
+        ueff = rng.normal(size=(n, 3)) * 1e-4
+        area = np.full(n, 0.01)
+        res, x = nlgs.solve_cohesive(W3, q, parv[:, 0], lawv, parv, st, ueff, area, 1e-2, 1.0, tol=1e-11,
+                                     criterion="residual", check_every=1, max_sweeps=20000)
+        assert res.converged, res.message
+        f = nlgs.natural_map_cohesive(W3.indptr, W3.indices, W3.blocks, q, parv[:, 0], res.r, lawv, parv, st, x,
+                                      ueff, area, 1e-2, 1.0)
+        assert f <= 1e-11 * np.linalg.norm(q)
+        x2 = x.copy()
+        assert nlgs._update_internal(lawv, parv, st, ueff, res.u, 1e-2, 1.0, x2) <= 1e-12
