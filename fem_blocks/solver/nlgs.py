@@ -758,18 +758,12 @@ def _sweep_cohesive3(indptr, indices, blocks, diag_pos, q, mu, r, order, omega, 
             x0, x1, x2, case = _local_cohesive3(wa, d, v0, v1, v2, law[a], par[a], st[a], trial[a], ueff[a],
                                                 area[a], h, theta, o0, o1, o2, wl, J)
         cases[case + 1] += 1
-        if omega != 1.0:
-            x0 = omega * x0 + (1.0 - omega) * o0
-            x1 = omega * x1 + (1.0 - omega) * o1
-            x2 = omega * x2 + (1.0 - omega) * o2
-        e0 = x0 - o0
-        e1 = x1 - o1
-        e2 = x2 - o2
-        dr2 += e0 * e0 + e1 * e1 + e2 * e2
-        r2 += x0 * x0 + x1 * x1 + x2 * x2
-        r[i0] = x0
-        r[i0 + 1] = x1
-        r[i0 + 2] = x2
+        for i, xi in enumerate((x0, x1, x2)):  # relaxation r <- ω r_loc + (1-ω) r, change and norm
+            if omega != 1.0:
+                xi = omega * xi + (1.0 - omega) * r[i0 + i]
+            dr2 += (xi - r[i0 + i]) ** 2
+            r2 += xi * xi
+            r[i0 + i] = xi
     return dr2, r2
 
 
