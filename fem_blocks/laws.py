@@ -47,9 +47,11 @@ LAW_NAMES = {"coulomb": COULOMB, "elastic": ELASTIC, "brittle": BRITTLE, "dugdal
 # parameter columns (per unit area)
 P_MU, P_CN, P_CT, P_RC, P_SC, P_LC, P_W, P_B, P_P, P_MUR, P_MUKIND, P_FT, P_C, P_GI, P_GII, P_SOFT, P_FC = range(17)
 NPAR = 17
-# state columns
+# state columns; 3D (u = (u_N, u_T, u_S)) appends the second tangential jump S_US, the 2D columns stay in place
 S_BETA, S_UN, S_UT, S_DISS, S_HIST, S_BROKEN, S_UP = range(7)
 NSTATE = 7
+S_US = 7
+NSTATE3 = 8
 
 LAW_KEYS = {
     "coulomb": {"mu", "f_c"},
@@ -144,8 +146,11 @@ def law_parameters(law: str, params: dict, name: str) -> tuple[int, np.ndarray]:
     return MIXED, p
 
 
-def initial_state(law: np.ndarray) -> np.ndarray:
-    st = np.zeros((law.size, NSTATE))
+def initial_state(law: np.ndarray, dim: int = 2) -> np.ndarray:
+    """Committed state of intact joints: (n, NSTATE) in 2D, (n, NSTATE3) in 3D (extra column S_US)."""
+    if dim not in (2, 3):
+        raise InputError(f"dim = {dim!r}: expected 2 or 3")
+    st = np.zeros((law.size, NSTATE if dim == 2 else NSTATE3))
     st[:, S_BETA] = np.where(law == MIXED, 0.0, 1.0)  # beta = 1 (intact); for MIXED the column holds D = 0
     return st
 
@@ -202,7 +207,8 @@ def _mixed_damage(par, D0, uN, uT):
 @njit(cache=True)
 def internal_update(law, par, st, uN, uT, h):
     """Internal variable implied by the jump (uN, uT), irreversible with respect to the committed state:
-    β (Frémond), intact flag 1/0 (brittle, Dugdale), damage D (mixed), 1 otherwise."""
+    β (Frémond), intact flag 1/0 (brittle, Dugdale), damage D (mixed), 1 otherwise. The tangential jump
+    enters only through |uT| (isotropic laws): 3D passes uT = ‖u_T‖."""
     if law == COULOMB or law == ELASTIC:
         return 1.0
     if st[S_BROKEN] > 0.0:
@@ -222,7 +228,8 @@ def internal_update(law, par, st, uN, uT, h):
 @njit(cache=True)
 def linear_part(law, par, st, x, tension):
     """Adhesive force per unit area for a given internal variable x: r_adh = (kN uN + fN, kT uT + fT);
-    `tension` selects the branch of laws acting in tension only. Returns (kN, kT, fN, fT, mu)."""
+    `tension` selects the branch of laws acting in tension only. Returns (kN, kT, fN, fT, mu). fT = 0 for every
+    law (isotropic tangential part), so in 3D r_adh = (kN uN + fN, kT u_T, kT u_S)."""
     mu = par[P_MU]
     if law == COULOMB or st[S_BROKEN] > 0.0:
         if law == FREMOND and par[P_MUKIND] == 1.0:
@@ -259,12 +266,12 @@ def compression_stiffness(law, par):
 
 
 @njit(cache=True)
-def commit(law, par, st, x, uN, uT, area):
-    """End of step: store the jump, the internal variable x (β / intact flag / D, final trial value of the
-    converged iteration) and the dissipated energy [J]."""
+def _commit_core(law, par, st, x, uN, uT, uT0, area):
+    """Internal variable x and dissipated energy [J] at the end of a step; uT, uT0: tangential jump now and at the
+    last commit (2D: signed; 3D: the norm ‖u_T‖, the laws being isotropic)."""
     if law != COULOMB and st[S_BROKEN] == 0.0:
         if law == BRITTLE and x == 0.0:
-            st[S_DISS] += area * 0.5 * (par[P_CN] * st[S_UN] ** 2 * (st[S_UN] > 0) + par[P_CT] * st[S_UT] ** 2)
+            st[S_DISS] += area * 0.5 * (par[P_CN] * st[S_UN] ** 2 * (st[S_UN] > 0) + par[P_CT] * uT0 ** 2)
             st[S_BROKEN] = 1.0
             st[S_BETA] = 0.0
         elif law == DUGDALE:
@@ -283,10 +290,61 @@ def commit(law, par, st, x, uN, uT, area):
             un = max(uN, 0.0)
             Y = 0.5 * (par[P_CN] * un * un + par[P_CT] * uT * uT)
             un0 = max(st[S_UN], 0.0)
-            Y0 = 0.5 * (par[P_CN] * un0 * un0 + par[P_CT] * st[S_UT] * st[S_UT])
+            Y0 = 0.5 * (par[P_CN] * un0 * un0 + par[P_CT] * uT0 * uT0)
             st[S_DISS] += area * 0.5 * (Y + Y0) * (x - st[S_BETA])  # trapezoidal ∫ Y dD
             st[S_BETA] = x
             if x >= 1.0:
                 st[S_BROKEN] = 1.0
+
+
+@njit(cache=True)
+def commit(law, par, st, x, uN, uT, area):
+    """End of step (2D): store the jump, the internal variable x (β / intact flag / D, final trial value of the
+    converged iteration) and the dissipated energy [J]."""
+    _commit_core(law, par, st, x, uN, uT, st[S_UT], area)
     st[S_UN] = uN
     st[S_UT] = uT
+
+
+@njit(cache=True)
+def commit3(law, par, st, x, uN, uT, uS, area):
+    """End of step (3D, state row of NSTATE3 columns): as `commit` with the tangential jump (u_T, u_S) entering
+    through its norm."""
+    _commit_core(law, par, st, x, uN, np.sqrt(uT * uT + uS * uS), np.sqrt(st[S_UT] * st[S_UT] + st[S_US] * st[S_US]),
+                 area)
+    st[S_UN] = uN
+    st[S_UT] = uT
+    st[S_US] = uS
+
+
+@njit(cache=True)
+def commit_step(law, par, st, trial, ueff, P, v, area, h, theta):
+    """End of a converged cohesive step, any dimension d = ueff.shape[1] (2: state rows NSTATE, 3: NSTATE3).
+    P (impulses) and v (shifted velocities, u = u_eff + hθ v) are flat, d entries per contact. At the cap
+    (P̃_N = P_N + hA(k_N u_N + f_N) >= h f_c A) the closure is plastic: Δu_p = min(0, hθ(v_N + cmp P̃_N)) (cmp the
+    compliance 1/(h²θ k A) of compliant joints in compression); the laws see the elastic jump u_N - Δu_p, then
+    u_p += Δu_p and f_c A |Δu_p| is dissipated. Same arithmetic as the 2D ContactStep (step.py)."""
+    d = ueff.shape[1]
+    for a in range(law.shape[0]):
+        uN = ueff[a, 0] + h * theta * v[d * a]
+        uT = ueff[a, 1] + h * theta * v[d * a + 1]
+        dup = 0.0
+        capv = h * par[a, P_FC] * area[a]
+        if capv > 0.0:
+            tension = uN > 1e-15
+            kN, kT, fN, fT, m = linear_part(law[a], par[a], st[a], trial[a], tension)
+            Pt = P[d * a] + h * area[a] * kN * h * theta * v[d * a] + h * area[a] * (kN * ueff[a, 0] + fN)
+            cmp = 0.0
+            if law[a] != COULOMB and not tension:
+                kc = compression_stiffness(law[a], par[a]) * area[a]
+                if kc > 0.0:
+                    cmp = 1.0 / (h * h * theta * kc)
+            if Pt >= capv * (1 - 1e-9):
+                dup = min(0.0, h * theta * (v[d * a] + cmp * Pt))
+        if d == 2:
+            commit(law[a], par[a], st[a], trial[a], uN - dup, uT, area[a])
+        else:
+            commit3(law[a], par[a], st[a], trial[a], uN - dup, uT, ueff[a, 2] + h * theta * v[d * a + 2], area[a])
+        if dup != 0.0:
+            st[a, S_UP] += dup
+            st[a, S_DISS] += par[a, P_FC] * area[a] * abs(dup)

@@ -28,7 +28,7 @@ import scipy.sparse as sp
 from numba import njit
 
 from ..errors import InputError
-from .local import _proj_cone3, local_3d
+from .local import _proj_cone3, _solve3, local_3d
 
 ORDERS = {"given": 0, "reversed": 1, "shuffled": 2}
 
@@ -611,13 +611,18 @@ def _local_cohesive(w00, w01, w10, w11, v0, v1, law, par, st, x, ue0, ue1, area,
 
 @njit(cache=True)
 def _update_internal(law, par, st, ueff, v, h, theta, x):
-    """x_α from the jumps u = u_eff + hθ v of a converged NLGS; returns the largest change."""
+    """x_α from the jumps u = u_eff + hθ v of a converged NLGS (d = ueff.shape[1] = 2 or 3; in 3D the laws see
+    ‖u_T‖ of the tangential 2-vector); returns the largest change."""
     dmax = 0.0
+    dim = ueff.shape[1]
     for a in range(law.shape[0]):
         if law[a] == 0:
             continue
-        xn = _internal_update(law[a], par[a], st[a], ueff[a, 0] + h * theta * v[2 * a],
-                              ueff[a, 1] + h * theta * v[2 * a + 1], h)
+        uT = ueff[a, 1] + h * theta * v[dim * a + 1]
+        if dim == 3:
+            uS = ueff[a, 2] + h * theta * v[dim * a + 2]
+            uT = np.sqrt(uT * uT + uS * uS)
+        xn = _internal_update(law[a], par[a], st[a], ueff[a, 0] + h * theta * v[dim * a], uT, h)
         d = abs(xn - x[a])
         if d > dmax:
             dmax = d
@@ -653,9 +658,248 @@ def _sweep_cohesive(indptr, indices, blocks, diag_pos, q, mu, r, order, omega, l
     return dr2, r2
 
 
+# ----------------------------------------------------------------------------- cohesive interfaces, 3D
+# Same change of variables with u = (u_N, u_T, u_S), K = diag(k_N, k_T, k_T) A (isotropic tangential part: the laws
+# see ‖u_T‖), W' = A⁻¹ W_αα = (W_αα⁻¹ + h²θ K)⁻¹ (symmetric when W_αα is), solved by local_3d; the cap fixes P̃_N and
+# leaves a 2D friction problem on the disk ‖P̃_T‖ <= μ P̃_N (_cap3).
+@njit(cache=True, inline="always")
+def _local_free3(indptr, indices, blocks, q, r, a):
+    """v_loc^α = q_α + Σ_{β≠α} W_αβ r_β (3D)."""
+    v0 = q[3 * a]
+    v1 = q[3 * a + 1]
+    v2 = q[3 * a + 2]
+    for k in range(indptr[a], indptr[a + 1]):
+        b = indices[k]
+        if b == a:
+            continue
+        for j in range(3):
+            rj = r[3 * b + j]
+            v0 += blocks[k, 0, j] * rj
+            v1 += blocks[k, 1, j] * rj
+            v2 += blocks[k, 2, j] * rj
+    return v0, v1, v2
+
+
+@njit(cache=True)
+def _cap3(w, d, pn, p1, p2, q1, q2, mu, capP):
+    """Compressive cap P̃_N <= capP (3D). At the cap P̃_N = capP and the tangential impulse solves
+    v_T = w_TN capP + w_TT p_T + q_T with Coulomb on the disk ‖p_T‖ <= R = μ capP: stick p_T = -w_TT⁻¹ b
+    (b = w_TN capP + q_T) if inside, else slide p_T = -R e, e = (λ I + R w_TT)⁻¹ b, ‖e‖ = 1 (then v_T = λ e, λ >= 0;
+    ‖(λ I + R w_TT)⁻¹ b‖ decreases in λ for w_TT SPD: bisection on [0, ‖b‖ + R ‖w_TT‖_1])."""
+    if capP <= 0.0 or pn <= capP:
+        return pn, p1, p2
+    pn = capP
+    b1 = w[d, 1, 0] * pn + q1
+    b2 = w[d, 2, 0] * pn + q2
+    R = mu * pn
+    a11 = w[d, 1, 1]
+    a12 = w[d, 1, 2]
+    a21 = w[d, 2, 1]
+    a22 = w[d, 2, 2]
+    det = a11 * a22 - a12 * a21
+    if det > 0.0:
+        s1 = -(a22 * b1 - a12 * b2) / det
+        s2 = -(a11 * b2 - a21 * b1) / det
+        if np.sqrt(s1 * s1 + s2 * s2) <= R:
+            return pn, s1, s2
+    nb = np.sqrt(b1 * b1 + b2 * b2)
+    if R == 0.0 or nb == 0.0:
+        return pn, 0.0, 0.0
+    lo = 0.0
+    hi = nb + R * (abs(a11) + abs(a12) + abs(a21) + abs(a22))
+    e1 = b1 / nb
+    e2 = b2 / nb
+    for it in range(200):
+        lam = 0.5 * (lo + hi)
+        m11 = lam + R * a11
+        m22 = lam + R * a22
+        dm = m11 * m22 - R * a12 * R * a21
+        if dm == 0.0:
+            lo = lam
+            continue
+        x1 = (m22 * b1 - R * a12 * b2) / dm
+        x2 = (m11 * b2 - R * a21 * b1) / dm
+        nx = np.sqrt(x1 * x1 + x2 * x2)
+        if nx > 1.0:
+            lo = lam
+        else:
+            hi = lam
+            if nx > 0.0:
+                e1 = x1 / nx
+                e2 = x2 / nx
+        if hi - lo <= 1e-15 * hi:
+            break
+    return pn, -R * e1, -R * e2
+
+
+@njit(cache=True)
+def _local_cohesive3(blocks, dk, v0, v1, v2, law, par, st, x, ue, area, h, theta, o0, o1, o2, wl, J):
+    """Exact 3D local solve with an adhesive law at a fixed internal variable x: A = I + h²θ W_αα K,
+    W' = A⁻¹ W_αα, q' = A⁻¹(v_loc - h W_αα (K u_eff + f)); P̃ from local_3d on (W' [+ compliance on the normal
+    diagonal in compression], q'), capped; P = P̃ - h (K u + f), u = u_eff + hθ (W' P̃ + q'). The tension /
+    compression branch of tension-only springs is iterated (as in 2D). o: current impulse (warm start).
+    Returns (P_N, P_T, P_S, local case)."""
+    c = h * h * theta
+    eps = 1e-15
+    tension = ue[0] > eps
+    # velocity of the current impulse (for the warm start P̃ = o + h(K u + f))
+    vc0 = v0 + blocks[dk, 0, 0] * o0 + blocks[dk, 0, 1] * o1 + blocks[dk, 0, 2] * o2
+    vc1 = v1 + blocks[dk, 1, 0] * o0 + blocks[dk, 1, 1] * o1 + blocks[dk, 1, 2] * o2
+    vc2 = v2 + blocks[dk, 2, 0] * o0 + blocks[dk, 2, 1] * o1 + blocks[dk, 2, 2] * o2
+    r0 = 0.0
+    r1 = 0.0
+    r2 = 0.0
+    case = -1
+    for it in range(4):
+        kN, kT, fN, fT, mue = _linear_part(law, par, st, x, tension)
+        kN *= area
+        kT *= area
+        fN *= area
+        for i in range(3):
+            for j in range(3):
+                J[i, j] = (1.0 if i == j else 0.0) + c * blocks[dk, i, j] * (kN if j == 0 else kT)
+        g0 = h * (kN * ue[0] + fN)
+        g1 = h * kT * ue[1]
+        g2 = h * kT * ue[2]
+        b0 = v0 - (blocks[dk, 0, 0] * g0 + blocks[dk, 0, 1] * g1 + blocks[dk, 0, 2] * g2)
+        b1 = v1 - (blocks[dk, 1, 0] * g0 + blocks[dk, 1, 1] * g1 + blocks[dk, 1, 2] * g2)
+        b2 = v2 - (blocks[dk, 2, 0] * g0 + blocks[dk, 2, 1] * g1 + blocks[dk, 2, 2] * g2)
+        q0, q1, q2, ok = _solve3(J, b0, b1, b2)
+        for j in range(3):  # W' = A⁻¹ W_αα column by column
+            c0, c1, c2, ok = _solve3(J, blocks[dk, 0, j], blocks[dk, 1, j], blocks[dk, 2, j])
+            wl[0, 0, j] = c0
+            wl[0, 1, j] = c1
+            wl[0, 2, j] = c2
+        cmp = 0.0
+        if not tension:
+            kc = _kcomp(law, par) * area
+            if kc > 0.0:
+                cmp = 1.0 / (c * kc)  # compliant Signorini: v_N + cmp P̃_N >= 0
+        w00 = wl[0, 0, 0]
+        wl[0, 0, 0] = w00 + cmp
+        s0 = o0 + h * (kN * (ue[0] + h * theta * vc0) + fN)
+        s1 = o1 + h * kT * (ue[1] + h * theta * vc1)
+        s2 = o2 + h * kT * (ue[2] + h * theta * vc2)
+        p0, p1, p2, case = local_3d(wl, 0, q0, q1, q2, mue, s0, s1, s2, J)
+        wl[0, 0, 0] = w00
+        p0, p1, p2 = _cap3(wl, 0, p0, p1, p2, q1, q2, mue, h * par[P_FC] * area)
+        uN = ue[0] + h * theta * (wl[0, 0, 0] * p0 + wl[0, 0, 1] * p1 + wl[0, 0, 2] * p2 + q0)
+        uT = ue[1] + h * theta * (wl[0, 1, 0] * p0 + wl[0, 1, 1] * p1 + wl[0, 1, 2] * p2 + q1)
+        uS = ue[2] + h * theta * (wl[0, 2, 0] * p0 + wl[0, 2, 1] * p1 + wl[0, 2, 2] * p2 + q2)
+        r0 = p0 - h * (kN * uN + fN)
+        r1 = p1 - h * kT * uT
+        r2 = p2 - h * kT * uS
+        if (uN > eps) == tension:
+            break
+        tension = uN > eps
+    return r0, r1, r2, case
+
+
+@njit(cache=True)
+def _sweep_cohesive3(indptr, indices, blocks, diag_pos, q, mu, r, order, omega, law, par, st, trial, ueff, area,
+                     h, theta, wl, J, cases):
+    """One 3D cohesive Gauss–Seidel pass (impulses r in place); cases[k] counts the local cases (k = case + 1)."""
+    dr2 = 0.0
+    r2 = 0.0
+    for ii in range(order.shape[0]):
+        a = order[ii]
+        v0, v1, v2 = _local_free3(indptr, indices, blocks, q, r, a)
+        d = diag_pos[a]
+        i0 = 3 * a
+        o0 = r[i0]
+        o1 = r[i0 + 1]
+        o2 = r[i0 + 2]
+        wa = blocks
+        if d < 0:  # no diagonal block stored: W_αα = 0 (e.g. both sides driven)
+            wa = wl
+            d = 1
+        if law[a] == 0:
+            x0, x1, x2, case = local_3d(wa, d, v0, v1, v2, mu[a], o0, o1, o2, J)
+            x0, x1, x2 = _cap3(wa, d, x0, x1, x2, v1, v2, mu[a], h * par[a, P_FC] * area[a])
+        else:
+            x0, x1, x2, case = _local_cohesive3(wa, d, v0, v1, v2, law[a], par[a], st[a], trial[a], ueff[a],
+                                                area[a], h, theta, o0, o1, o2, wl, J)
+        cases[case + 1] += 1
+        for i, xi in enumerate((x0, x1, x2)):  # relaxation r <- ω r_loc + (1-ω) r, change and norm
+            if omega != 1.0:
+                xi = omega * xi + (1.0 - omega) * r[i0 + i]
+            dr2 += (xi - r[i0 + i]) ** 2
+            r2 += xi * xi
+            r[i0 + i] = xi
+    return dr2, r2
+
+
+@njit(cache=True)
+def _natural_map_cohesive3(indptr, indices, blocks, q, mu, r, law, par, st, trial, ueff, area, h, theta):
+    """3D ‖F‖ of the transformed problem: F = P̃ - P_K(P̃ - (v + [μ‖v_T‖, 0, 0])), P̃ = P + P_adh(u(v)); at a cap
+    the Alart–Curnier residual (ρ = 1) with the normal projection onto [0, h f_c A] and the tangential one onto the
+    disk of radius μ times it (zero exactly at the solutions)."""
+    n = mu.shape[0]
+    u = np.empty_like(q)
+    matvec_bcsr(indptr, indices, blocks, r, u)
+    s = 0.0
+    for a in range(n):
+        v0 = u[3 * a] + q[3 * a]
+        v1 = u[3 * a + 1] + q[3 * a + 1]
+        v2 = u[3 * a + 2] + q[3 * a + 2]
+        p0 = r[3 * a]
+        p1 = r[3 * a + 1]
+        p2 = r[3 * a + 2]
+        m = mu[a]
+        if law[a] != 0:
+            uN = ueff[a, 0] + h * theta * v0
+            kN, kT, fN, fT, m = _linear_part(law[a], par[a], st[a], trial[a], uN > 0.0)
+            p0 += h * area[a] * (kN * uN + fN)
+            p1 += h * area[a] * kT * (ueff[a, 1] + h * theta * v1)
+            p2 += h * area[a] * kT * (ueff[a, 2] + h * theta * v2)
+            if uN <= 0.0:
+                kc = _kcomp(law[a], par[a]) * area[a]
+                if kc > 0.0:
+                    v0 += p0 / (h * h * theta * kc)
+        capP = h * par[a, P_FC] * area[a]
+        if capP > 0.0:
+            y0 = min(max(p0 - v0, 0.0), capP)
+            x1 = p1 - v1
+            x2 = p2 - v2
+            nx = np.sqrt(x1 * x1 + x2 * x2)
+            lim = m * y0
+            if nx > lim:
+                x1 *= lim / nx
+                x2 *= lim / nx
+            y1, y2 = x1, x2
+        else:
+            y0, y1, y2 = _proj_cone3(p0 - (v0 + m * np.sqrt(v1 * v1 + v2 * v2)), p1 - v1, p2 - v2, m)
+        f0 = p0 - y0
+        f1 = p1 - y1
+        f2 = p2 - y2
+        s += f0 * f0 + f1 * f1 + f2 * f2
+    return np.sqrt(s)
+
+
+def _check_cohesive3(n, r, law, par, st, ueff, area):
+    """Shapes of the 3D cohesive inputs (InputError naming the field)."""
+    from ..laws import NPAR, NSTATE3
+    if r.size != 3 * n:
+        raise InputError(f"r0: expected {3 * n} entries (3 per contact), got {r.size}")
+    if law.shape != (n,):
+        raise InputError(f"law: expected {n} law codes, got shape {law.shape}")
+    if par.shape != (n, NPAR):
+        raise InputError(f"par: expected shape ({n}, {NPAR}), got {par.shape}")
+    if st.ndim != 2 or st.shape[0] != n or st.shape[1] < NSTATE3:
+        raise InputError(f"st: expected the 3D state layout, shape ({n}, {NSTATE3}) (laws.initial_state(law, 3)), "
+                         f"got {st.shape}")
+    if np.shape(ueff) != (n, 3):
+        raise InputError(f"ueff: expected shape ({n}, 3) (u_N, u_T, u_S per contact), got {np.shape(ueff)}")
+    if np.shape(area) != (n,):
+        raise InputError(f"area: expected {n} tributary areas, got shape {np.shape(area)}")
+
+
 @njit(cache=True)
 def natural_map_cohesive(indptr, indices, blocks, q, mu, r, law, par, st, trial, ueff, area, h, theta):
-    """‖F‖ of the transformed problem: F = P̃ - P_K(P̃ - (v + [μ|v_T|, 0])), P̃ = P + P_adh(u(v))."""
+    """‖F‖ of the transformed problem: F = P̃ - P_K(P̃ - (v + [μ|v_T|, 0])), P̃ = P + P_adh(u(v)) (2D or 3D by the
+    block size)."""
+    if blocks.shape[1] == 3:
+        return _natural_map_cohesive3(indptr, indices, blocks, q, mu, r, law, par, st, trial, ueff, area, h, theta)
     n = mu.shape[0]
     u = np.empty_like(q)
     matvec_bcsr(indptr, indices, blocks, r, u)
@@ -704,8 +948,11 @@ def natural_map_cohesive(indptr, indices, blocks, q, mu, r, law, par, st, trial,
 
 @njit(cache=True)
 def _run_cohesive(indptr, indices, blocks, diag_pos, q, mu, r, order_kind, omega, tol, max_sweeps, seed,
-                  law, par, st, trial, ueff, area, h, theta, use_residual, check_every, qnorm):
+                  law, par, st, trial, ueff, area, h, theta, use_residual, check_every, qnorm, cases):
     n = mu.shape[0]
+    dim = blocks.shape[1]
+    wl = np.zeros((2, 3, 3))  # 3D: wl[0] the transformed block W', wl[1] a zero block for rows without W_αα
+    J = np.empty((3, 3))
     order = np.arange(n)
     if order_kind == 1:
         order = order[::-1].copy()
@@ -717,8 +964,12 @@ def _run_cohesive(indptr, indices, blocks, diag_pos, q, mu, r, order_kind, omega
     while sweeps < max_sweeps:
         if order_kind == 2:
             np.random.shuffle(order)
-        dr2, r2 = _sweep_cohesive(indptr, indices, blocks, diag_pos, q, mu, r, order, omega, law, par, st, trial,
-                                  ueff, area, h, theta)
+        if dim == 2:
+            dr2, r2 = _sweep_cohesive(indptr, indices, blocks, diag_pos, q, mu, r, order, omega, law, par, st, trial,
+                                      ueff, area, h, theta)
+        else:
+            dr2, r2 = _sweep_cohesive3(indptr, indices, blocks, diag_pos, q, mu, r, order, omega, law, par, st, trial,
+                                       ueff, area, h, theta, wl, J, cases)
         sweeps += 1
         change = np.sqrt(dr2 / r2) if r2 > 0.0 else np.sqrt(dr2)
         if use_residual:
@@ -738,16 +989,19 @@ def solve_cohesive(W: BlockCSR, q, mu, law, par, st, ueff, area, h: float, theta
                    tol: float = 1e-8, max_sweeps: int = 10000, omega: float = 1.0, order: str = "given",
                    seed: int = 0, max_outer: int = 100, criterion: str = "change", check_every: int = 10,
                    x0=None):
-    """NLGS with interface laws (laws.py) per contact. Returns (NLGSResult, trial internal variables).
-    `q` includes the Signorini shift; `ueff` = u_i + h(1-θ)v_i - hθ shift e_N per contact (nc, 2)."""
+    """NLGS with interface laws (laws.py) per contact, 2D (2x2 blocks) or 3D (3x3 blocks, u = (u_N, u_T, u_S)).
+    Returns (NLGSResult, trial internal variables). `q` includes the Signorini shift; `ueff` = u_i + h(1-θ)v_i - hθ
+    shift e_N per contact (nc, d); `st` the committed states (nc, NSTATE) in 2D, (nc, NSTATE3) in 3D."""
     if criterion not in ("change", "residual"):
         raise InputError(f"criterion = {criterion!r}: expected 'change' or 'residual'")
     q, mu = _check(W, q, mu, tol, max_sweeps, omega, order, check_every)
-    n = W.n
-    r = np.zeros(2 * n) if r0 is None else np.array(r0, dtype=np.float64).ravel()
+    n, d = W.n, W.dim
+    r = np.zeros(d * n) if r0 is None else np.array(r0, dtype=np.float64).ravel()
     law = np.ascontiguousarray(law, dtype=np.int64)
     par = np.ascontiguousarray(par, dtype=np.float64)
     st = np.ascontiguousarray(st, dtype=np.float64)
+    if d == 3:
+        _check_cohesive3(n, r, law, par, st, ueff, area)
     from ..laws import S_BETA
     trial = np.ascontiguousarray(st[:, S_BETA].copy() if x0 is None else np.array(x0, dtype=np.float64))
     ueff = np.ascontiguousarray(ueff, dtype=np.float64)
@@ -758,6 +1012,7 @@ def solve_cohesive(W: BlockCSR, q, mu, law, par, st, ueff, area, h: float, theta
     # update them from the converged jumps, until they stop changing (selects the least damaged solution)
     total = 0
     u = np.empty_like(q)
+    cases = np.zeros(6, dtype=np.int64)
     converged = False
     change = np.inf
     for outer in range(max_outer):
@@ -765,7 +1020,7 @@ def solve_cohesive(W: BlockCSR, q, mu, law, par, st, ueff, area, h: float, theta
                                                   ORDERS[order], float(omega), float(tol),
                                                   int(max_sweeps) - total, int(seed) + outer, law, par, st, trial,
                                                   ueff, area, float(h), float(theta), criterion == "residual",
-                                                  int(check_every), float(np.linalg.norm(q)) or 1.0)
+                                                  int(check_every), float(np.linalg.norm(q)) or 1.0, cases)
         total += sweeps
         matvec_bcsr(W.indptr, W.indices, W.blocks, r, u)
         u += q
@@ -782,4 +1037,5 @@ def solve_cohesive(W: BlockCSR, q, mu, law, par, st, ueff, area, h: float, theta
                                          float(h), float(theta)))
     msg = f"converged in {sweeps} sweeps" if converged else \
         f"not converged after {sweeps} sweeps (change {change:.3g}, tolerance {tol:g})"
-    return NLGSResult(r, u, int(sweeps), bool(converged), float(change), res_abs / qnorm, res_abs, msg), trial
+    return NLGSResult(r, u, int(sweeps), bool(converged), float(change), res_abs / qnorm, res_abs, msg,
+                      cases if d == 3 else None), trial
