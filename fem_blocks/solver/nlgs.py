@@ -68,7 +68,9 @@ def to_block_csr(W, dim: int = 2) -> BlockCSR:
     if Ws.shape[1] != m or m % dim:
         raise InputError(f"W: expected a square matrix of size dim * n_contacts, got shape {Ws.shape} (dim {dim})")
     nc = m // dim
-    Ws = (Ws + sp.csr_matrix((np.zeros(m), (np.arange(m), np.arange(m))), shape=(m, m))).tocsr()
+    c = Ws.tocoo()  # explicit zero diagonal entries (a csr sum would drop them): every row gets its diagonal block
+    Ws = sp.coo_matrix((np.r_[c.data, np.zeros(m)], (np.r_[c.row, np.arange(m)], np.r_[c.col, np.arange(m)])),
+                       shape=(m, m)).tocsr()
     B = Ws.tobsr(blocksize=(dim, dim))
     B.sort_indices()
     indptr = B.indptr.astype(np.int64)
