@@ -377,8 +377,8 @@ class ContactStep:
         c2 = perf_counter()
         tm["local"] += c2 - c1
         if self.cohesive:
-            from ..laws import S_UN, S_UT
-            ueff = self.state[:, [S_UN, S_UT]] + h * (1 - th) * vi
+            from ..laws import NSTATE, S_UN, S_UT
+            ueff = self.state[:, [S_UN, S_UT] + ([NSTATE] if d == 3 else [])] + h * (1 - th) * vi
             ueff[:, 0] -= gbar  # u = u_eff + h theta v_shifted (v_shifted = v_N + gbar/(h theta))
             if self.opts.solver == "newton":
                 from ..solver.newton import solve_cohesive_newton
@@ -391,7 +391,7 @@ class ContactStep:
                                                  max_sweeps=self.opts.max_sweeps, omega=self.opts.omega,
                                                  order=self.opts.order, seed=self.opts.seed + self.steps,
                                                  criterion=self.opts.criterion, check_every=self.opts.check_every)
-            vs = res.u.reshape(-1, 2)
+            vs = res.u.reshape(-1, d)
             u_new = ueff + h * th * vs
             dup = self._crushing(res.r.reshape(-1, 2), ueff, res.u, trial, h, th)
             u_new[:, 0] -= dup  # the laws see the elastic jump
