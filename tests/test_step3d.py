@@ -314,3 +314,17 @@ def test_solver_and_law_options_3d():
         sim.step()
         ref_sim.step()
     assert np.allclose(blk.u, ref.u, rtol=0, atol=1e-9)
+
+
+def test_rotation_displacement_driver_3d():
+    """A displacement driver on a 3D rotation dof sets the orientation exactly: Rot(t) = exp([φ(t) e_z]x) with the
+    θ-rule increments completed by the remaining rotation, whatever θ."""
+    drivers = {k: ("velocity", 0.0) for k in ("x", "y", "z", "rx", "ry")}
+    drivers["rz"] = Driver("displacement", History([0.0, 0.05, 0.1], [0.0, 0.3, 0.2]))
+    rb = RigidBody3D.box(1.0, 0.6, 0.4, rho=1000.0, drivers=drivers)
+    sim = Simulation([rb], 1e-3, 0.7)
+    for _ in range(80):
+        sim.step()
+    phi = rb.drivers[5].history(sim.time)
+    assert np.allclose(rb.orientation, rotation3d(EZ, phi), atol=1e-13) and abs(rb.q[5] - phi) <= 1e-13
+    assert abs(rb.u[5] - (0.2 - 0.3) / 0.05) <= 1e-9
