@@ -1,4 +1,5 @@
-"""Moreau–Jean theta-method time stepping for deformable blocks and rigid bodies (DESIGN §2).
+"""Moreau–Jean theta-method time stepping for deformable blocks and rigid bodies (DESIGN §2), in 2D or 3D
+(dimension d from the bodies: DeformableBody/RigidBody or DeformableBody3D/RigidBody3D, not mixed).
 
 Per step [t_i, t_{i+1}], for every deformable body (type frame, clamped dofs eliminated):
 
@@ -12,6 +13,14 @@ then
 
     q_{i+1} = q_i + h [(1-theta) u_i + theta u_{i+1}].
 
+3D rigid bodies (dofs (v, ω) at the centre of mass, global frame): M = diag(m, m, m) ⊕ I, I = Rot I0 Rotᵀ in
+the orientation at the start of the step, the free velocity on the free dofs
+
+    u_free,f = u_i,f + h M_ff^-1 (F_theta - (0, ω_i × I ω_i))_f        (explicit gyroscopic moment),
+
+and the orientation is updated by the rotation vector Δφ = h [(1-theta) ω_i + theta ω_{i+1}]:
+Rot <- exp([Δφ]x) Rot (RigidBody3D.rotate).
+
 Quasi-static option "velocity reset" (thesis §7.1.2.d): u_i := 0 on free dofs at the start of
 every step. Reaction of the drivers on a driven rigid dof (what a load cell reads):
 
@@ -23,7 +32,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .bodies import DeformableBody, RigidBody, check_step
+from .bodies import DeformableBody, DeformableBody3D, RigidBody, RigidBody3D, check_step
 from .errors import InputError
 
 
@@ -66,21 +75,31 @@ class _Group:
 class Simulation:
     """Time integration of a set of bodies (and, through `contact`, their interfaces).
 
-    Parameters: bodies (DeformableBody / RigidBody), h, theta in [0.5, 1], gravity vector,
-    velocity_reset (quasi-static), contact: an optional object with `solve(sim, t0, t1)` that
-    returns the contact impulse contribution (see contact_step.ContactStep).
+    Parameters: bodies (DeformableBody / RigidBody in 2D, DeformableBody3D / RigidBody3D in 3D), h,
+    theta in [0.5, 1], gravity vector (default (0, -9.81) in 2D, (0, 0, -9.81) in 3D), velocity_reset
+    (quasi-static), contact: an optional object with `solve(sim, t0, t1)` that returns the contact
+    impulse contribution (see contact/step.py ContactStep).
     """
 
-    def __init__(self, bodies, h: float, theta: float = 0.5, gravity=(0.0, -9.81),
+    def __init__(self, bodies, h: float, theta: float = 0.5, gravity=None,
                  velocity_reset: bool = False, contact=None, t0: float = 0.0):
         check_step(h, theta)
         if not bodies:
             raise InputError("bodies: expected at least one body")
         self.bodies = list(bodies)
+        kinds = {2: (DeformableBody, RigidBody), 3: (DeformableBody3D, RigidBody3D)}
+        self.dim = 3 if isinstance(self.bodies[0], kinds[3]) else 2
         for b in self.bodies:
-            if not isinstance(b, (DeformableBody, RigidBody)):
-                raise InputError(f"bodies: {b!r} is not a DeformableBody or RigidBody")
-        self.g = np.asarray(gravity, dtype=float).reshape(2)
+            if not isinstance(b, kinds[self.dim]):
+                names = " or ".join(c.__name__ for c in kinds[self.dim])
+                raise InputError(f"bodies: {b!r} is not a {names} (all bodies of a simulation share the dimension "
+                                 f"{self.dim} of the first one)")
+        d = self.dim
+        gravity = ((0.0, -9.81) if d == 2 else (0.0, 0.0, -9.81)) if gravity is None else gravity
+        if np.size(gravity) != d or not np.all(np.isfinite(np.asarray(gravity, dtype=float))):
+            raise InputError(f"gravity = {gravity!r}: expected {d} finite components [m/s^2]")
+        self.g = np.asarray(gravity, dtype=float).reshape(d)
+        self.rigid_ndof = 3 if d == 2 else 6
         self.velocity_reset = bool(velocity_reset)
         self.time, self.step_count = float(t0), 0
         self.external_work = 0.0
@@ -144,10 +163,43 @@ class Simulation:
             if self.velocity_reset:
                 b.u[~b.driven] = 0.0
             b.Ftheta = (1 - th) * b.applied_force(t0, self.g) + th * b.applied_force(t1, self.g)
-            uf = b.u + h * np.divide(b.Ftheta, b.mass, out=np.zeros(3), where=b.mass > 0)
+            uf = b.u + h * self._rigid_accel(b)
             for k, drv in b.drivers.items():
                 uf[k] = drv.step_velocity(t0, t1)
             b.ufree = uf
+
+    def _rigid_accel(self, b) -> np.ndarray:
+        """M^-1 F_theta on the free dofs (2D: diagonal M; 3D: M_ff^-1 (F_theta - (0, ω × I ω))_f), 0 on driven."""
+        if self.dim == 2:
+            return np.divide(b.Ftheta, b.mass, out=np.zeros(3), where=b.mass > 0)
+        F = b.Ftheta.copy()
+        w = b.u[3:]
+        F[3:] -= np.cross(w, b.inertia @ w)
+        return b.W @ F
+
+    def _rigid_mass_times(self, b, v) -> np.ndarray:
+        return b.mass * v if self.dim == 2 else b.mass_matrix @ v
+
+    def _rigid_gravity_force(self, b) -> np.ndarray:
+        f = np.zeros(self.rigid_ndof)
+        f[:self.dim] = (b.mass[0] if self.dim == 2 else b.mass) * self.g
+        return f
+
+    def _move_rigid(self, b, dq, t1):
+        """q += dq (3D: translation, then the orientation rotated by Δφ = dq[3:]); displacement drivers set q[k]
+        (3D rotation dofs: the remaining rotation about axis k is applied)."""
+        if self.dim == 2:
+            b.q += dq
+        else:
+            b.q[:3] += dq[:3]
+            b.rotate(dq[3:])
+        for k, drv in b.drivers.items():
+            if drv.kind == "displacement":
+                if self.dim == 3 and k >= 3:
+                    e = np.zeros(3)
+                    e[k - 3] = drv.history(t1) - b.q[k]
+                    b.rotate(e)
+                b.q[k] = drv.history(t1)
 
     def step(self) -> StepInfo:
         h, th = self.h, self.theta
@@ -168,17 +220,14 @@ class Simulation:
             b = self.bodies[i]
             unew = b.ufree if getattr(b, "ucorr", None) is None else b.ufree + b.ucorr
             imp = getattr(b, "contact_impulse", None)
-            cimp = np.zeros(3) if imp is None else imp
-            react = b.mass * (unew - b.u) / h - b.Ftheta - cimp / h
+            cimp = np.zeros(self.rigid_ndof) if imp is None else imp
+            react = self._rigid_mass_times(b, unew - b.u) / h - b.Ftheta - cimp / h
             b.reaction = np.where(b.driven, react, 0.0)
             dq = h * ((1 - th) * b.u + th * unew)
-            gforce = np.array([b.mass[0] * self.g[0], b.mass[1] * self.g[1], 0.0])
+            gforce = self._rigid_gravity_force(b)
             work += float(np.dot(np.where(b.driven, 0.0, b.Ftheta - gforce), dq))
             wdrv += float(np.dot(b.reaction, dq))
-            b.q += dq
-            for k, drv in b.drivers.items():
-                if drv.kind == "displacement":
-                    b.q[k] = drv.history(t1)
+            self._move_rigid(b, dq, t1)
             b.u[:] = unew
             b.ucorr, b.contact_impulse = None, None
         self.time, self.step_count = t1, self.step_count + 1
@@ -197,12 +246,15 @@ class Simulation:
             d[f"sim.body{i}.u"] = np.array(b.u)
             if b.kind == 1:
                 d[f"sim.body{i}.reaction"] = np.array(b.reaction)
+                if self.dim == 3:
+                    d[f"sim.body{i}.orientation"] = np.array(b.orientation)
         return d
 
     def restore_state(self, d: dict) -> None:
         """Inverse of `export_state` (in place: the groups' arrays keep their identity)."""
         for i, b in enumerate(self.bodies):
-            for name in ("q", "u") + (("reaction",) if b.kind == 1 else ()):
+            rigid = ("reaction",) + (("orientation",) if self.dim == 3 else ()) if b.kind == 1 else ()
+            for name in ("q", "u") + rigid:
                 key = f"sim.body{i}.{name}"
                 if key not in d or np.shape(d[key]) != np.shape(getattr(b, name)):
                     raise InputError(f"checkpoint: {key}: missing or of another shape than body {i} of this model "
@@ -223,19 +275,19 @@ class Simulation:
             pot -= float(np.sum(gr.Fg * gr.Q))
         for i in self.rigid:
             b = self.bodies[i]
-            kin += 0.5 * float(np.dot(b.mass, b.u * b.u))
-            pot -= float(b.mass[0] * (self.g[0] * b.q[0] + self.g[1] * b.q[1]))
+            kin += 0.5 * float(np.dot(b.u, self._rigid_mass_times(b, b.u)))
+            pot -= float(np.dot(self._rigid_gravity_force(b), b.q))
         return kin, ela, pot
 
     def max_velocity(self) -> float:
-        v = 0.0
+        v, d = 0.0, self.dim
         for gr in self.groups:
             if gr.U.size:
-                v = max(v, float(np.max(np.hypot(gr.U[0::2], gr.U[1::2]))))
+                v = max(v, float(np.max(np.linalg.norm(gr.U.reshape(-1, d, gr.U.shape[1]), axis=1))))
         for i in self.rigid:
             b = self.bodies[i]
-            if not b.driven[:2].all():
-                v = max(v, float(np.hypot(*b.u[:2])))
+            if not b.driven[:d].all():
+                v = max(v, float(np.linalg.norm(b.u[:d])))
         return v
 
     def info(self, cinfo=None) -> StepInfo:

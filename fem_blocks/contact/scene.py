@@ -1,10 +1,13 @@
 """Flat-array view of the bodies of a Simulation, as the contact layer sees them (architecture.md).
 
-Bodies 0..nb-1 (deformable and rigid in one list). Boundary nodes of all bodies are concatenated
-in `bx` (deformable: the type's boundary nodes in `BlockType.boundary_nodes` order; rigid: polygon
-vertices); `bedges` index `bx`, counter-clockwise per body. Velocities and impulses are exchanged in
-the *W numbering*: deformable body = its type's boundary dofs `2*bnode_index + c` in the type frame,
-rigid body = (vx, vy, omega) at its centre of mass. `U_offset[b]` locates body b in flat vectors.
+Bodies 0..nb-1 (deformable and rigid in one list), dimension d = sim.dim (2 or 3). Boundary nodes of all
+bodies are concatenated in `bx (nbn, d)` (deformable: the type's boundary nodes in
+`BlockType.boundary_nodes` order; rigid: polygon vertices in 2D, the points of its polyhedron in 3D).
+2D: `bedges` index `bx`, counter-clockwise per body. 3D: `bfaces (nf, 4)` index `bx` (-1 in column 3 for
+a triangle), outward by the right-hand rule, `bface_body (nf,)` (detection3d.flatten_boundaries layout).
+Velocities and impulses are exchanged in the *W numbering*: deformable body = its type's boundary dofs
+`d*bnode_index + c` in the type frame, rigid body = (vx, vy, omega) in 2D, (v, ω) (6 dofs) in 3D at its
+centre of mass. `U_offset[b]` locates body b in flat vectors.
 
 All per-step gathers/scatters are batched per group of bodies sharing a step operator.
 """
@@ -19,8 +22,10 @@ class ContactScene:
         bodies = sim.bodies
         nb = len(bodies)
         self.nb = nb
+        d = self.dim = getattr(sim, "dim", 2)
+        self.rigid_ndof = 3 if d == 2 else 6
         self.kind = np.array([b.kind for b in bodies], dtype=np.int64)
-        self.rot = np.zeros((nb, 2, 2))
+        self.rot = np.zeros((nb, d, d))
         self.body_group = (np.zeros(nb, dtype=np.int64) if body_group is None
                            else np.asarray(body_group, dtype=np.int64))
         # per-type boundary numbering (shared offsets), rigid: identity over its vertices
@@ -39,14 +44,14 @@ class ContactScene:
                 self.bnode_offset[i] = type_offset[key]
                 self.nbnodes[i] = b.type.boundary_nodes.size
             else:
-                self.rot[i] = np.eye(2)
-                nv = len(b.vertices_rel)
+                self.rot[i] = np.eye(d)
+                nv = len(self._rigid_points(b))
                 self.bnode_offset[i] = off
                 index_parts.append(np.arange(nv, dtype=np.int64))
                 off += nv
                 self.nbnodes[i] = nv
         self.bnode_index_flat = np.concatenate(index_parts).astype(np.int64)
-        # boundary nodes and edges in bx numbering
+        # boundary nodes and edges (2D) / faces (3D) in bx numbering
         self.bx_start = np.zeros(nb + 1, dtype=np.int64)
         self.bx_start[1:] = np.cumsum(self.nbnodes)
         nbn = int(self.bx_start[-1])
@@ -58,22 +63,34 @@ class ContactScene:
             if b.kind == 0:
                 bt = b.type
                 self.bnode_local[s:s + bt.boundary_nodes.size] = bt.boundary_nodes
-                e = bt.bnode_index[bt.mesh.boundary_edges] + s
+                local = bt.mesh.boundary_edges if d == 2 else bt.mesh.boundary_faces
+                e = bt.bnode_index[local] + s
             else:
                 nv = self.nbnodes[i]
                 self.bnode_local[s:s + nv] = np.arange(nv)
                 k = np.arange(nv)
-                e = np.column_stack([k, (k + 1) % nv]) + s
+                e = (np.column_stack([k, (k + 1) % nv]) if d == 2 else b.boundary_faces) + s
+            if d == 3 and e.shape[1] == 3:
+                e = np.column_stack([e, -np.ones(len(e), dtype=np.int64)])
             edges.append(e)
             ebody.append(np.full(len(e), i, dtype=np.int64))
-        self.bedges = np.concatenate(edges).astype(np.int64)
-        self.bedge_body = np.concatenate(ebody)
+        if d == 2:
+            self.bedges = np.concatenate(edges).astype(np.int64)
+            self.bedge_body = np.concatenate(ebody)
+        else:
+            self.bfaces = np.ascontiguousarray(np.concatenate(edges).astype(np.int64))
+            self.bface_body = np.concatenate(ebody)
         # W numbering
-        self.W_size = np.where(self.kind == 0, 2 * self.nbnodes, 3).astype(np.int64)
+        self.W_size = np.where(self.kind == 0, d * self.nbnodes, self.rigid_ndof).astype(np.int64)
         self.U_offset = np.zeros(nb + 1, dtype=np.int64)
         self.U_offset[1:] = np.cumsum(self.W_size)
         self.n_udof = int(self.U_offset[-1])
         self._group_index()
+
+    @staticmethod
+    def _rigid_points(b) -> np.ndarray:
+        """Reference boundary points of a rigid body relative to its centre of mass (2D vertices / 3D points)."""
+        return b.vertices_rel if getattr(b, "gdim", 2) == 2 else b.points_rel
 
     def _group_index(self):
         """Per simulation group: index matrices into bx and into the flat W-numbered vectors."""
@@ -81,7 +98,7 @@ class ContactScene:
         self.groups = []
         for gr in sim.groups:
             bt = gr.type
-            nbd = 2 * bt.boundary_nodes.size
+            nbd = self.dim * bt.boundary_nodes.size
             members = gr.members
             uidx = self.U_offset[members][:, None] + np.arange(nbd)[None, :]  # (k, nbd)
             xidx = self.bx_start[members][:, None] + np.arange(bt.boundary_nodes.size)[None, :]
@@ -89,11 +106,13 @@ class ContactScene:
             C = np.stack([sim.bodies[b].position for b in members])
             self.groups.append((gr, uidx, xidx, R, C))
         self.rigid = np.array(sim.rigid, dtype=np.int64)
+        self.rigid_W = {}  # rigid W used in the last Delassus assembly (3D: depends on the orientation)
 
     # ------------------------------------------------------------------ geometry
     def positions(self, reference: bool = False) -> np.ndarray:
-        """bx (nbn, 2): global positions of all boundary nodes (current or reference)."""
-        bx = np.zeros((int(self.bx_start[-1]), 2))
+        """bx (nbn, d): global positions of all boundary nodes (current or reference)."""
+        d = self.dim
+        bx = np.zeros((int(self.bx_start[-1]), d))
         for gr, uidx, xidx, R, C in self.groups:
             bt = gr.type
             X = bt.mesh.points[bt.boundary_nodes]  # (nbn_t, 2)
@@ -101,17 +120,20 @@ class ContactScene:
             if reference:
                 P = np.broadcast_to(X, (k,) + X.shape)
             else:
-                Q = gr.Q[bt.boundary_dofs, :].T.reshape(k, -1, 2)
+                Q = gr.Q[bt.boundary_dofs, :].T.reshape(k, -1, d)
                 P = X[None] + Q
-            bx[xidx.ravel()] = (np.einsum("kij,knj->kni", R, P) + C[:, None, :]).reshape(-1, 2)
+            bx[xidx.ravel()] = (np.einsum("kij,knj->kni", R, P) + C[:, None, :]).reshape(-1, d)
         for i in self.rigid:
             b = self.sim.bodies[i]
             s, e = self.bx_start[i], self.bx_start[i + 1]
-            bx[s:e] = (b.center0 + b.vertices_rel) if reference else b.current_vertices()
+            if reference:
+                bx[s:e] = b.center0 + self._rigid_points(b)
+            else:
+                bx[s:e] = b.current_vertices() if d == 2 else b.current_points()
         return bx
 
     def centers(self, reference: bool = False) -> np.ndarray:
-        c = np.zeros((self.nb, 2))
+        c = np.zeros((self.nb, self.dim))
         for i in self.rigid:
             b = self.sim.bodies[i]
             c[i] = b.center0 if reference else b.center
@@ -128,9 +150,10 @@ class ContactScene:
             W_offset[gr.members] = off
             off += Wbb.size
         for i in self.rigid:
-            parts.append(self.sim.bodies[i].W.ravel())
+            Wr = self.rigid_W[i] = self.sim.bodies[i].W
+            parts.append(Wr.ravel())
             W_offset[i] = off
-            off += 9
+            off += Wr.size
         W_flat = np.ascontiguousarray(np.concatenate(parts)) if parts else np.zeros(0)
         return W_flat, W_offset, self.W_size.copy()
 
@@ -143,7 +166,7 @@ class ContactScene:
         for i in self.rigid:
             b = self.sim.bodies[i]
             s = self.U_offset[i]
-            out[s:s + 3] = {"ufree": b.ufree, "u": b.u, "q": b.q}[which]
+            out[s:s + self.rigid_ndof] = {"ufree": b.ufree, "u": b.u, "q": b.q}[which]
         return out
 
     def apply_impulse(self, imp: np.ndarray):
@@ -161,6 +184,8 @@ class ContactScene:
         for i in self.rigid:
             b = self.sim.bodies[i]
             s = self.U_offset[i]
-            p = imp[s:s + 3]
+            p = imp[s:s + self.rigid_ndof]
             b.contact_impulse = p.copy()
-            b.ucorr = b.W @ p
+            # the W of the Delassus operator (3D rigid: inertia of the orientation at assembly), so that the
+            # corrected local velocities are exactly those of the contact solution
+            b.ucorr = self.rigid_W.get(i, b.W) @ p

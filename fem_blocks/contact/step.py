@@ -13,7 +13,16 @@ geometry). Then u_{i+1} = u_free + W H P (one batched solve per block type).
 
 Geometry: "frozen" (small displacements; detection, frames, G and W_del once in the reference
 configuration; gaps follow the displacement jumps gt = gt_ref + (G q)_N) or "updated" (re-detection
-from the current configuration every `redetect_every` steps, reactions carried over by contact key).
+from the current configuration every `redetect_every` steps, reactions carried over by contact key;
+in 3D the steps in between keep the pairs and recompute points, frames, gaps and G by
+detection3d.update_geometry).
+
+Dimension d = sim.dim: the same step in 2D (detection, kinematics, delassus: local (n, t)) and 3D
+(detection3d, kinematics3d: local (n, t, s), 3x3 Delassus blocks); impulses P (nc, d), law state
+(nc, NSTATE) in 2D, (nc, NSTATE + 1) in 3D (the extra column is the second tangential jump u_S).
+3D for now: Coulomb (friction or frictionless) with NLGS, or the global Newton when solver/newton.py
+provides the 3D Alart–Curnier kernel; cohesive 3D laws are rejected with an InputError until their
+kernels land (they plug in through the same law/par/state arrays).
 """
 from __future__ import annotations
 
@@ -27,7 +36,9 @@ from numba import njit
 from ..errors import InputError, check_range
 from ..laws import commit
 from . import detection as det
+from . import detection3d as det3
 from . import kinematics as kin
+from . import kinematics3d as kin3
 from .scene import ContactScene
 
 STATUS_NAMES = ("open", "stick", "slip")
@@ -145,14 +156,30 @@ class ContactStep:
 
     def _table(self):
         gid = {g: i for i, g in enumerate(self.group_names)}
-        return det.build_table(self.interfaces, gid)
+        table = det.build_table(self.interfaces, gid)
+        return table if self.dim == 2 else det3.InterfaceTable3D.from_2d(table)
 
     def _detect(self, bx):
         s = self.scene
+        if self.dim == 3:
+            return det3.detect(bx, s.bnode_body, s.bnode_local, s.bfaces, s.bface_body, s.kind, self.body_group,
+                               self.table)
         cs = det.detect(bx, s.bnode_body, s.bnode_local, s.bedges, s.bedge_body, s.kind, self.body_group,
                         self.table)
         cs.area = cs.area * self.body_thickness[cs.cand_body]  # tributary length x thickness
         return cs
+
+    def _delassus(self, W_flat, W_offset, W_size):
+        from .. import delassus
+        if self.dim == 3:
+            return kin3.assemble_delassus(self.G, W_flat, W_offset, W_size, self.scene.nb)
+        return delassus.assemble(self.G, W_flat, W_offset, W_size, self.scene.nb)
+
+    def _initial_state(self):
+        """Committed law state of new contacts: 2D (nc, NSTATE); 3D one more column, S_US = NSTATE (u_S)."""
+        from ..laws import initial_state
+        st = initial_state(self.law)
+        return st if self.dim == 2 else np.column_stack([st, np.zeros(len(st))])
 
     def _assign_laws(self):
         """Per-contact law code, parameters (per unit area) and friction from the contact's interface."""
@@ -165,6 +192,10 @@ class ContactStep:
         self.mu = self.par[:, 0].copy()
         from ..laws import P_FC
         self.cohesive = bool(np.any(self.law != 0) or np.any(self.par[:, P_FC] > 0))  # caps: cohesive kernels
+        if self.dim == 3 and self.cohesive:
+            bad = next(itf for itf in self.interfaces if itf.law_code != 0 or itf.law_par[P_FC] > 0)
+            raise InputError(f"interfaces.{bad.name}.law = {bad.law!r}: 3D contact supports the Coulomb law without "
+                             f"crushing cap (f_c) for now; expected law = 'coulomb'")
 
     def _crushing(self, P, ueff, v, x, h, th):
         """Plastic closure increment Δu_p <= 0 of the contacts whose r̃_N reached the cap h f_c A: the penetration
@@ -196,34 +227,37 @@ class ContactStep:
 
     def _geometry(self, sim, first: bool):
         s = self.scene
-        if first or (self.opts.geometry == "updated" and self.steps % self.opts.redetect_every == 0):
-            ref = first and self.opts.geometry == "frozen"
+        updated = self.opts.geometry == "updated"
+        redetect = first or (updated and self.steps % self.opts.redetect_every == 0)
+        if redetect:
+            ref = first and not updated
             bx = s.positions(reference=ref)
             old, oldP = self.cs, self.P
             self.cs = self._detect(bx)
             self._check_initial_penetration(first, bx)
             self._assign_laws()
             nc = len(self.cs.gap)
-            self.P = np.zeros((nc, 2))
-            from ..laws import initial_state
-            st = initial_state(self.law)
+            self.P = np.zeros((nc, self.dim))
+            st = self._initial_state()
             if old is not None and oldP is not None and nc:
-                m = det.match(old, self.cs)
+                m = self._det.match(old, self.cs)
                 ok = m >= 0
                 self.P[ok] = oldP[m[ok]]
                 st[ok] = self.state[m[ok]]
             self.state = st
-            centers = s.centers(reference=ref)
-            self.G = kin.build_G(self.cs, s.kind, s.rot, centers, s.bnode_index_flat, s.bnode_offset)
-            self.W_dirty = True
             if ref:
                 self.gap_ref = self.cs.gap - self.cs.g0
+        elif updated and self.dim == 3 and len(self.cs.gap):
+            self.cs = det3.update_geometry(self.cs, s.positions(), s.bfaces)  # same pairs, current frames and gaps
+        if redetect or (updated and self.dim == 3):
+            centers = s.centers(reference=redetect and first and not updated)
+            self.G = self._kin.build_G(self.cs, s.kind, s.rot, centers, s.bnode_index_flat, s.bnode_offset)
+            self.W_dirty = True
         if self.W_dirty:
-            from .. import delassus
             from time import perf_counter
             c = perf_counter()
             W_flat, W_offset, W_size = s.W_blocks()
-            self.Wdel = delassus.assemble(self.G, W_flat, W_offset, W_size, s.nb)
+            self.Wdel = self._delassus(W_flat, W_offset, W_size)
             self.W_dirty = False
             self.timers["delassus"] += perf_counter() - c
 
@@ -235,7 +269,7 @@ class ContactStep:
         names = self.body_names or [str(i) for i in range(self.scene.nb)]
         alert = min(itf.alert for itf in self.interfaces)
         s = self.scene
-        ov = det.find_overlap(bx, s.bnode_body, s.bedges, s.bedge_body, alert)
+        ov = det.find_overlap(bx, s.bnode_body, s.bedges, s.bedge_body, alert) if self.dim == 2 else None
         if ov is not None:
             raise InputError(f"bodies {names[ov[0]]} and {names[ov[1]]} overlap at the start by {ov[2]:.3g} m "
                              f"(more than the alert distance {alert:.3g} m)")
@@ -250,14 +284,25 @@ class ContactStep:
                              f"start by {-gt[a]:.3g} m (more than the alert distance {alerts[a]:.3g} m)")
 
     def _setup(self, sim):
+        self.dim = getattr(sim, "dim", 2)
+        self._det, self._kin = (det, kin) if self.dim == 2 else (det3, kin3)
+        self._cs_cls = det.ContactSet if self.dim == 2 else det3.ContactSet3D
+        self._g_cls = kin.GBlocks if self.dim == 2 else kin3.GBlocks3D
+        if self.dim == 3 and self.opts.solver == "newton":
+            from ..solver import newton
+            if not hasattr(newton, "alart_curnier_3d"):
+                raise InputError("contact.solver = 'newton': this build has no 3D Newton solver; expected 'nlgs'")
         self.scene = ContactScene(sim, self.body_group)
         self.table = self._table()
-        self.body_thickness = np.array([b.type.material.thickness if b.kind == 0 else b.thickness
-                                        for b in sim.bodies])
+        self.body_thickness = (np.array([b.type.material.thickness if b.kind == 0 else b.thickness
+                                         for b in sim.bodies]) if self.dim == 2 else None)
 
     # ------------------------------------------------------------------ checkpoint
-    _CS = tuple(f.name for f in dataclasses.fields(det.ContactSet))
     _OUT = ("gt_end", "v", "r", "status")
+
+    @property
+    def _CS(self):
+        return tuple(f.name for f in dataclasses.fields(self._cs_cls))
 
     def export_state(self) -> dict:
         """Arrays that determine the rest of the run: contact set, G blocks, reference gaps, impulses (warm
@@ -284,11 +329,11 @@ class ContactStep:
         if "contact.cs.gap" not in d:
             return
         self._setup(sim)
-        self.cs = det.ContactSet(**{k: np.array(d[f"contact.cs.{k}"]) for k in self._CS})
+        self.cs = self._cs_cls(**{k: np.array(d[f"contact.cs.{k}"]) for k in self._CS})
         if len(self.cs.cand_body) and max(self.cs.cand_body.max(), self.cs.ant_body.max()) >= self.scene.nb:
             raise InputError("checkpoint: contacts refer to bodies this model does not have")
         self._assign_laws()
-        self.G = kin.GBlocks(*(np.array(d[f"contact.G.{k}"]) for k in ("side_body", "side_dofs", "side_G")))
+        self.G = self._g_cls(*(np.array(d[f"contact.G.{k}"]) for k in ("side_body", "side_dofs", "side_G")))
         self.P, self.state = np.array(d["contact.P"]), np.array(d["contact.state"])
         self.gap_ref = np.array(d["contact.gap_ref"]) if "contact.gap_ref" in d else None
         for k in self._OUT:
@@ -317,10 +362,11 @@ class ContactStep:
             self.last = dict(contacts=0, active=0, sweeps=0, change=0.0, residual=0.0, converged=True)
             return self.last
         ufree = s.gather("ufree")
-        vfree = kin.local_velocity(self.G, ufree, s.U_offset)
-        vi = kin.local_velocity(self.G, s.gather("u"), s.U_offset)
+        d, K = self.dim, self._kin
+        vfree = K.local_velocity(self.G, ufree, s.U_offset)
+        vi = K.local_velocity(self.G, s.gather("u"), s.U_offset)
         if self.opts.geometry == "frozen":
-            gt = self.gap_ref + kin.local_velocity(self.G, s.gather("q"), s.U_offset)[:, 0]
+            gt = self.gap_ref + K.local_velocity(self.G, s.gather("q"), s.U_offset)[:, 0]
         else:
             gt = cs.gap - cs.g0
         from ..laws import S_UP
@@ -331,8 +377,8 @@ class ContactStep:
         c2 = perf_counter()
         tm["local"] += c2 - c1
         if self.cohesive:
-            from ..laws import S_UN, S_UT
-            ueff = self.state[:, [S_UN, S_UT]] + h * (1 - th) * vi
+            from ..laws import NSTATE, S_UN, S_UT
+            ueff = self.state[:, [S_UN, S_UT] + ([NSTATE] if d == 3 else [])] + h * (1 - th) * vi
             ueff[:, 0] -= gbar  # u = u_eff + h theta v_shifted (v_shifted = v_N + gbar/(h theta))
             if self.opts.solver == "newton":
                 from ..solver.newton import solve_cohesive_newton
@@ -345,7 +391,7 @@ class ContactStep:
                                                  max_sweeps=self.opts.max_sweeps, omega=self.opts.omega,
                                                  order=self.opts.order, seed=self.opts.seed + self.steps,
                                                  criterion=self.opts.criterion, check_every=self.opts.check_every)
-            vs = res.u.reshape(-1, 2)
+            vs = res.u.reshape(-1, d)
             u_new = ueff + h * th * vs
             dup = self._crushing(res.r.reshape(-1, 2), ueff, res.u, trial, h, th)
             u_new[:, 0] -= dup  # the laws see the elastic jump
@@ -364,16 +410,17 @@ class ContactStep:
                                            max_sweeps=self.opts.max_sweeps, omega=self.opts.omega,
                                            order=self.opts.order, seed=self.opts.seed + self.steps,
                                            criterion=self.opts.criterion, check_every=self.opts.check_every)
-            from ..laws import S_UN, S_UT
-            vs = res.u.reshape(-1, 2)
+            from ..laws import NSTATE, S_UN, S_UT
+            vs = res.u.reshape(-1, d)
             self.state[:, S_UN] += h * ((1 - th) * vi[:, 0] + th * (vs[:, 0] - gbar / (h * th)))
-            self.state[:, S_UT] += h * ((1 - th) * vi[:, 1] + th * vs[:, 1])
+            ut_cols = [S_UT] + ([NSTATE] if d == 3 else [])  # 3D: S_US = NSTATE
+            self.state[:, ut_cols] += h * ((1 - th) * vi[:, 1:] + th * vs[:, 1:])
         c3 = perf_counter()
         tm["nlgs"] += c3 - c2
-        P = res.r.reshape(-1, 2)
+        P = res.r.reshape(-1, d)
         self.P = P
-        v = res.u.reshape(-1, 2)
-        imp = kin.accumulate_impulse(self.G, P, s.n_udof, s.U_offset)
+        v = res.u.reshape(-1, d)
+        imp = K.accumulate_impulse(self.G, P, s.n_udof, s.U_offset)
         s.apply_impulse(imp)
         tm["correction"] += perf_counter() - c3
         self.gt_end = h * th * v[:, 0]  # v is the shifted normal velocity: g~_{i+1} = gbar + h theta v_N
@@ -381,7 +428,8 @@ class ContactStep:
         self.r = P / h
         status = np.zeros(nc, dtype=np.int64)
         closed = P[:, 0] > 0
-        slip = closed & (np.abs(P[:, 1]) >= self.mu * P[:, 0] * (1 - 1e-9)) & (np.abs(v[:, 1]) > 1e-12)
+        slip = (closed & (np.linalg.norm(P[:, 1:], axis=1) >= self.mu * P[:, 0] * (1 - 1e-9))
+                & (np.linalg.norm(v[:, 1:], axis=1) > 1e-12))
         status[closed] = 1
         status[slip] = 2
         self.status = status
