@@ -328,3 +328,31 @@ def test_rotation_displacement_driver_3d():
     phi = rb.drivers[5].history(sim.time)
     assert np.allclose(rb.orientation, rotation3d(EZ, phi), atol=1e-13) and abs(rb.q[5] - phi) <= 1e-13
     assert abs(rb.u[5] - (0.2 - 0.3) / 0.05) <= 1e-9
+
+
+# ----------------------------------------------------------------------------- interface laws in the 3D time step
+@pytest.mark.parametrize("pull", [30e3, 150e3])
+def test_fremond_joint_pulled_3d(pull):
+    """Rigid 1 x 1 x 0.5 m block (1000 kg) glued on a fixed floor by a Frémond–Cangémi joint (c_N = 1e9 N/m³,
+    w = 10 J/m²: peak tension √(w c_N) A = 100 kN), pulled up by a constant force, quasi-static (θ = 1, velocity
+    reset). Below the peak the joint opens by (F - m g)/(c_N A) with β = 1 (Y = c_N u² < w); above it the joint
+    breaks (β → 0) and the block leaves."""
+    c_N, w, m = 1e9, 10.0, 1000.0
+    blk = RigidBody3D(box_corners(1.0, 1.0, 0.5, (-0.5, -0.5, 0.0)), mass=m, forces={"z": pull}, name="block")
+    itf = InterfaceSpec("joint", ("block", "floor"), law="fremond", candidate="block",
+                        params=dict(c_N=c_N, c_T=c_N, w=w, mu=0.7))
+    cst = contact([itf], ["floor", "block"], tol=1e-12)
+    sim = Simulation([floor_on(np.eye(3)), blk], 1e-3, 1.0, velocity_reset=True, contact=cst)
+    for _ in range(30):
+        info = sim.step()
+    assert info.contact["converged"]
+    from fem_blocks.laws import S_BETA
+    lift = blk.q[2]
+    if pull < np.sqrt(w * c_N):
+        u_exact = (pull - m * G) / c_N
+        assert abs(lift / u_exact - 1) <= 1e-8
+        assert np.all(cst.state[:, S_BETA] == 1.0)
+        assert np.linalg.norm(blk.q[3:]) <= 1e-12  # no tilt
+    else:
+        assert np.all(cst.state[:, S_BETA] < 1e-3)
+        assert lift > 10 * np.sqrt(w / c_N)

@@ -20,9 +20,8 @@ detection3d.update_geometry).
 Dimension d = sim.dim: the same step in 2D (detection, kinematics, delassus: local (n, t)) and 3D
 (detection3d, kinematics3d: local (n, t, s), 3x3 Delassus blocks); impulses P (nc, d), law state
 (nc, NSTATE) in 2D, (nc, NSTATE + 1) in 3D (the extra column is the second tangential jump u_S).
-3D for now: Coulomb (friction or frictionless) with NLGS, or the global Newton when solver/newton.py
-provides the 3D Alart–Curnier kernel; cohesive 3D laws are rejected with an InputError until their
-kernels land (they plug in through the same law/par/state arrays).
+3D: every interface law with NLGS (nlgs.solve_cohesive on 3x3 blocks, laws.commit_step), or Coulomb with
+the global Newton (solver/newton.py); the 3D Newton for interface laws is not written yet (InputError).
 """
 from __future__ import annotations
 
@@ -178,8 +177,7 @@ class ContactStep:
     def _initial_state(self):
         """Committed law state of new contacts: 2D (nc, NSTATE); 3D one more column, S_US = NSTATE (u_S)."""
         from ..laws import initial_state
-        st = initial_state(self.law)
-        return st if self.dim == 2 else np.column_stack([st, np.zeros(len(st))])
+        return initial_state(self.law, self.dim)
 
     def _assign_laws(self):
         """Per-contact law code, parameters (per unit area) and friction from the contact's interface."""
@@ -192,10 +190,10 @@ class ContactStep:
         self.mu = self.par[:, 0].copy()
         from ..laws import P_FC
         self.cohesive = bool(np.any(self.law != 0) or np.any(self.par[:, P_FC] > 0))  # caps: cohesive kernels
-        if self.dim == 3 and self.cohesive:
+        if self.dim == 3 and self.cohesive and self.opts.solver == "newton":
             bad = next(itf for itf in self.interfaces if itf.law_code != 0 or itf.law_par[P_FC] > 0)
-            raise InputError(f"interfaces.{bad.name}.law = {bad.law!r}: 3D contact supports the Coulomb law without "
-                             f"crushing cap (f_c) for now; expected law = 'coulomb'")
+            raise InputError(f"interfaces.{bad.name}.law = {bad.law!r}: the 3D Newton solver handles the Coulomb law "
+                             f"without crushing cap only; expected contact.solver = 'nlgs' for 3D interface laws")
 
     def _crushing(self, P, ueff, v, x, h, th):
         """Plastic closure increment Δu_p <= 0 of the contacts whose r̃_N reached the cap h f_c A: the penetration
@@ -392,14 +390,18 @@ class ContactStep:
                                                  order=self.opts.order, seed=self.opts.seed + self.steps,
                                                  criterion=self.opts.criterion, check_every=self.opts.check_every)
             vs = res.u.reshape(-1, d)
-            u_new = ueff + h * th * vs
-            dup = self._crushing(res.r.reshape(-1, 2), ueff, res.u, trial, h, th)
-            u_new[:, 0] -= dup  # the laws see the elastic jump
-            _commit_all(self.law, self.par, self.state, trial, u_new, cs.area)
-            if np.any(dup):
-                from ..laws import S_DISS
-                self.state[:, S_UP] += dup
-                self.state[:, S_DISS] += self._cap_force * np.abs(dup)
+            if d == 3:  # crushing at the cap, then commit (laws.commit_step, any dimension)
+                from ..laws import commit_step
+                commit_step(self.law, self.par, self.state, trial, ueff, res.r, res.u, cs.area, h, th)
+            else:
+                u_new = ueff + h * th * vs
+                dup = self._crushing(res.r.reshape(-1, 2), ueff, res.u, trial, h, th)
+                u_new[:, 0] -= dup  # the laws see the elastic jump
+                _commit_all(self.law, self.par, self.state, trial, u_new, cs.area)
+                if np.any(dup):
+                    from ..laws import S_DISS
+                    self.state[:, S_UP] += dup
+                    self.state[:, S_DISS] += self._cap_force * np.abs(dup)
         else:
             if self.opts.solver == "newton":
                 from ..solver.newton import solve_newton

@@ -16,12 +16,14 @@ from .pvd import SeriesWriter
 def law_state_fields(law: np.ndarray, state: np.ndarray) -> dict:
     """Point fields of the interface-law state (laws.py columns), the same in 2D and 3D: law (code), damage
     (1 - β for Frémond–Cangémi and brittle laws, D for the mixed-mode law, 0 for elastic and dry joints),
-    opening u_N, slip u_T, dissipated energy, crushing (plastic normal jump)."""
-    from ..laws import MIXED, S_BETA, S_DISS, S_UN, S_UP, S_UT
+    opening u_N, slip (u_T in 2D; its norm ‖(u_T, u_S)‖ in 3D, state rows of NSTATE3 columns), dissipated
+    energy, crushing (plastic normal jump)."""
+    from ..laws import MIXED, NSTATE3, S_BETA, S_DISS, S_UN, S_UP, S_US, S_UT
     law = np.asarray(law)
     damage = np.where(law == MIXED, state[:, S_BETA], np.where(law >= 2, 1.0 - state[:, S_BETA], 0.0))
+    slip = np.hypot(state[:, S_UT], state[:, S_US]) if state.shape[1] == NSTATE3 else state[:, S_UT].copy()
     return dict(law=law.astype(np.int64), damage=damage, opening=state[:, S_UN].copy(),
-                slip=state[:, S_UT].copy(), dissipated=state[:, S_DISS].copy(), crushing=state[:, S_UP].copy())
+                slip=slip, dissipated=state[:, S_DISS].copy(), crushing=state[:, S_UP].copy())
 
 
 class ContactsWriter(SeriesWriter):
