@@ -23,6 +23,7 @@ import numpy as np
 from numba import njit
 
 from ..errors import InputError
+from . import kinematics as _kin2
 
 ND = 12  # padded dofs per side: 4 nodes x 3 components (rigid: 6)
 
@@ -146,18 +147,12 @@ def _accumulate(side_body, side_dofs, side_G, P, U_offset, out):
 
 def local_velocity(G: GBlocks3D, U_flat, U_offset) -> np.ndarray:
     """(nc, 3) local velocities (v_N, v_T, v_S) = G u from the flat W-numbered body velocities."""
-    out = np.zeros((G.side_body.shape[0], 3))
-    _local_velocity(G.side_body, G.side_dofs, G.side_G, np.ascontiguousarray(U_flat, dtype=float),
-                    np.asarray(U_offset, dtype=np.int64), out)
-    return out
+    return _kin2.local_velocity(G, U_flat, U_offset, _local_velocity)
 
 
 def accumulate_impulse(G: GBlocks3D, P, n_total: int, U_offset) -> np.ndarray:
     """H P: flat W-numbered vector of the contact impulses (nc, 3) on the bodies."""
-    out = np.zeros(int(n_total))
-    _accumulate(G.side_body, G.side_dofs, G.side_G, np.ascontiguousarray(P, dtype=float).reshape(-1, 3),
-                np.asarray(U_offset, dtype=np.int64), out)
-    return out
+    return _kin2.accumulate_impulse(G, P, n_total, U_offset, _accumulate)
 
 
 # ----------------------------------------------------------------------------- Delassus operator (3D)
