@@ -333,13 +333,62 @@ def polygon_properties(vertices: np.ndarray):
     return A, np.array([cx, cy]), J
 
 
+class _DrivenDofs:
+    """Drivers and applied forces of a rigid body's dofs (shared by RigidBody and RigidBody3D). The class gives
+    `dof_names` (one name per dof), `_dof(k)` (name or index -> index) and `_massless(i)`; `_init_loads` sets
+    `drivers` {dof: Driver} and `forces` {dof: History}. A dof is driven (prescribed velocity) or free with the
+    applied force Σ forces[i](t), never both."""
+
+    dof_names: tuple = ()
+
+    def _init_loads(self, drivers, forces):
+        name = self.name
+        self.drivers: dict[int, Driver] = {}
+        for k, d in (drivers or {}).items():
+            i = self._dof(k)
+            self.drivers[i] = d if isinstance(d, Driver) else Driver(*d, name=f"{name}.driver.{k}")
+        self.forces: dict[int, History] = {}
+        for k, f in (forces or {}).items():
+            i = self._dof(k)
+            if i in self.drivers:
+                raise InputError(f"{name}.forces.{k}: dof {k!r} is driven; a driven dof cannot also carry a force")
+            self.forces[i] = as_history(f, f"{name}.forces.{k}")
+
+    def set_driver(self, dof, driver: "Driver | None"):
+        """Drive a dof (removing any applied force on it) or free it (driver None) — e.g. between load stages."""
+        i = self._dof(dof)
+        if driver is None:
+            self.drivers.pop(i, None)
+            if self._massless(i):
+                raise InputError(f"{self.name}: dof {self.dof_names[i]!r} cannot be freed: the body has no mass "
+                                 f"(give rho or mass)")
+        else:
+            self.drivers[i] = driver
+            self.forces.pop(i, None)
+
+    def set_force(self, dof, history):
+        """Apply a force history on a free dof (a driven dof is freed first)."""
+        i = self._dof(dof)
+        if i in self.drivers:
+            self.set_driver(dof, None)
+        self.forces[i] = as_history(history, f"{self.name}.forces.{self.dof_names[i]}")
+
+    @property
+    def driven(self) -> np.ndarray:
+        """(ndof,) bool, True on the driven dofs."""
+        m = np.zeros(len(self.dof_names), dtype=bool)
+        m[list(self.drivers)] = True
+        return m
+
+
 DOF_NAMES = ("x", "y", "rz")
 
 
-class RigidBody:
+class RigidBody(_DrivenDofs):
     """2D rigid polygon with dofs (vx, vy, omega) at its centre of mass."""
 
     kind = 1
+    dof_names = DOF_NAMES
 
     def __init__(self, vertices, rho: float = None, thickness: float = 1.0, mass: float = None,
                  inertia: float = None, drivers: dict | None = None, forces: dict | None = None,
@@ -373,16 +422,7 @@ class RigidBody:
         self.center0 = c
         self.vertices_rel = V - c  # reference vertices relative to the centre of mass
         self.thickness = thickness
-        self.drivers: dict[int, Driver] = {}
-        for k, d in (drivers or {}).items():
-            i = self._dof(k)
-            self.drivers[i] = d if isinstance(d, Driver) else Driver(*d, name=f"{name}.driver.{k}")
-        self.forces: dict[int, History] = {}
-        for k, f in (forces or {}).items():
-            i = self._dof(k)
-            if i in self.drivers:
-                raise InputError(f"{name}.forces.{k}: dof {k!r} is driven; a driven dof cannot also carry a force")
-            self.forces[i] = as_history(f, f"{name}.forces.{k}")
+        self._init_loads(drivers, forces)
         self.q = np.zeros(3)  # (dx, dy, phi) of the centre of mass
         self.u = np.zeros(3)
         self.reaction = np.zeros(3)  # force/moment applied by the drivers, last step
@@ -394,30 +434,8 @@ class RigidBody:
             return int(k)
         raise InputError(f"{self.name}: dof {k!r}: expected one of {DOF_NAMES}")
 
-    def set_driver(self, dof, driver: "Driver | None"):
-        """Drive a dof (removing any applied force on it) or free it (driver None) — e.g. between load stages."""
-        i = self._dof(dof)
-        if driver is None:
-            self.drivers.pop(i, None)
-            if self.mass[i] == 0.0:
-                raise InputError(f"{self.name}: dof {DOF_NAMES[i]!r} cannot be freed: the body has no mass "
-                                 f"(give rho or mass)")
-        else:
-            self.drivers[i] = driver
-            self.forces.pop(i, None)
-
-    def set_force(self, dof, history):
-        """Apply a force history on a free dof (a driven dof is freed first)."""
-        i = self._dof(dof)
-        if i in self.drivers:
-            self.set_driver(dof, None)
-        self.forces[i] = as_history(history, f"{self.name}.forces.{DOF_NAMES[i]}")
-
-    @property
-    def driven(self) -> np.ndarray:
-        m = np.zeros(3, dtype=bool)
-        m[list(self.drivers)] = True
-        return m
+    def _massless(self, i: int) -> bool:
+        return self.mass[i] == 0.0
 
     @property
     def center(self) -> np.ndarray:
@@ -648,7 +666,7 @@ class DeformableBody3D:
 DOF_NAMES_3D = ("x", "y", "z", "rx", "ry", "rz")
 
 
-class RigidBody3D:
+class RigidBody3D(_DrivenDofs):
     """3D rigid body with dofs (vx, vy, vz, wx, wy, wz): velocity of its centre of mass and angular velocity
     (global frame). Mass matrix diag(m, m, m) ⊕ I with I = Rot I0 Rot^T the inertia tensor about the centre of
     mass in the current orientation Rot. Geometry: a BlockMesh3D, or the 8 corners of a hexahedral block (gmsh
@@ -657,6 +675,7 @@ class RigidBody3D:
 
     kind = 1
     gdim = 3
+    dof_names = DOF_NAMES_3D
 
     def __init__(self, geometry, rho: float | None = None, mass: float | None = None, inertia=None,
                  drivers: dict | None = None, forces: dict | None = None, name: str = "rigid"):
@@ -693,16 +712,7 @@ class RigidBody3D:
         self.points_rel = mesh.points - c  # surface/vertex points relative to the centre of mass
         self.boundary_faces = np.asarray(faces, dtype=np.int64)
         self.orientation = np.eye(3)
-        self.drivers: dict[int, Driver] = {}
-        for k, d in (drivers or {}).items():
-            i = self._dof(k)
-            self.drivers[i] = d if isinstance(d, Driver) else Driver(*d, name=f"{name}.driver.{k}")
-        self.forces: dict[int, History] = {}
-        for k, f in (forces or {}).items():
-            i = self._dof(k)
-            if i in self.drivers:
-                raise InputError(f"{name}.forces.{k}: dof {k!r} is driven; a driven dof cannot also carry a force")
-            self.forces[i] = as_history(f, f"{name}.forces.{k}")
+        self._init_loads(drivers, forces)
         self.q = np.zeros(6)  # displacement of the centre of mass, accumulated rotation vector increments
         self.u = np.zeros(6)
         self.reaction = np.zeros(6)
@@ -744,29 +754,8 @@ class RigidBody3D:
             return int(k)
         raise InputError(f"{self.name}: dof {k!r}: expected one of {DOF_NAMES_3D}")
 
-    def set_driver(self, dof, driver: "Driver | None"):
-        """Drive a dof (removing any applied force on it) or free it (driver None)."""
-        i = self._dof(dof)
-        if driver is None:
-            self.drivers.pop(i, None)
-            if self.mass == 0.0:
-                raise InputError(f"{self.name}: dof {DOF_NAMES_3D[i]!r} cannot be freed: the body has no mass "
-                                 f"(give rho or mass)")
-        else:
-            self.drivers[i] = driver
-            self.forces.pop(i, None)
-
-    def set_force(self, dof, history):
-        i = self._dof(dof)
-        if i in self.drivers:
-            self.set_driver(dof, None)
-        self.forces[i] = as_history(history, f"{self.name}.forces.{DOF_NAMES_3D[i]}")
-
-    @property
-    def driven(self) -> np.ndarray:
-        m = np.zeros(6, dtype=bool)
-        m[list(self.drivers)] = True
-        return m
+    def _massless(self, i: int) -> bool:
+        return self.mass == 0.0
 
     @property
     def center(self) -> np.ndarray:
