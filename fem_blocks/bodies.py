@@ -222,7 +222,48 @@ class Traction:
     history: History | float = 1.0
 
 
-class DeformableBody:
+class _PlacedBlock:
+    """What DeformableBody and DeformableBody3D share: an instance of a block type (`type`, mesh points X in the
+    type frame) placed by a rotation R then a translation c = `position` (x = R X + c), with displacements q
+    and velocities u in the type frame (gdim dofs per node) and tractions on tagged boundaries."""
+
+    gdim = 2
+
+    def _init_tractions(self, tractions):
+        self.tractions = list(tractions)
+        for tr in self.tractions:
+            tr.history = as_history(tr.history, f"{self.name}.traction.history")
+            if tr.tag not in self.type.mesh.tag_names:
+                raise InputError(f"{self.name}.traction.tag = {tr.tag!r}: expected one of "
+                                 f"{sorted(self.type.mesh.tag_names)}")
+            self._check_traction(tr)
+
+    def _check_traction(self, tr):
+        """Dimension-specific check of a traction's value (none in 2D)."""
+
+    @property
+    def reference_points(self) -> np.ndarray:
+        """Global node positions of the undeformed instance: x = R X + c."""
+        return self.type.mesh.points @ self.R.T + self.position
+
+    def current_points(self) -> np.ndarray:
+        return (self.type.mesh.points + self.q.reshape(-1, self.gdim)) @ self.R.T + self.position
+
+    def displacement_global(self) -> np.ndarray:
+        return self.q.reshape(-1, self.gdim) @ self.R.T
+
+    def velocity_global(self) -> np.ndarray:
+        return self.u.reshape(-1, self.gdim) @ self.R.T
+
+    def external_load(self, t: float, g: np.ndarray) -> np.ndarray:
+        """F(t) in the type frame: gravity + tractions."""
+        f = self.type.gravity_load(self.R.T @ g) if np.any(g) else np.zeros(self.type.ndof)
+        for tr in self.tractions:
+            f = f + tr.history(t) * self.type.traction_load(tr.tag, self.R.T @ np.asarray(tr.value, float))
+        return f
+
+
+class DeformableBody(_PlacedBlock):
     """Instance of a BlockType placed by rotation `angle` about the type origin then translation."""
 
     kind = 0
@@ -233,30 +274,11 @@ class DeformableBody:
         self.position = np.asarray(position, dtype=float).reshape(2)
         self.angle = float(angle)
         self.R = rotation(self.angle)
-        self.tractions = list(tractions)
-        for tr in self.tractions:
-            tr.history = as_history(tr.history, f"{name}.traction.history")
-            if tr.tag not in block_type.mesh.tag_names:
-                raise InputError(f"{name}.traction.tag = {tr.tag!r}: expected one of "
-                                 f"{sorted(block_type.mesh.tag_names)}")
+        self._init_tractions(tractions)
         self.clamped = self._clamped_dofs(clamps)
         # state (type frame); replaced by views into group arrays by the time stepper
         self.q = np.zeros(block_type.ndof)
         self.u = np.zeros(block_type.ndof)
-
-    @property
-    def reference_points(self) -> np.ndarray:
-        """Global node positions of the undeformed instance: x = R X + c."""
-        return self.type.mesh.points @ self.R.T + self.position
-
-    def current_points(self) -> np.ndarray:
-        return (self.type.mesh.points + self.q.reshape(-1, 2)) @ self.R.T + self.position
-
-    def displacement_global(self) -> np.ndarray:
-        return self.q.reshape(-1, 2) @ self.R.T
-
-    def velocity_global(self) -> np.ndarray:
-        return self.u.reshape(-1, 2) @ self.R.T
 
     def _clamped_dofs(self, clamps) -> np.ndarray:
         nd = self.type.ndof
@@ -293,14 +315,6 @@ class DeformableBody:
                     comp = 1 - comp
                 mask[2 * nodes + comp] = True
         return mask
-
-    def external_load(self, t: float, g: np.ndarray) -> np.ndarray:
-        """F(t) in the type frame: gravity + tractions."""
-        f = self.type.gravity_load(self.R.T @ g) if np.any(g) else np.zeros(self.type.ndof)
-        for tr in self.tractions:
-            f = f + tr.history(t) * self.type.traction_load(tr.tag, self.R.T @ np.asarray(tr.value, float))
-        return f
-
 
 class Driver:
     """Prescribed motion of one rigid dof: kind 'velocity' or 'displacement', with a History."""
@@ -579,7 +593,7 @@ class Clamp3D:
     components: str = "xyz"
 
 
-class DeformableBody3D:
+class DeformableBody3D(_PlacedBlock):
     """Instance of a BlockType3D placed by a rotation R (3x3, default identity) about the type origin, then a
     translation: x = R X + c. Displacements and velocities q, u are stored in the type frame (3*node + c), so
     the type's K, M, factor and W_bb are shared; global displacement = R q per node, and the boundary Delassus
@@ -593,30 +607,14 @@ class DeformableBody3D:
         self.type, self.name = block_type, name
         self.position = np.asarray(position, dtype=float).reshape(3)
         self.R = np.eye(3) if R is None else check_rotation3d(R, f"{name}.rotation")
-        self.tractions = list(tractions)
-        for tr in self.tractions:
-            tr.history = as_history(tr.history, f"{name}.traction.history")
-            if tr.tag not in block_type.mesh.tag_names:
-                raise InputError(f"{name}.traction.tag = {tr.tag!r}: expected one of "
-                                 f"{sorted(block_type.mesh.tag_names)}")
-            if np.asarray(tr.value, dtype=float).shape != (3,):
-                raise InputError(f"{name}.traction.value: expected 3 components (tx, ty, tz) [Pa]")
+        self._init_tractions(tractions)
         self.clamped = self._clamped_dofs(clamps)
         self.q = np.zeros(block_type.ndof)
         self.u = np.zeros(block_type.ndof)
 
-    @property
-    def reference_points(self) -> np.ndarray:
-        return self.type.mesh.points @ self.R.T + self.position
-
-    def current_points(self) -> np.ndarray:
-        return (self.type.mesh.points + self.q.reshape(-1, 3)) @ self.R.T + self.position
-
-    def displacement_global(self) -> np.ndarray:
-        return self.q.reshape(-1, 3) @ self.R.T
-
-    def velocity_global(self) -> np.ndarray:
-        return self.u.reshape(-1, 3) @ self.R.T
+    def _check_traction(self, tr):
+        if np.asarray(tr.value, dtype=float).shape != (3,):
+            raise InputError(f"{self.name}.traction.value: expected 3 components (tx, ty, tz) [Pa]")
 
     def _clamped_dofs(self, clamps) -> np.ndarray:
         mask = np.zeros(self.type.ndof, dtype=bool)
@@ -654,14 +652,6 @@ class DeformableBody3D:
             for j in type_comps:
                 mask[3 * nodes + j] = True
         return mask
-
-    def external_load(self, t: float, g: np.ndarray) -> np.ndarray:
-        """F(t) in the type frame: gravity + tractions."""
-        f = self.type.gravity_load(self.R.T @ g) if np.any(g) else np.zeros(self.type.ndof)
-        for tr in self.tractions:
-            f = f + tr.history(t) * self.type.traction_load(tr.tag, self.R.T @ np.asarray(tr.value, float))
-        return f
-
 
 DOF_NAMES_3D = ("x", "y", "z", "rx", "ry", "rz")
 
