@@ -150,18 +150,24 @@ class BlockType:
         if mass not in ("lumped", "consistent"):
             raise InputError(f"{name}.mass = {mass!r}: expected 'lumped' or 'consistent'")
         meshing.validate(mesh, source=name)
+        m = material
+        self._setup(mesh, material, mass, name, fem_backend.assemble_operators(mesh, m.E, m.nu, m.rho, m.thickness,
+                                                                               m.plane), 2)
+
+    def _setup(self, mesh, material: Material, mass: str, name: str, ops, d: int):
+        """Store K, M (lumped or consistent), C = alpha M + beta K from the FE operators `ops`, and the node and
+        boundary numbering with d dofs per node (dof d*node + c)."""
         self.mesh, self.material, self.mass_kind, self.name = mesh, material, mass, name
         m = material
-        ops = fem_backend.assemble_operators(mesh, m.E, m.nu, m.rho, m.thickness, m.plane)
         self.K = ops.K.tocsr()
         self.M = (ops.M_lumped if mass == "lumped" else ops.M_consistent).tocsr()
         self.C = (m.alpha * self.M + m.beta * self.K).tocsr()
         self.n_nodes = mesh.points.shape[0]
-        self.ndof = 2 * self.n_nodes
+        self.ndof = d * self.n_nodes
         self.boundary_nodes = np.asarray(mesh.boundary_nodes(), dtype=np.int64)
         self.bnode_index = -np.ones(self.n_nodes, dtype=np.int64)
         self.bnode_index[self.boundary_nodes] = np.arange(self.boundary_nodes.size)
-        self.boundary_dofs = np.stack([2 * self.boundary_nodes, 2 * self.boundary_nodes + 1], 1).ravel()
+        self.boundary_dofs = (d * self.boundary_nodes[:, None] + np.arange(d)[None, :]).ravel()
         self._ops: dict = {}
         self._stress = None
 
@@ -546,20 +552,8 @@ class BlockType3D(BlockType):
         if not isinstance(mesh, meshing.BlockMesh3D):
             raise InputError(f"{name}: expected a 3D mesh (BlockMesh3D), got {type(mesh).__name__}")
         meshing.validate3d(mesh, source=name)
-        self.mesh, self.material, self.mass_kind, self.name = mesh, material, mass, name
-        m = material
-        ops = fem_backend.assemble_operators_3d(mesh, m.E, m.nu, m.rho)
-        self.K = ops.K.tocsr()
-        self.M = (ops.M_lumped if mass == "lumped" else ops.M_consistent).tocsr()
-        self.C = (m.alpha * self.M + m.beta * self.K).tocsr()
-        self.n_nodes = mesh.points.shape[0]
-        self.ndof = 3 * self.n_nodes
-        self.boundary_nodes = np.asarray(mesh.boundary_nodes(), dtype=np.int64)
-        self.bnode_index = -np.ones(self.n_nodes, dtype=np.int64)
-        self.bnode_index[self.boundary_nodes] = np.arange(self.boundary_nodes.size)
-        self.boundary_dofs = (3 * self.boundary_nodes[:, None] + np.arange(3)[None, :]).ravel()
-        self._ops: dict = {}
-        self._stress = None
+        self._setup(mesh, material, mass, name, fem_backend.assemble_operators_3d(mesh, material.E, material.nu,
+                                                                                  material.rho), 3)
 
     @property
     def stress_operator(self) -> sp.csr_matrix:
