@@ -19,7 +19,7 @@ import numpy as np
 
 ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..")
 sys.path.insert(0, ROOT)
-from bench_kernel import machine  # noqa: E402
+from bench_kernel import machine, write_section  # noqa: E402
 from fem_blocks.errors import InputError  # noqa: E402
 from fem_blocks.io import fclib  # noqa: E402
 from fem_blocks.solver import newton, nlgs  # noqa: E402
@@ -126,20 +126,6 @@ def markdown(rows):
     return "\n".join(out) + "\n"
 
 
-def write_section(text, path=os.path.join(ROOT, "docs", "benchmarks.md")):
-    """Replace the section under HEADING (up to the next '## ' heading) or append it at the end."""
-    old = open(path).read() if os.path.exists(path) else "# Benchmarks\n"
-    lines = old.splitlines(keepends=True)
-    start = next((i for i, ln in enumerate(lines) if ln.strip() == HEADING), None)
-    if start is None:
-        new = old.rstrip("\n") + "\n\n" + text
-    else:
-        end = next((j for j in range(start + 1, len(lines)) if lines[j].startswith("## ")), len(lines))
-        new = "".join(lines[:start]) + text + ("\n" if end < len(lines) else "") + "".join(lines[end:])
-    with open(path, "w") as fh:
-        fh.write(new)
-
-
 if __name__ == "__main__":
     ap = argparse.ArgumentParser()
     ap.add_argument("--no-write", action="store_true")
@@ -147,4 +133,4 @@ if __name__ == "__main__":
     md = markdown(run())
     print(md)
     if not a.no_write:
-        write_section(md)
+        write_section(md, heading=HEADING)

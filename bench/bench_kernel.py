@@ -166,11 +166,12 @@ def markdown(rows, skipped, cap):
     return "\n".join(out) + "\n"
 
 
-def write_section(text, path=os.path.join(ROOT, "docs", "benchmarks.md")):
-    """Replace the section under HEADING (up to the next '## ' heading) or append it."""
+def write_section(text, path=os.path.join(ROOT, "docs", "benchmarks.md"), heading=HEADING):
+    """Replace the section under `heading` (up to the next '## ' heading) or append it at the end (also used by
+    bench_fclib3d with its own heading)."""
     old = open(path).read() if os.path.exists(path) else "# Benchmarks\n"
     lines = old.splitlines(keepends=True)
-    start = next((i for i, ln in enumerate(lines) if ln.strip() == HEADING), None)
+    start = next((i for i, ln in enumerate(lines) if ln.strip() == heading), None)
     if start is None:
         new = old.rstrip("\n") + "\n\n" + text
     else:

@@ -150,18 +150,24 @@ class BlockType:
         if mass not in ("lumped", "consistent"):
             raise InputError(f"{name}.mass = {mass!r}: expected 'lumped' or 'consistent'")
         meshing.validate(mesh, source=name)
+        m = material
+        self._setup(mesh, material, mass, name, fem_backend.assemble_operators(mesh, m.E, m.nu, m.rho, m.thickness,
+                                                                               m.plane), 2)
+
+    def _setup(self, mesh, material: Material, mass: str, name: str, ops, d: int):
+        """Store K, M (lumped or consistent), C = alpha M + beta K from the FE operators `ops`, and the node and
+        boundary numbering with d dofs per node (dof d*node + c)."""
         self.mesh, self.material, self.mass_kind, self.name = mesh, material, mass, name
         m = material
-        ops = fem_backend.assemble_operators(mesh, m.E, m.nu, m.rho, m.thickness, m.plane)
         self.K = ops.K.tocsr()
         self.M = (ops.M_lumped if mass == "lumped" else ops.M_consistent).tocsr()
         self.C = (m.alpha * self.M + m.beta * self.K).tocsr()
         self.n_nodes = mesh.points.shape[0]
-        self.ndof = 2 * self.n_nodes
+        self.ndof = d * self.n_nodes
         self.boundary_nodes = np.asarray(mesh.boundary_nodes(), dtype=np.int64)
         self.bnode_index = -np.ones(self.n_nodes, dtype=np.int64)
         self.bnode_index[self.boundary_nodes] = np.arange(self.boundary_nodes.size)
-        self.boundary_dofs = np.stack([2 * self.boundary_nodes, 2 * self.boundary_nodes + 1], 1).ravel()
+        self.boundary_dofs = (d * self.boundary_nodes[:, None] + np.arange(d)[None, :]).ravel()
         self._ops: dict = {}
         self._stress = None
 
@@ -222,7 +228,48 @@ class Traction:
     history: History | float = 1.0
 
 
-class DeformableBody:
+class _PlacedBlock:
+    """What DeformableBody and DeformableBody3D share: an instance of a block type (`type`, mesh points X in the
+    type frame) placed by a rotation R then a translation c = `position` (x = R X + c), with displacements q
+    and velocities u in the type frame (gdim dofs per node) and tractions on tagged boundaries."""
+
+    gdim = 2
+
+    def _init_tractions(self, tractions):
+        self.tractions = list(tractions)
+        for tr in self.tractions:
+            tr.history = as_history(tr.history, f"{self.name}.traction.history")
+            if tr.tag not in self.type.mesh.tag_names:
+                raise InputError(f"{self.name}.traction.tag = {tr.tag!r}: expected one of "
+                                 f"{sorted(self.type.mesh.tag_names)}")
+            self._check_traction(tr)
+
+    def _check_traction(self, tr):
+        """Dimension-specific check of a traction's value (none in 2D)."""
+
+    @property
+    def reference_points(self) -> np.ndarray:
+        """Global node positions of the undeformed instance: x = R X + c."""
+        return self.type.mesh.points @ self.R.T + self.position
+
+    def current_points(self) -> np.ndarray:
+        return (self.type.mesh.points + self.q.reshape(-1, self.gdim)) @ self.R.T + self.position
+
+    def displacement_global(self) -> np.ndarray:
+        return self.q.reshape(-1, self.gdim) @ self.R.T
+
+    def velocity_global(self) -> np.ndarray:
+        return self.u.reshape(-1, self.gdim) @ self.R.T
+
+    def external_load(self, t: float, g: np.ndarray) -> np.ndarray:
+        """F(t) in the type frame: gravity + tractions."""
+        f = self.type.gravity_load(self.R.T @ g) if np.any(g) else np.zeros(self.type.ndof)
+        for tr in self.tractions:
+            f = f + tr.history(t) * self.type.traction_load(tr.tag, self.R.T @ np.asarray(tr.value, float))
+        return f
+
+
+class DeformableBody(_PlacedBlock):
     """Instance of a BlockType placed by rotation `angle` about the type origin then translation."""
 
     kind = 0
@@ -233,30 +280,11 @@ class DeformableBody:
         self.position = np.asarray(position, dtype=float).reshape(2)
         self.angle = float(angle)
         self.R = rotation(self.angle)
-        self.tractions = list(tractions)
-        for tr in self.tractions:
-            tr.history = as_history(tr.history, f"{name}.traction.history")
-            if tr.tag not in block_type.mesh.tag_names:
-                raise InputError(f"{name}.traction.tag = {tr.tag!r}: expected one of "
-                                 f"{sorted(block_type.mesh.tag_names)}")
+        self._init_tractions(tractions)
         self.clamped = self._clamped_dofs(clamps)
         # state (type frame); replaced by views into group arrays by the time stepper
         self.q = np.zeros(block_type.ndof)
         self.u = np.zeros(block_type.ndof)
-
-    @property
-    def reference_points(self) -> np.ndarray:
-        """Global node positions of the undeformed instance: x = R X + c."""
-        return self.type.mesh.points @ self.R.T + self.position
-
-    def current_points(self) -> np.ndarray:
-        return (self.type.mesh.points + self.q.reshape(-1, 2)) @ self.R.T + self.position
-
-    def displacement_global(self) -> np.ndarray:
-        return self.q.reshape(-1, 2) @ self.R.T
-
-    def velocity_global(self) -> np.ndarray:
-        return self.u.reshape(-1, 2) @ self.R.T
 
     def _clamped_dofs(self, clamps) -> np.ndarray:
         nd = self.type.ndof
@@ -294,14 +322,6 @@ class DeformableBody:
                 mask[2 * nodes + comp] = True
         return mask
 
-    def external_load(self, t: float, g: np.ndarray) -> np.ndarray:
-        """F(t) in the type frame: gravity + tractions."""
-        f = self.type.gravity_load(self.R.T @ g) if np.any(g) else np.zeros(self.type.ndof)
-        for tr in self.tractions:
-            f = f + tr.history(t) * self.type.traction_load(tr.tag, self.R.T @ np.asarray(tr.value, float))
-        return f
-
-
 class Driver:
     """Prescribed motion of one rigid dof: kind 'velocity' or 'displacement', with a History."""
 
@@ -333,13 +353,62 @@ def polygon_properties(vertices: np.ndarray):
     return A, np.array([cx, cy]), J
 
 
+class _DrivenDofs:
+    """Drivers and applied forces of a rigid body's dofs (shared by RigidBody and RigidBody3D). The class gives
+    `dof_names` (one name per dof), `_dof(k)` (name or index -> index) and `_massless(i)`; `_init_loads` sets
+    `drivers` {dof: Driver} and `forces` {dof: History}. A dof is driven (prescribed velocity) or free with the
+    applied force Σ forces[i](t), never both."""
+
+    dof_names: tuple = ()
+
+    def _init_loads(self, drivers, forces):
+        name = self.name
+        self.drivers: dict[int, Driver] = {}
+        for k, d in (drivers or {}).items():
+            i = self._dof(k)
+            self.drivers[i] = d if isinstance(d, Driver) else Driver(*d, name=f"{name}.driver.{k}")
+        self.forces: dict[int, History] = {}
+        for k, f in (forces or {}).items():
+            i = self._dof(k)
+            if i in self.drivers:
+                raise InputError(f"{name}.forces.{k}: dof {k!r} is driven; a driven dof cannot also carry a force")
+            self.forces[i] = as_history(f, f"{name}.forces.{k}")
+
+    def set_driver(self, dof, driver: "Driver | None"):
+        """Drive a dof (removing any applied force on it) or free it (driver None) — e.g. between load stages."""
+        i = self._dof(dof)
+        if driver is None:
+            self.drivers.pop(i, None)
+            if self._massless(i):
+                raise InputError(f"{self.name}: dof {self.dof_names[i]!r} cannot be freed: the body has no mass "
+                                 f"(give rho or mass)")
+        else:
+            self.drivers[i] = driver
+            self.forces.pop(i, None)
+
+    def set_force(self, dof, history):
+        """Apply a force history on a free dof (a driven dof is freed first)."""
+        i = self._dof(dof)
+        if i in self.drivers:
+            self.set_driver(dof, None)
+        self.forces[i] = as_history(history, f"{self.name}.forces.{self.dof_names[i]}")
+
+    @property
+    def driven(self) -> np.ndarray:
+        """(ndof,) bool, True on the driven dofs."""
+        m = np.zeros(len(self.dof_names), dtype=bool)
+        m[list(self.drivers)] = True
+        return m
+
+
 DOF_NAMES = ("x", "y", "rz")
 
 
-class RigidBody:
+class RigidBody(_DrivenDofs):
     """2D rigid polygon with dofs (vx, vy, omega) at its centre of mass."""
 
     kind = 1
+    dof_names = DOF_NAMES
 
     def __init__(self, vertices, rho: float = None, thickness: float = 1.0, mass: float = None,
                  inertia: float = None, drivers: dict | None = None, forces: dict | None = None,
@@ -373,16 +442,7 @@ class RigidBody:
         self.center0 = c
         self.vertices_rel = V - c  # reference vertices relative to the centre of mass
         self.thickness = thickness
-        self.drivers: dict[int, Driver] = {}
-        for k, d in (drivers or {}).items():
-            i = self._dof(k)
-            self.drivers[i] = d if isinstance(d, Driver) else Driver(*d, name=f"{name}.driver.{k}")
-        self.forces: dict[int, History] = {}
-        for k, f in (forces or {}).items():
-            i = self._dof(k)
-            if i in self.drivers:
-                raise InputError(f"{name}.forces.{k}: dof {k!r} is driven; a driven dof cannot also carry a force")
-            self.forces[i] = as_history(f, f"{name}.forces.{k}")
+        self._init_loads(drivers, forces)
         self.q = np.zeros(3)  # (dx, dy, phi) of the centre of mass
         self.u = np.zeros(3)
         self.reaction = np.zeros(3)  # force/moment applied by the drivers, last step
@@ -394,30 +454,8 @@ class RigidBody:
             return int(k)
         raise InputError(f"{self.name}: dof {k!r}: expected one of {DOF_NAMES}")
 
-    def set_driver(self, dof, driver: "Driver | None"):
-        """Drive a dof (removing any applied force on it) or free it (driver None) — e.g. between load stages."""
-        i = self._dof(dof)
-        if driver is None:
-            self.drivers.pop(i, None)
-            if self.mass[i] == 0.0:
-                raise InputError(f"{self.name}: dof {DOF_NAMES[i]!r} cannot be freed: the body has no mass "
-                                 f"(give rho or mass)")
-        else:
-            self.drivers[i] = driver
-            self.forces.pop(i, None)
-
-    def set_force(self, dof, history):
-        """Apply a force history on a free dof (a driven dof is freed first)."""
-        i = self._dof(dof)
-        if i in self.drivers:
-            self.set_driver(dof, None)
-        self.forces[i] = as_history(history, f"{self.name}.forces.{DOF_NAMES[i]}")
-
-    @property
-    def driven(self) -> np.ndarray:
-        m = np.zeros(3, dtype=bool)
-        m[list(self.drivers)] = True
-        return m
+    def _massless(self, i: int) -> bool:
+        return self.mass[i] == 0.0
 
     @property
     def center(self) -> np.ndarray:
@@ -514,20 +552,8 @@ class BlockType3D(BlockType):
         if not isinstance(mesh, meshing.BlockMesh3D):
             raise InputError(f"{name}: expected a 3D mesh (BlockMesh3D), got {type(mesh).__name__}")
         meshing.validate3d(mesh, source=name)
-        self.mesh, self.material, self.mass_kind, self.name = mesh, material, mass, name
-        m = material
-        ops = fem_backend.assemble_operators_3d(mesh, m.E, m.nu, m.rho)
-        self.K = ops.K.tocsr()
-        self.M = (ops.M_lumped if mass == "lumped" else ops.M_consistent).tocsr()
-        self.C = (m.alpha * self.M + m.beta * self.K).tocsr()
-        self.n_nodes = mesh.points.shape[0]
-        self.ndof = 3 * self.n_nodes
-        self.boundary_nodes = np.asarray(mesh.boundary_nodes(), dtype=np.int64)
-        self.bnode_index = -np.ones(self.n_nodes, dtype=np.int64)
-        self.bnode_index[self.boundary_nodes] = np.arange(self.boundary_nodes.size)
-        self.boundary_dofs = (3 * self.boundary_nodes[:, None] + np.arange(3)[None, :]).ravel()
-        self._ops: dict = {}
-        self._stress = None
+        self._setup(mesh, material, mass, name, fem_backend.assemble_operators_3d(mesh, material.E, material.nu,
+                                                                                  material.rho), 3)
 
     @property
     def stress_operator(self) -> sp.csr_matrix:
@@ -561,7 +587,7 @@ class Clamp3D:
     components: str = "xyz"
 
 
-class DeformableBody3D:
+class DeformableBody3D(_PlacedBlock):
     """Instance of a BlockType3D placed by a rotation R (3x3, default identity) about the type origin, then a
     translation: x = R X + c. Displacements and velocities q, u are stored in the type frame (3*node + c), so
     the type's K, M, factor and W_bb are shared; global displacement = R q per node, and the boundary Delassus
@@ -575,30 +601,14 @@ class DeformableBody3D:
         self.type, self.name = block_type, name
         self.position = np.asarray(position, dtype=float).reshape(3)
         self.R = np.eye(3) if R is None else check_rotation3d(R, f"{name}.rotation")
-        self.tractions = list(tractions)
-        for tr in self.tractions:
-            tr.history = as_history(tr.history, f"{name}.traction.history")
-            if tr.tag not in block_type.mesh.tag_names:
-                raise InputError(f"{name}.traction.tag = {tr.tag!r}: expected one of "
-                                 f"{sorted(block_type.mesh.tag_names)}")
-            if np.asarray(tr.value, dtype=float).shape != (3,):
-                raise InputError(f"{name}.traction.value: expected 3 components (tx, ty, tz) [Pa]")
+        self._init_tractions(tractions)
         self.clamped = self._clamped_dofs(clamps)
         self.q = np.zeros(block_type.ndof)
         self.u = np.zeros(block_type.ndof)
 
-    @property
-    def reference_points(self) -> np.ndarray:
-        return self.type.mesh.points @ self.R.T + self.position
-
-    def current_points(self) -> np.ndarray:
-        return (self.type.mesh.points + self.q.reshape(-1, 3)) @ self.R.T + self.position
-
-    def displacement_global(self) -> np.ndarray:
-        return self.q.reshape(-1, 3) @ self.R.T
-
-    def velocity_global(self) -> np.ndarray:
-        return self.u.reshape(-1, 3) @ self.R.T
+    def _check_traction(self, tr):
+        if np.asarray(tr.value, dtype=float).shape != (3,):
+            raise InputError(f"{self.name}.traction.value: expected 3 components (tx, ty, tz) [Pa]")
 
     def _clamped_dofs(self, clamps) -> np.ndarray:
         mask = np.zeros(self.type.ndof, dtype=bool)
@@ -637,18 +647,10 @@ class DeformableBody3D:
                 mask[3 * nodes + j] = True
         return mask
 
-    def external_load(self, t: float, g: np.ndarray) -> np.ndarray:
-        """F(t) in the type frame: gravity + tractions."""
-        f = self.type.gravity_load(self.R.T @ g) if np.any(g) else np.zeros(self.type.ndof)
-        for tr in self.tractions:
-            f = f + tr.history(t) * self.type.traction_load(tr.tag, self.R.T @ np.asarray(tr.value, float))
-        return f
-
-
 DOF_NAMES_3D = ("x", "y", "z", "rx", "ry", "rz")
 
 
-class RigidBody3D:
+class RigidBody3D(_DrivenDofs):
     """3D rigid body with dofs (vx, vy, vz, wx, wy, wz): velocity of its centre of mass and angular velocity
     (global frame). Mass matrix diag(m, m, m) ⊕ I with I = Rot I0 Rot^T the inertia tensor about the centre of
     mass in the current orientation Rot. Geometry: a BlockMesh3D, or the 8 corners of a hexahedral block (gmsh
@@ -657,6 +659,7 @@ class RigidBody3D:
 
     kind = 1
     gdim = 3
+    dof_names = DOF_NAMES_3D
 
     def __init__(self, geometry, rho: float | None = None, mass: float | None = None, inertia=None,
                  drivers: dict | None = None, forces: dict | None = None, name: str = "rigid"):
@@ -693,16 +696,7 @@ class RigidBody3D:
         self.points_rel = mesh.points - c  # surface/vertex points relative to the centre of mass
         self.boundary_faces = np.asarray(faces, dtype=np.int64)
         self.orientation = np.eye(3)
-        self.drivers: dict[int, Driver] = {}
-        for k, d in (drivers or {}).items():
-            i = self._dof(k)
-            self.drivers[i] = d if isinstance(d, Driver) else Driver(*d, name=f"{name}.driver.{k}")
-        self.forces: dict[int, History] = {}
-        for k, f in (forces or {}).items():
-            i = self._dof(k)
-            if i in self.drivers:
-                raise InputError(f"{name}.forces.{k}: dof {k!r} is driven; a driven dof cannot also carry a force")
-            self.forces[i] = as_history(f, f"{name}.forces.{k}")
+        self._init_loads(drivers, forces)
         self.q = np.zeros(6)  # displacement of the centre of mass, accumulated rotation vector increments
         self.u = np.zeros(6)
         self.reaction = np.zeros(6)
@@ -744,29 +738,8 @@ class RigidBody3D:
             return int(k)
         raise InputError(f"{self.name}: dof {k!r}: expected one of {DOF_NAMES_3D}")
 
-    def set_driver(self, dof, driver: "Driver | None"):
-        """Drive a dof (removing any applied force on it) or free it (driver None)."""
-        i = self._dof(dof)
-        if driver is None:
-            self.drivers.pop(i, None)
-            if self.mass == 0.0:
-                raise InputError(f"{self.name}: dof {DOF_NAMES_3D[i]!r} cannot be freed: the body has no mass "
-                                 f"(give rho or mass)")
-        else:
-            self.drivers[i] = driver
-            self.forces.pop(i, None)
-
-    def set_force(self, dof, history):
-        i = self._dof(dof)
-        if i in self.drivers:
-            self.set_driver(dof, None)
-        self.forces[i] = as_history(history, f"{self.name}.forces.{DOF_NAMES_3D[i]}")
-
-    @property
-    def driven(self) -> np.ndarray:
-        m = np.zeros(6, dtype=bool)
-        m[list(self.drivers)] = True
-        return m
+    def _massless(self, i: int) -> bool:
+        return self.mass == 0.0
 
     @property
     def center(self) -> np.ndarray:

@@ -13,9 +13,10 @@ from .solver.nlgs import BlockCSR
 
 
 @njit(cache=True)
-def _assemble_rows(nc, order, ent_contact, ent_side, starts, side_body, side_dofs, side_G, W_flat, W_offset, W_size):
-    """Row-by-row block-CSR assembly: row α holds every contact sharing a body with α (duplicates summed in
-    place), columns sorted; memory is the final number of blocks only."""
+def _row_pattern(nc, order, ent_contact, starts, side_body):
+    """Block-CSR pattern of the Delassus operator (any block size): row α holds every contact sharing a body
+    with α (once), columns sorted. `order`/`starts` list the (contact, side) entities of each body (see
+    body_entities). Returns indptr, indices, diag_pos (position of the diagonal block of each row)."""
     marker = -np.ones(nc, dtype=np.int64)
     counts = np.zeros(nc, dtype=np.int64)
     for a in range(nc):
@@ -29,13 +30,9 @@ def _assemble_rows(nc, order, ent_contact, ent_side, starts, side_body, side_dof
     indptr = np.zeros(nc + 1, dtype=np.int64)
     for a in range(nc):
         indptr[a + 1] = indptr[a] + counts[a]
-    nnz = indptr[nc]
-    indices = np.empty(nnz, dtype=np.int64)
-    blocks = np.zeros((nnz, 2, 2))
+    indices = np.empty(indptr[nc], dtype=np.int64)
     diag_pos = np.empty(nc, dtype=np.int64)
-    pos_of = -np.ones(nc, dtype=np.int64)
     marker[:] = -1
-    GW = np.zeros((2, 4))
     for a in range(nc):
         k = indptr[a]
         for s in range(2):
@@ -49,8 +46,35 @@ def _assemble_rows(nc, order, ent_contact, ent_side, starts, side_body, side_dof
         row = indices[indptr[a]:indptr[a + 1]]
         row.sort()
         for kk in range(indptr[a], indptr[a + 1]):
+            if indices[kk] == a:
+                diag_pos[a] = kk
+    return indptr, indices, diag_pos
+
+
+def body_entities(side_body, nb: int):
+    """(contact, side) entities grouped by body: ent_contact, ent_side (2 nc,), order (entities sorted by
+    body, stable) and starts (nb + 1,): body b's entities are order[starts[b]:starts[b + 1]]."""
+    nc = side_body.shape[0]
+    ent_body = side_body.ravel()
+    ent_contact = np.repeat(np.arange(nc, dtype=np.int64), 2)
+    ent_side = np.tile(np.array([0, 1], dtype=np.int64), nc)
+    order = np.argsort(ent_body, kind="stable").astype(np.int64)
+    starts = np.zeros(nb + 1, dtype=np.int64)
+    starts[1:] = np.cumsum(np.bincount(ent_body, minlength=nb))
+    return ent_contact, ent_side, order, starts
+
+
+@njit(cache=True)
+def _assemble_rows(nc, order, ent_contact, ent_side, starts, side_body, side_dofs, side_G, W_flat, W_offset, W_size):
+    """Row-by-row block-CSR assembly (2 x 2 blocks): the pattern of _row_pattern, duplicates (both sides on
+    one body) summed in place; memory is the final number of blocks only."""
+    indptr, indices, diag_pos = _row_pattern(nc, order, ent_contact, starts, side_body)
+    blocks = np.zeros((indptr[nc], 2, 2))
+    pos_of = -np.ones(nc, dtype=np.int64)
+    GW = np.zeros((2, 4))
+    for a in range(nc):
+        for kk in range(indptr[a], indptr[a + 1]):
             pos_of[indices[kk]] = kk
-        diag_pos[a] = pos_of[a]
         for s in range(2):
             b = side_body[a, s]
             off = W_offset[b]
@@ -88,12 +112,7 @@ def _assemble_rows(nc, order, ent_contact, ent_side, starts, side_body, side_dof
 def assemble(G, W_flat, W_offset, W_size, nb: int) -> BlockCSR:
     """Block-CSR Delassus operator from the G blocks and the per-body dense W (see module docstring)."""
     nc = G.side_body.shape[0]
-    ent_body = G.side_body.ravel()
-    ent_contact = np.repeat(np.arange(nc, dtype=np.int64), 2)
-    ent_side = np.tile(np.array([0, 1], dtype=np.int64), nc)
-    order = np.argsort(ent_body, kind="stable").astype(np.int64)
-    starts = np.zeros(nb + 1, dtype=np.int64)
-    starts[1:] = np.cumsum(np.bincount(ent_body, minlength=nb))
+    ent_contact, ent_side, order, starts = body_entities(G.side_body, nb)
     indptr, indices, blocks, diag_pos = _assemble_rows(
         nc, order, ent_contact, ent_side, starts, np.ascontiguousarray(G.side_body, dtype=np.int64),
         np.ascontiguousarray(G.side_dofs, dtype=np.int64), np.ascontiguousarray(G.side_G, dtype=np.float64),

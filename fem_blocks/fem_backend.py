@@ -85,18 +85,31 @@ class _quiet_jit:
 def assemble_operators(mesh, E, nu, rho, thickness=1.0, plane="stress") -> FEOperators:
     """K, M (consistent and lumped) of a BlockMesh with dolfinx, in the BlockMesh dof order."""
     check_material(E, nu, rho, thickness, plane)
+    lam_, mu_ = lame(E, nu, plane)
+    # Q1: standard 2x2 Gauss (basix degree 2 and 3 on quadrilaterals), exact for K on parallelograms and for M
+    # on any quadrilateral (N_a N_b det J is cubic per direction)
+    return _assemble_fe(mesh, 2, lam_, mu_, float(thickness), float(thickness) * float(rho), (2, 3))
+
+
+def _assemble_fe(mesh, gdim, lam_, mu_, k_scale, m_scale, tensor_degrees) -> FEOperators:
+    """K = k_scale ∫ sigma(u) : eps(v) dx (k_scale None: no factor), M = m_scale ∫ u . v dx and the lumped M
+    (vertex quadrature on simplices, row sum on quadrangles/hexahedra) of a linear Lagrange space on `mesh`
+    (gdim 2: triangle|quad, 3: tetrahedron|hexahedron) with dolfinx; scipy CSR in the mesh dof order
+    gdim*node + c. tensor_degrees: (K, M) quadrature degrees on quadrangles/hexahedra (simplices: the degrees
+    estimated by ufl, exact for P1)."""
     import ufl
     from mpi4py import MPI
     from dolfinx import cpp, fem, mesh as dmesh
     from dolfinx.fem.petsc import assemble_matrix
     from dolfinx.io import gmshio
 
-    gmsh_type = 2 if mesh.cell_type == "triangle" else 3
+    tensor = mesh.cell_type in ("quad", "hexahedron")
+    gmsh_type = {"triangle": 2, "quad": 3, "tetrahedron": 4, "hexahedron": 5}[mesh.cell_type]
     cells = np.asarray(mesh.cells, dtype=np.int64)
-    if mesh.cell_type == "quad":  # gmsh (CCW) -> dolfinx (tensor-product) vertex order
-        perm = cpp.io.perm_gmsh(cpp.mesh.CellType.quadrilateral, 4)
-        cells = cells[:, perm]
-    domain = gmshio.ufl_mesh(gmsh_type, 2)  # one ufl.Mesh per dolfinx mesh (0.5.2 requirement)
+    if tensor:  # gmsh -> dolfinx (tensor-product) vertex order
+        dcell = cpp.mesh.CellType.quadrilateral if gdim == 2 else cpp.mesh.CellType.hexahedron
+        cells = cells[:, cpp.io.perm_gmsh(dcell, cells.shape[1])]
+    domain = gmshio.ufl_mesh(gmsh_type, gdim)  # one ufl.Mesh per dolfinx mesh (0.5.2 requirement)
     msh = dmesh.create_mesh(MPI.COMM_SELF, cells, np.ascontiguousarray(mesh.points, dtype=np.float64), domain)
     with _quiet_jit():
         V = fem.VectorFunctionSpace(msh, ("Lagrange", 1))
@@ -107,44 +120,42 @@ def assemble_operators(mesh, E, nu, rho, thickness=1.0, plane="stress") -> FEOpe
     d2g = np.empty(n, dtype=np.int64)
     d2g[V.dofmap.list.array] = msh.geometry.dofmap.array
     node = np.asarray(msh.geometry.input_global_indices, dtype=np.int64)[d2g]
-    perm = np.empty(2 * n, dtype=np.int64)
-    perm[0::2], perm[1::2] = 2 * node, 2 * node + 1
+    perm = (gdim * node[:, None] + np.arange(gdim)[None, :]).ravel()
 
     # material data as dolfinx Constants (not literals): the generated kernels do not depend on the material,
     # so they are JIT-compiled once per cell type and found in the cache for every other material
-    lam_, mu_ = lame(E, nu, plane)
     lam, mu = fem.Constant(msh, float(lam_)), fem.Constant(msh, float(mu_))
-    t, trho = fem.Constant(msh, float(thickness)), fem.Constant(msh, float(thickness) * float(rho))
+    mc = fem.Constant(msh, float(m_scale))
     u, v = ufl.TrialFunction(V), ufl.TestFunction(V)
     eps = lambda w: ufl.sym(ufl.grad(w))  # noqa: E731
-    sig = lambda w: lam * ufl.tr(eps(w)) * ufl.Identity(2) + 2 * mu * eps(w)  # noqa: E731
-    if mesh.cell_type == "quad":
-        # Q1: standard 2x2 Gauss (basix degree 2 and 3 on quadrilaterals), exact for K on parallelograms and
-        # for M on any quadrilateral (N_a N_b det J is cubic per direction)
-        dx_k = ufl.dx(metadata={"quadrature_degree": 2})
-        dx_m = ufl.dx(metadata={"quadrature_degree": 3})
+    sig = lambda w: lam * ufl.tr(eps(w)) * ufl.Identity(gdim) + 2 * mu * eps(w)  # noqa: E731
+    if tensor:
+        dx_k = ufl.dx(metadata={"quadrature_degree": tensor_degrees[0]})
+        dx_m = ufl.dx(metadata={"quadrature_degree": tensor_degrees[1]})
     else:
         dx_k = dx_m = ufl.dx  # P1: exact by the estimated degrees (0 and 2)
+    k_int = ufl.inner(sig(u), eps(v))
+    if k_scale is not None:
+        k_int = fem.Constant(msh, float(k_scale)) * k_int
     with _quiet_jit():
-        k_form = fem.form(t * ufl.inner(sig(u), eps(v)) * dx_k)
-        m_form = fem.form(trho * ufl.inner(u, v) * dx_m)
-    K = assemble_matrix(k_form)
-    K.assemble()
-    M = assemble_matrix(m_form)
-    M.assemble()
-    Ks, Ms = _petsc_to_scipy(K, perm), _petsc_to_scipy(M, perm)
-    K.destroy()
-    M.destroy()
-    if mesh.cell_type == "triangle":
+        k_form = fem.form(k_int * dx_k)
+        m_form = fem.form(mc * ufl.inner(u, v) * dx_m)
+    mats = []
+    for f in (k_form, m_form):
+        A = assemble_matrix(f)
+        A.assemble()
+        mats.append(_petsc_to_scipy(A, perm))
+        A.destroy()
+    Ks, Ms = mats
+    if not tensor:
         import warnings
         with warnings.catch_warnings(), _quiet_jit():
             warnings.simplefilter("ignore", UserWarning)  # "requested degree 2" of the vertex rule
-            ml_form = fem.form(trho * ufl.inner(u, v) * ufl.dx(metadata={"quadrature_rule": "vertex"}))
+            ml_form = fem.form(mc * ufl.inner(u, v) * ufl.dx(metadata={"quadrature_rule": "vertex"}))
         ML = assemble_matrix(ml_form)
         ML.assemble()
-        Ml = _petsc_to_scipy(ML, perm)
+        Ml = sp.diags(_petsc_to_scipy(ML, perm).diagonal()).tocsr()
         ML.destroy()
-        Ml = sp.diags(Ml.diagonal()).tocsr()
     else:
         Ml = sp.diags(np.asarray(Ms.sum(axis=1)).ravel()).tocsr()  # row-sum lumping (Q1)
     return FEOperators(Ks, Ms, Ml)
@@ -228,61 +239,9 @@ def assemble_operators_3d(mesh, E, nu, rho) -> FEOperators:
     check_elastic_3d(E, nu)
     check_range("rho", rho, 0.0, lo_open=True, expected="rho > 0 [kg/m^3]")
     _check_mesh3d(mesh)
-    import ufl
-    from mpi4py import MPI
-    from dolfinx import cpp, fem, mesh as dmesh
-    from dolfinx.fem.petsc import assemble_matrix
-    from dolfinx.io import gmshio
-
-    hexa = mesh.cell_type == "hexahedron"
-    cells = np.asarray(mesh.cells, dtype=np.int64)
-    if hexa:  # gmsh -> dolfinx (tensor-product) vertex order
-        cells = cells[:, cpp.io.perm_gmsh(cpp.mesh.CellType.hexahedron, 8)]
-    domain = gmshio.ufl_mesh(5 if hexa else 4, 3)  # one ufl.Mesh per dolfinx mesh (0.5.2 requirement)
-    msh = dmesh.create_mesh(MPI.COMM_SELF, cells, np.ascontiguousarray(mesh.points, dtype=np.float64), domain)
-    with _quiet_jit():
-        V = fem.VectorFunctionSpace(msh, ("Lagrange", 1))
-    n = mesh.points.shape[0]
-    if V.dofmap.index_map.size_local != n:
-        raise InputError(f"{mesh.source}: dolfinx built {V.dofmap.index_map.size_local} nodes for {n} mesh nodes")
-    d2g = np.empty(n, dtype=np.int64)
-    d2g[V.dofmap.list.array] = msh.geometry.dofmap.array
-    node = np.asarray(msh.geometry.input_global_indices, dtype=np.int64)[d2g]
-    perm = (3 * node[:, None] + np.arange(3)[None, :]).ravel()
-
     lam_, mu_ = lame_3d(E, nu)
-    lam, mu = fem.Constant(msh, float(lam_)), fem.Constant(msh, float(mu_))
-    rho_c = fem.Constant(msh, float(rho))
-    u, v = ufl.TrialFunction(V), ufl.TestFunction(V)
-    eps = lambda w: ufl.sym(ufl.grad(w))  # noqa: E731
-    sig = lambda w: lam * ufl.tr(eps(w)) * ufl.Identity(3) + 2 * mu * eps(w)  # noqa: E731
-    if hexa:
-        dx_k = ufl.dx(metadata={"quadrature_degree": 2})  # 2 Gauss points per direction
-        dx_m = ufl.dx(metadata={"quadrature_degree": 4})  # 3 Gauss points per direction
-    else:
-        dx_k = dx_m = ufl.dx  # P1: exact by the estimated degrees (0 and 2)
-    with _quiet_jit():
-        k_form = fem.form(ufl.inner(sig(u), eps(v)) * dx_k)
-        m_form = fem.form(rho_c * ufl.inner(u, v) * dx_m)
-    mats = []
-    for f in (k_form, m_form):
-        A = assemble_matrix(f)
-        A.assemble()
-        mats.append(_petsc_to_scipy(A, perm))
-        A.destroy()
-    Ks, Ms = mats
-    if not hexa:
-        import warnings
-        with warnings.catch_warnings(), _quiet_jit():
-            warnings.simplefilter("ignore", UserWarning)  # "requested degree 2" of the vertex rule
-            ml_form = fem.form(rho_c * ufl.inner(u, v) * ufl.dx(metadata={"quadrature_rule": "vertex"}))
-        ML = assemble_matrix(ml_form)
-        ML.assemble()
-        Ml = sp.diags(_petsc_to_scipy(ML, perm).diagonal()).tocsr()
-        ML.destroy()
-    else:
-        Ml = sp.diags(np.asarray(Ms.sum(axis=1)).ravel()).tocsr()  # row-sum lumping (Q1)
-    return FEOperators(Ks, Ms, Ml)
+    # Q1: K with 2 Gauss points per direction, M with 3 (quadrature degrees 2 and 4)
+    return _assemble_fe(mesh, 3, lam_, mu_, None, float(rho), (2, 4))
 
 
 def elasticity_matrix_3d(E, nu) -> np.ndarray:

@@ -27,8 +27,27 @@ GMSH_NAMES = {1: "2-node line", 2: "3-node triangle", 3: "4-node quadrangle", 4:
               15: "point", 16: "8-node quadrangle", 20: "9-node incomplete triangle", 21: "10-node triangle"}
 
 
+class _MeshArrays:
+    """What BlockMesh and BlockMesh3D share: `points` (n, gdim) and a boundary connectivity array named by
+    `_boundary` (2D edges, 3D faces)."""
+
+    _boundary = ""
+
+    @property
+    def n_nodes(self) -> int:
+        return int(self.points.shape[0])
+
+    def boundary_nodes(self) -> np.ndarray:
+        """Sorted unique node indices on the boundary (int64)."""
+        return np.unique(np.asarray(getattr(self, self._boundary), dtype=np.int64))
+
+    def bbox(self):
+        """(xmin, ymin[, zmin], xmax, ymax[, zmax])."""
+        return (*self.points.min(axis=0), *self.points.max(axis=0))
+
+
 @dataclass(eq=False)
-class BlockMesh:
+class BlockMesh(_MeshArrays):
     """2D block mesh as plain arrays (see the module docstring). `node_ids`/`cell_ids` (optional) are the
     gmsh node/element tags, used only to name nodes and elements in error messages."""
 
@@ -43,6 +62,7 @@ class BlockMesh:
     cell_ids: np.ndarray | None = field(default=None, repr=False)
 
     gdim = 2
+    _boundary = "boundary_edges"
 
     @classmethod
     def from_cells(cls, points, cells, cell_type: str | None = None, source: str = "mesh") -> "BlockMesh":
@@ -53,14 +73,6 @@ class BlockMesh:
             cell_type = "triangle" if C.ndim == 2 and C.shape[1] == 3 else "quad"
         be, _ = boundary_from_cells(C, source)
         return cls(P, C, cell_type, be.astype(np.int64), np.zeros(len(be), dtype=np.int64), {"untagged": 0}, source)
-
-    @property
-    def n_nodes(self) -> int:
-        return int(self.points.shape[0])
-
-    def boundary_nodes(self) -> np.ndarray:
-        """Sorted unique node indices on the boundary (int64)."""
-        return np.unique(np.asarray(self.boundary_edges, dtype=np.int64))
 
     def translated(self, dx: float, dy: float) -> "BlockMesh":
         """Same mesh (same node order and connectivity) moved by (dx, dy)."""
@@ -74,10 +86,6 @@ class BlockMesh:
 
     def area(self) -> float:
         return float(self.cell_areas().sum())
-
-    def bbox(self):
-        """(xmin, ymin, xmax, ymax)."""
-        return (*self.points.min(axis=0), *self.points.max(axis=0))
 
 
 def _signed_areas(points, cells) -> np.ndarray:
@@ -183,34 +191,50 @@ class _Gmsh:
         return False
 
 
-def _extract(gmsh, source: str) -> BlockMesh:
-    """Arrays of the current gmsh model: 2D linear cells, used nodes, physical curves as tags."""
+def _gmsh_cells(gmsh, source: str, dim: int):
+    """Nodes and the single linear cell type of dimension `dim` of the current gmsh model: (node_tags, X (n, 3),
+    cell_type, cell_tags, cells in gmsh node tags (nc, nv)); InputError on no cell, an unsupported or a mixed
+    element type."""
+    linear, what = (GMSH_LINEAR, ("triangles", "quadrangles")) if dim == 2 else \
+        (GMSH_LINEAR_3D, ("tetrahedra", "hexahedra"))
     node_tags, coords, _ = gmsh.model.mesh.getNodes()
     node_tags = np.asarray(node_tags, dtype=np.int64)
     X = np.asarray(coords, dtype=float).reshape(-1, 3)
-    types, etags, enodes = gmsh.model.mesh.getElements(dim=2)
+    types, etags, enodes = gmsh.model.mesh.getElements(dim=dim)
     if len(types) == 0:
-        raise InputError(f"{source}: the mesh has no 2D element (expected triangles or quadrangles)")
-    bad = [t for t in types if t not in GMSH_LINEAR]
+        raise InputError(f"{source}: the mesh has no {dim}D element (expected {what[0]} or {what[1]})")
+    bad = [t for t in types if t not in linear]
     if bad:
         raise InputError(f"{source}: unsupported element type {GMSH_NAMES.get(bad[0], bad[0])!s} "
-                         f"(gmsh type {bad[0]}); expected linear triangles (P1) or quadrangles (Q1)")
+                         f"(gmsh type {bad[0]}); expected linear {what[0]} (P1) or {what[1]} (Q1)")
     if len(types) > 1:
         names = " and ".join(f"{GMSH_NAMES.get(t, t)} (gmsh type {t})" for t in types)
         raise InputError(f"{source}: mixed element types {names}; expected a single element type")
-    cell_type = GMSH_LINEAR[types[0]]
-    nv = 3 if cell_type == "triangle" else 4
+    cell_type = linear[types[0]]
     cell_tags = np.asarray(etags[0], dtype=np.int64)
-    cells_t = np.asarray(enodes[0], dtype=np.int64).reshape(-1, nv)
-    if np.any(np.abs(X[:, 2]) > 1e-12 * max(1.0, np.abs(X[:, :2]).max())):
-        raise InputError(f"{source}: nodes out of the z = 0 plane; expected a 2D mesh")
-    # used nodes only, in gmsh node order
+    cells_t = np.asarray(enodes[0], dtype=np.int64).reshape(-1, _NV[cell_type])
+    return node_tags, X, cell_type, cell_tags, cells_t
+
+
+def _used_nodes(node_tags, cells_t):
+    """Keep the nodes used by the cells, in gmsh node order: (pos: gmsh tag -> index in node_tags, used (n,)
+    bool, new: index in node_tags -> used-node index or -1)."""
     pos = np.full(int(node_tags.max()) + 1, -1, dtype=np.int64)
     pos[node_tags] = np.arange(node_tags.size)
     used = np.zeros(node_tags.size, dtype=bool)
     used[pos[cells_t.ravel()]] = True
     new = -np.ones(node_tags.size, dtype=np.int64)
     new[used] = np.arange(used.sum())
+    return pos, used, new
+
+
+def _extract(gmsh, source: str) -> BlockMesh:
+    """Arrays of the current gmsh model: 2D linear cells, used nodes, physical curves as tags."""
+    node_tags, X, cell_type, cell_tags, cells_t = _gmsh_cells(gmsh, source, 2)
+    if np.any(np.abs(X[:, 2]) > 1e-12 * max(1.0, np.abs(X[:, :2]).max())):
+        raise InputError(f"{source}: nodes out of the z = 0 plane; expected a 2D mesh")
+    # used nodes only, in gmsh node order
+    pos, used, new = _used_nodes(node_tags, cells_t)
     points = X[used, :2].copy()
     cells = new[pos[cells_t]]
     node_ids = node_tags[used]
@@ -398,14 +422,10 @@ def load_msh(path: str) -> BlockMesh:
 
 
 # ----------------------------------------------------------------------------- validation
-def validate(mesh: BlockMesh, source: str = "mesh") -> None:
-    """Reject meshes a FE block cannot use; the message names the element or node id.
-
-    Checks: array shapes/dtypes, finite coordinates, cell indices in range, every node used,
-    inverted or degenerate elements (area <= 1e-10 x mean), non-convex quads, duplicate nodes
-    (closer than 1e-12 x bounding-box size), non-manifold edges and vertices, a single connected piece."""
-    if isinstance(mesh, BlockMesh3D):
-        return validate3d(mesh, source)
+def _check_arrays(mesh, source: str, gdim: int, cell_types: tuple):
+    """Checks shared by validate and validate3d: points a float64 (n >= gdim + 1, gdim) array of finite
+    coordinates, cell_type in cell_types, cells an int64 (nc >= 1, nv) array of existing nodes, every node used.
+    Returns (points, cells, nv, nid, cid), nid/cid naming a node/element by its gmsh tag when known."""
     P, C = mesh.points, mesh.cells
     node_id = getattr(mesh, "node_ids", None)
     cell_id = getattr(mesh, "cell_ids", None)
@@ -416,13 +436,14 @@ def validate(mesh: BlockMesh, source: str = "mesh") -> None:
     def cid(i):
         return f"{int(cell_id[i])} (gmsh tag)" if cell_id is not None else f"{int(i)}"
 
-    if not isinstance(P, np.ndarray) or P.ndim != 2 or P.shape[1] != 2 or P.shape[0] < 3 \
+    if not isinstance(P, np.ndarray) or P.ndim != 2 or P.shape[1] != gdim or P.shape[0] < gdim + 1 \
             or P.dtype != np.float64:
-        raise InputError(f"{source}: points: expected a float64 (n >= 3, 2) array, got "
+        raise InputError(f"{source}: points: expected a float64 (n >= {gdim + 1}, {gdim}) array, got "
                          f"{getattr(P, 'dtype', type(P).__name__)} {getattr(P, 'shape', '')}")
-    if mesh.cell_type not in ("triangle", "quad"):
-        raise InputError(f"{source}: cell_type = {mesh.cell_type!r}: expected 'triangle' or 'quad'")
-    nv = 3 if mesh.cell_type == "triangle" else 4
+    if mesh.cell_type not in cell_types:
+        raise InputError(f"{source}: cell_type = {mesh.cell_type!r}: expected "
+                         f"{' or '.join(repr(t) for t in cell_types)}")
+    nv = _NV[mesh.cell_type]
     if not isinstance(C, np.ndarray) or C.ndim != 2 or C.shape[1] != nv or C.shape[0] < 1 \
             or C.dtype != np.int64:
         raise InputError(f"{source}: cells: expected an int64 (nc >= 1, {nv}) array for {mesh.cell_type} "
@@ -437,6 +458,28 @@ def validate(mesh: BlockMesh, source: str = "mesh") -> None:
     used[C.ravel()] = True
     if not used.all():
         raise InputError(f"{source}: node {nid(np.flatnonzero(~used)[0])} is not used by any element")
+    return P, C, nv, nid, cid
+
+
+def _check_duplicate_nodes(P, source: str, nid) -> None:
+    """InputError if two nodes are closer than 1e-12 x the bounding-box size."""
+    size = float(np.ptp(P, axis=0).max())
+    from scipy.spatial import cKDTree
+    pairs = cKDTree(P).query_pairs(1e-12 * size, output_type="ndarray")
+    if len(pairs):
+        a, b = pairs[0]
+        raise InputError(f"{source}: nodes {nid(a)} and {nid(b)} are duplicates (same position)")
+
+
+def validate(mesh: BlockMesh, source: str = "mesh") -> None:
+    """Reject meshes a FE block cannot use; the message names the element or node id.
+
+    Checks: array shapes/dtypes, finite coordinates, cell indices in range, every node used,
+    inverted or degenerate elements (area <= 1e-10 x mean), non-convex quads, duplicate nodes
+    (closer than 1e-12 x bounding-box size), non-manifold edges and vertices, a single connected piece."""
+    if isinstance(mesh, BlockMesh3D):
+        return validate3d(mesh, source)
+    P, C, nv, nid, cid = _check_arrays(mesh, source, 2, ("triangle", "quad"))
     for k in range(nv):
         for j in range(k + 1, nv):
             same = np.flatnonzero(C[:, k] == C[:, j])
@@ -457,12 +500,7 @@ def validate(mesh: BlockMesh, source: str = "mesh") -> None:
         bad = np.flatnonzero(np.any(cross <= 1e-12 * scale, axis=1))
         if bad.size:
             raise InputError(f"{source}: quadrangle {cid(bad[0])} is not convex")
-    size = float(np.ptp(P, axis=0).max())
-    from scipy.spatial import cKDTree
-    pairs = cKDTree(P).query_pairs(1e-12 * size, output_type="ndarray")
-    if len(pairs):
-        a, b = pairs[0]
-        raise InputError(f"{source}: nodes {nid(a)} and {nid(b)} are duplicates (same position)")
+    _check_duplicate_nodes(P, source, nid)
     bedges, _ = boundary_from_cells(C, source, nid)
     deg = np.bincount(bedges.ravel(), minlength=len(P))
     if np.any(deg > 2):
@@ -496,6 +534,7 @@ GMSH_NAMES.update({6: "6-node prism", 7: "5-node pyramid", 11: "10-node tetrahed
                    17: "20-node hexahedron", 29: "20-node tetrahedron", 92: "64-node hexahedron"})
 GMSH_LINEAR_3D = {4: "tetrahedron", 5: "hexahedron"}
 NV_3D = {"tetrahedron": 4, "hexahedron": 8}
+_NV = {"triangle": 3, "quad": 4, **NV_3D}  # nodes per linear cell
 # outward faces of the reference cells (gmsh node order): right-hand rule normal points out of the cell
 TET_FACES = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]], dtype=np.int64)
 HEX_FACES = np.array([[0, 3, 2, 1], [4, 5, 6, 7], [0, 1, 5, 4], [1, 2, 6, 5], [2, 3, 7, 6], [3, 0, 4, 7]],
@@ -556,7 +595,7 @@ def cell_volumes_3d(points: np.ndarray, cells: np.ndarray, cell_type: str) -> np
 
 
 @dataclass(eq=False)
-class BlockMesh3D:
+class BlockMesh3D(_MeshArrays):
     """3D block mesh as plain arrays (contract in the section header above and docs/architecture.md).
     `node_ids`/`cell_ids` (optional) are the gmsh node/element tags, used only in error messages."""
 
@@ -571,6 +610,7 @@ class BlockMesh3D:
     cell_ids: np.ndarray | None = field(default=None, repr=False)
 
     gdim = 3
+    _boundary = "boundary_faces"
 
     @classmethod
     def from_cells(cls, points, cells, cell_type: str | None = None, source: str = "mesh") -> "BlockMesh3D":
@@ -582,14 +622,6 @@ class BlockMesh3D:
         bf, _ = boundary_faces_from_cells(C, cell_type, source)
         return cls(P, C, cell_type, bf.astype(np.int64), -np.ones(len(bf), dtype=np.int64), {"untagged": -1},
                    source)
-
-    @property
-    def n_nodes(self) -> int:
-        return int(self.points.shape[0])
-
-    def boundary_nodes(self) -> np.ndarray:
-        """Sorted unique node indices on the boundary (int64)."""
-        return np.unique(np.asarray(self.boundary_faces, dtype=np.int64))
 
     def translated(self, dx: float, dy: float, dz: float) -> "BlockMesh3D":
         """Same mesh (same node order and connectivity) moved by (dx, dy, dz)."""
@@ -610,10 +642,6 @@ class BlockMesh3D:
 
     def volume(self) -> float:
         return float(self.cell_volumes().sum())
-
-    def bbox(self):
-        """(xmin, ymin, zmin, xmax, ymax, zmax)."""
-        return (*self.points.min(axis=0), *self.points.max(axis=0))
 
     def face_areas(self) -> np.ndarray:
         """Area of each boundary face (bilinear quadrangles by 2x2 Gauss on the ruled surface)."""
@@ -675,29 +703,8 @@ def boundary_faces_from_cells(cells: np.ndarray, cell_type: str, source: str = "
 
 def _extract3d(gmsh, source: str) -> BlockMesh3D:
     """Arrays of the current gmsh model: 3D linear cells, used nodes, physical surfaces as face tags."""
-    node_tags, coords, _ = gmsh.model.mesh.getNodes()
-    node_tags = np.asarray(node_tags, dtype=np.int64)
-    X = np.asarray(coords, dtype=float).reshape(-1, 3)
-    types, etags, enodes = gmsh.model.mesh.getElements(dim=3)
-    if len(types) == 0:
-        raise InputError(f"{source}: the mesh has no 3D element (expected tetrahedra or hexahedra)")
-    bad = [t for t in types if t not in GMSH_LINEAR_3D]
-    if bad:
-        raise InputError(f"{source}: unsupported element type {GMSH_NAMES.get(bad[0], bad[0])!s} "
-                         f"(gmsh type {bad[0]}); expected linear tetrahedra (P1) or hexahedra (Q1)")
-    if len(types) > 1:
-        names = " and ".join(f"{GMSH_NAMES.get(t, t)} (gmsh type {t})" for t in types)
-        raise InputError(f"{source}: mixed element types {names}; expected a single element type")
-    cell_type = GMSH_LINEAR_3D[types[0]]
-    nv = NV_3D[cell_type]
-    cell_tags = np.asarray(etags[0], dtype=np.int64)
-    cells_t = np.asarray(enodes[0], dtype=np.int64).reshape(-1, nv)
-    pos = np.full(int(node_tags.max()) + 1, -1, dtype=np.int64)
-    pos[node_tags] = np.arange(node_tags.size)
-    used = np.zeros(node_tags.size, dtype=bool)
-    used[pos[cells_t.ravel()]] = True
-    new = -np.ones(node_tags.size, dtype=np.int64)
-    new[used] = np.arange(used.sum())
+    node_tags, X, cell_type, cell_tags, cells_t = _gmsh_cells(gmsh, source, 3)
+    pos, used, new = _used_nodes(node_tags, cells_t)
     points = X[used].copy()
     cells = new[pos[cells_t]]
     node_ids = node_tags[used]
@@ -946,37 +953,7 @@ def validate3d(mesh: BlockMesh3D, source: str = "mesh") -> None:
     than 2 elements or with the same orientation in both, a single face-connected piece, a manifold boundary
     (each boundary edge in exactly 2 boundary faces, one fan of boundary faces around each boundary node), and
     boundary_faces/face_tags consistent with the cells."""
-    P, C = mesh.points, mesh.cells
-    node_id = getattr(mesh, "node_ids", None)
-    cell_id = getattr(mesh, "cell_ids", None)
-
-    def nid(i):
-        return f"{int(node_id[i])} (gmsh tag)" if node_id is not None else f"{int(i)}"
-
-    def cid(i):
-        return f"{int(cell_id[i])} (gmsh tag)" if cell_id is not None else f"{int(i)}"
-
-    if not isinstance(P, np.ndarray) or P.ndim != 2 or P.shape[1] != 3 or P.shape[0] < 4 \
-            or P.dtype != np.float64:
-        raise InputError(f"{source}: points: expected a float64 (n >= 4, 3) array, got "
-                         f"{getattr(P, 'dtype', type(P).__name__)} {getattr(P, 'shape', '')}")
-    if mesh.cell_type not in NV_3D:
-        raise InputError(f"{source}: cell_type = {mesh.cell_type!r}: expected 'tetrahedron' or 'hexahedron'")
-    nv = NV_3D[mesh.cell_type]
-    if not isinstance(C, np.ndarray) or C.ndim != 2 or C.shape[1] != nv or C.shape[0] < 1 \
-            or C.dtype != np.int64:
-        raise InputError(f"{source}: cells: expected an int64 (nc >= 1, {nv}) array for {mesh.cell_type} "
-                         f"cells, got {getattr(C, 'dtype', type(C).__name__)} {getattr(C, 'shape', '')}")
-    bad = np.flatnonzero(~np.all(np.isfinite(P), axis=1))
-    if bad.size:
-        raise InputError(f"{source}: node {nid(bad[0])} has a non-finite coordinate")
-    if C.min() < 0 or C.max() >= len(P):
-        raise InputError(f"{source}: element {cid(int(np.flatnonzero((C < 0) | (C >= len(P)))[0] // nv))} "
-                         f"refers to a node that does not exist")
-    used = np.zeros(len(P), dtype=bool)
-    used[C.ravel()] = True
-    if not used.all():
-        raise InputError(f"{source}: node {nid(np.flatnonzero(~used)[0])} is not used by any element")
+    P, C, nv, nid, cid = _check_arrays(mesh, source, 3, ("tetrahedron", "hexahedron"))
     Cs = np.sort(C, axis=1)
     same = np.flatnonzero(np.any(Cs[:, 1:] == Cs[:, :-1], axis=1))
     if same.size:
@@ -995,12 +972,7 @@ def validate3d(mesh: BlockMesh3D, source: str = "mesh") -> None:
             f" at {'its centre' if np.argmin(dj[e]) == 8 else f'its corner {int(np.argmin(dj[e]))}'}"
         raise InputError(f"{source}: element {cid(e)} is {what}{where}; expected positively oriented elements "
                          f"(gmsh node order) of positive volume")
-    size = float(np.ptp(P, axis=0).max())
-    from scipy.spatial import cKDTree
-    pairs = cKDTree(P).query_pairs(1e-12 * size, output_type="ndarray")
-    if len(pairs):
-        a, b = pairs[0]
-        raise InputError(f"{source}: nodes {nid(a)} and {nid(b)} are duplicates (same position)")
+    _check_duplicate_nodes(P, source, nid)
     bfaces, _ = boundary_faces_from_cells(C, mesh.cell_type, source, nid, cid)
     # one piece, connected through faces
     from scipy.sparse import coo_matrix

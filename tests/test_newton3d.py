@@ -7,8 +7,8 @@ fclib.residual (numpy). Every 3D problem whose Siconos reference reached 1e-8 is
 5.1e-7 relative to ‖q‖) is included too since we reach 1e-8 on it.
 """
 import glob
-import json
 import os
+import sys
 
 import numpy as np
 import pytest
@@ -17,13 +17,9 @@ from fem_blocks.errors import InputError
 from fem_blocks.io import fclib
 from fem_blocks.solver import newton, nlgs
 
-FCLIB = "/work/shared/data/fclib"
-if not os.path.isdir(FCLIB):
-    FCLIB = os.path.join(os.path.dirname(__file__), "..", "..", "shared", "data", "fclib")
-SUMMARY = {}
-if os.path.exists(os.path.join(FCLIB, "reference_solutions", "SUMMARY.json")):
-    with open(os.path.join(FCLIB, "reference_solutions", "SUMMARY.json")) as fh:
-        SUMMARY = {d["problem"]: d for d in json.load(fh)}
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from test_fclib import FCLIB, SUMMARY  # noqa: E402  (data location and Siconos reference summary)
+
 FILES = {os.path.splitext(os.path.basename(f))[0]: f
          for f in glob.glob(os.path.join(FCLIB, "**", "*.hdf5"), recursive=True)}
 PROBLEMS_3D = sorted(n for n, d in SUMMARY.items() if d["d"] == 3 and n in FILES)

@@ -300,6 +300,24 @@ def _shape(k, xi, eta):
 
 
 @njit(cache=True)
+def _bilinear_point(coef, f, u, v):
+    """Point x = c0 + u a + v b + u v d of the bilinear face f (coef[f] = c0, a, b, d) and its tangents
+    x_,u = a + v d, x_,v = b + u d: (x, y, z, tu_x, tu_y, tu_z, tv_x, tv_y, tv_z)."""
+    dx = coef[f, 3, 0]
+    dy = coef[f, 3, 1]
+    dz = coef[f, 3, 2]
+    ax = coef[f, 1, 0] + v * dx
+    ay = coef[f, 1, 1] + v * dy
+    az = coef[f, 1, 2] + v * dz
+    bx = coef[f, 2, 0] + u * dx
+    by = coef[f, 2, 1] + u * dy
+    bz = coef[f, 2, 2] + u * dz
+    return (coef[f, 0, 0] + u * coef[f, 1, 0] + v * coef[f, 2, 0] + u * v * dx,
+            coef[f, 0, 1] + u * coef[f, 1, 1] + v * coef[f, 2, 1] + u * v * dy,
+            coef[f, 0, 2] + u * coef[f, 1, 2] + v * coef[f, 2, 2] + u * v * dz, ax, ay, az, bx, by, bz)
+
+
+@njit(cache=True)
 def _project(coef, nv, f, p0, p1, p2, out):
     """Orthogonal projection of p on face f. out[0:2] = reference coords (ξ, η) or (λ1, λ2), out[2:5] = x_a,
     out[5:8] = n, out[8:11] = t, out[11:14] = s, out[14] = gap. Returns False if Newton failed."""
@@ -337,18 +355,10 @@ def _project(coef, nv, f, p0, p1, p2, out):
         dz = coef[f, 3, 2]
         ok = False
         for it in range(60):
-            xx = c0x + u * ax + v * bxx + u * v * dx
-            xy = c0y + u * ay + v * by + u * v * dy
-            xz = c0z + u * az + v * bz + u * v * dz
+            xx, xy, xz, tux, tuy, tuz, tvx, tvy, tvz = _bilinear_point(coef, f, u, v)
             ex = xx - p0
             ey = xy - p1
             ez = xz - p2
-            tux = ax + v * dx
-            tuy = ay + v * dy
-            tuz = az + v * dz
-            tvx = bxx + u * dx
-            tvy = by + u * dy
-            tvz = bz + u * dz
             F0 = tux * ex + tuy * ey + tuz * ez
             F1 = tvx * ex + tvy * ey + tvz * ez
             H00 = tux * tux + tuy * tuy + tuz * tuz
@@ -375,15 +385,7 @@ def _project(coef, nv, f, p0, p1, p2, out):
                 break
         if not ok:
             return False
-        xx = c0x + u * ax + v * bxx + u * v * dx
-        xy = c0y + u * ay + v * by + u * v * dy
-        xz = c0z + u * az + v * bz + u * v * dz
-        tux = ax + v * dx
-        tuy = ay + v * dy
-        tuz = az + v * dz
-        tvx = bxx + u * dx
-        tvy = by + u * dy
-        tvz = bz + u * dz
+        xx, xy, xz, tux, tuy, tuz, tvx, tvy, tvz = _bilinear_point(coef, f, u, v)
     nx, ny, nz = _cross(tux, tuy, tuz, tvx, tvy, tvz)
     L = np.sqrt(nx * nx + ny * ny + nz * nz)
     if L == 0.0:

@@ -87,16 +87,21 @@ def _accumulate(side_body, side_dofs, side_G, P, U_offset, out):
                     out[off + d] += side_G[a, s, 0, j] * P[a, 0] + side_G[a, s, 1, j] * P[a, 1]
 
 
-def local_velocity(G: GBlocks, U_flat, U_offset) -> np.ndarray:
-    out = np.zeros((G.side_body.shape[0], 2))
-    _local_velocity(G.side_body, G.side_dofs, G.side_G, np.ascontiguousarray(U_flat, dtype=float),
-                    np.asarray(U_offset, dtype=np.int64), out)
+def local_velocity(G, U_flat, U_offset, kernel=None) -> np.ndarray:
+    """(nc, d) local velocities G u from the flat W-numbered body velocities; d = G.side_G.shape[2]. `kernel`:
+    the compiled loop for that d (default the 2D `_local_velocity`; kinematics3d passes its own: a kernel
+    generic in d measured 3x slower on the 2D case, so each dimension keeps its unrolled loop)."""
+    out = np.zeros((G.side_body.shape[0], G.side_G.shape[2]))
+    (kernel or _local_velocity)(G.side_body, G.side_dofs, G.side_G, np.ascontiguousarray(U_flat, dtype=float),
+                                np.asarray(U_offset, dtype=np.int64), out)
     return out
 
 
-def accumulate_impulse(G: GBlocks, P, n_total: int, U_offset) -> np.ndarray:
-    """H P: flat W-numbered vector of the contact impulses on the bodies."""
+def accumulate_impulse(G, P, n_total: int, U_offset, kernel=None) -> np.ndarray:
+    """H P: flat W-numbered vector of the contact impulses P (nc, d) on the bodies (`kernel` as in
+    local_velocity)."""
     out = np.zeros(int(n_total))
-    _accumulate(G.side_body, G.side_dofs, G.side_G, np.ascontiguousarray(P, dtype=float).reshape(-1, 2),
-                np.asarray(U_offset, dtype=np.int64), out)
+    (kernel or _accumulate)(G.side_body, G.side_dofs, G.side_G,
+                            np.ascontiguousarray(P, dtype=float).reshape(-1, G.side_G.shape[2]),
+                            np.asarray(U_offset, dtype=np.int64), out)
     return out

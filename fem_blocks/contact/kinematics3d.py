@@ -22,7 +22,9 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from ..delassus import _row_pattern, body_entities
 from ..errors import InputError
+from . import kinematics as _kin2
 
 ND = 12  # padded dofs per side: 4 nodes x 3 components (rigid: 6)
 
@@ -146,18 +148,12 @@ def _accumulate(side_body, side_dofs, side_G, P, U_offset, out):
 
 def local_velocity(G: GBlocks3D, U_flat, U_offset) -> np.ndarray:
     """(nc, 3) local velocities (v_N, v_T, v_S) = G u from the flat W-numbered body velocities."""
-    out = np.zeros((G.side_body.shape[0], 3))
-    _local_velocity(G.side_body, G.side_dofs, G.side_G, np.ascontiguousarray(U_flat, dtype=float),
-                    np.asarray(U_offset, dtype=np.int64), out)
-    return out
+    return _kin2.local_velocity(G, U_flat, U_offset, _local_velocity)
 
 
 def accumulate_impulse(G: GBlocks3D, P, n_total: int, U_offset) -> np.ndarray:
     """H P: flat W-numbered vector of the contact impulses (nc, 3) on the bodies."""
-    out = np.zeros(int(n_total))
-    _accumulate(G.side_body, G.side_dofs, G.side_G, np.ascontiguousarray(P, dtype=float).reshape(-1, 3),
-                np.asarray(U_offset, dtype=np.int64), out)
-    return out
+    return _kin2.accumulate_impulse(G, P, n_total, U_offset, _accumulate)
 
 
 # ----------------------------------------------------------------------------- Delassus operator (3D)
@@ -165,46 +161,18 @@ def accumulate_impulse(G: GBlocks3D, P, n_total: int, U_offset) -> np.ndarray:
 def _assemble_rows3(nc, order, ent_contact, ent_side, starts, side_body, side_dofs, side_G, W_flat, W_offset,
                     W_size):
     """Row-by-row block-CSR assembly of w^{ab} = Σ_{shared body} G^a_s W_b G^b_s'ᵀ (3 x 3 blocks), columns
-    sorted, duplicates (both sides on one body) summed in place. Same algorithm as delassus._assemble_rows."""
+    sorted (pattern: delassus._row_pattern), duplicates (both sides on one body) summed in place."""
     nd = side_dofs.shape[2]
-    marker = -np.ones(nc, dtype=np.int64)
-    counts = np.zeros(nc, dtype=np.int64)
-    for a in range(nc):
-        for s in range(2):
-            b = side_body[a, s]
-            for e in range(starts[b], starts[b + 1]):
-                c = ent_contact[order[e]]
-                if marker[c] != a:
-                    marker[c] = a
-                    counts[a] += 1
-    indptr = np.zeros(nc + 1, dtype=np.int64)
-    for a in range(nc):
-        indptr[a + 1] = indptr[a] + counts[a]
-    nnz = indptr[nc]
-    indices = np.empty(nnz, dtype=np.int64)
-    blocks = np.zeros((nnz, 3, 3))
-    diag_pos = np.empty(nc, dtype=np.int64)
+    indptr, indices, diag_pos = _row_pattern(nc, order, ent_contact, starts, side_body)
+    blocks = np.zeros((indptr[nc], 3, 3))
     pos_of = -np.ones(nc, dtype=np.int64)
-    marker[:] = -1
     maxsz = 0
     for b in range(W_size.shape[0]):
         maxsz = max(maxsz, W_size[b])
     GW = np.zeros((3, maxsz))
     for a in range(nc):
-        k = indptr[a]
-        for s in range(2):
-            b = side_body[a, s]
-            for e in range(starts[b], starts[b + 1]):
-                c = ent_contact[order[e]]
-                if marker[c] != a:
-                    marker[c] = a
-                    indices[k] = c
-                    k += 1
-        row = indices[indptr[a]:indptr[a + 1]]
-        row.sort()
         for kk in range(indptr[a], indptr[a + 1]):
             pos_of[indices[kk]] = kk
-        diag_pos[a] = pos_of[a]
         for s in range(2):
             b = side_body[a, s]
             off = W_offset[b]
@@ -254,12 +222,7 @@ def assemble_delassus(G: GBlocks3D, W_flat, W_offset, W_size, nb: int):
         raise InputError(f"W_offset / W_size: expected {nb} entries (one per body)")
     if nc and np.any(G.side_dofs.max(axis=2) >= W_size[G.side_body]):
         raise InputError("G blocks: a dof index exceeds its body's W size")
-    ent_body = G.side_body.ravel()
-    ent_contact = np.repeat(np.arange(nc, dtype=np.int64), 2)
-    ent_side = np.tile(np.array([0, 1], dtype=np.int64), nc)
-    order = np.argsort(ent_body, kind="stable").astype(np.int64)
-    starts = np.zeros(nb + 1, dtype=np.int64)
-    starts[1:] = np.cumsum(np.bincount(ent_body, minlength=nb))
+    ent_contact, ent_side, order, starts = body_entities(G.side_body, nb)
     indptr, indices, blocks, diag_pos = _assemble_rows3(
         nc, order, ent_contact, ent_side, starts, np.ascontiguousarray(G.side_body, dtype=np.int64),
         np.ascontiguousarray(G.side_dofs, dtype=np.int64), np.ascontiguousarray(G.side_G, dtype=np.float64),
