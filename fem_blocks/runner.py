@@ -498,6 +498,33 @@ def _summary(case, model, sim, info, run, t_start, t_setup, pv, pc, status) -> d
     return summary
 
 
+def _dof_control(case, body: str, dof: str, stage: int):
+    """How `dof` of rigid body `body` is controlled during stage `stage` (stages accumulate in order, as in
+    `_enter_stage`): ("driven", None), or ("force", history or None) for a free dof (None: no applied force)."""
+    spec = next((r for r in case.rigid_bodies if r.name == body), None)
+    state = ("driven", None) if spec is not None and dof in spec.drivers else \
+        ("force", spec.forces.get(dof) if spec is not None else None)
+    for st in case.stages[:stage + 1]:
+        if dof in st.drivers.get(body, {}):
+            state = ("force", None) if st.drivers[body][dof] is None else ("driven", None)
+        if dof in st.forces.get(body, {}):
+            state = ("force", st.forces[body][dof])
+    return state
+
+
+def _vertical_force(case, hist, body: str, k: int):
+    """Vertical force on `body` at history row k [kN], positive upwards: the reaction `body.Ry` when its vertical
+    dof is driven (e.g. blocked), the applied force history at that time when the dof is free (force control;
+    its reaction column is then 0)."""
+    if f"{body}.Ry" not in hist:
+        return None
+    kind, force = _dof_control(case, body, "y", int(hist["stage"][k]))
+    if kind == "driven":
+        return float(hist[f"{body}.Ry"][k] / 1e3)
+    from .bodies import as_history
+    return 0.0 if force is None else float(as_history(force, f"{body}.forces.y")(float(hist["time"][k])) / 1e3)
+
+
 def _figures(case, sim, model, out_dir) -> dict:
     """force_displacement.png and crack_pattern.png, and the curve's peak figures for summary.json."""
     from .output.figures import write_crack_pattern, write_curve
@@ -527,7 +554,6 @@ def _figures(case, sim, model, out_dir) -> dict:
             if sel.sum() >= 3 else None
         if cv["force"] == "x":
             out["peak_horizontal_force_kN"] = out["peak_force_kN"]
-            out["vertical_force_at_peak_kN"] = float(hist.get(f"{body}.Ry", np.zeros_like(F))[k] / 1e3) \
-                if f"{body}.Ry" in hist else None
+            out["vertical_force_at_peak_kN"] = _vertical_force(case, hist, body, k)
         out["force_displacement"] = "force_displacement.png"
     return out
