@@ -118,9 +118,13 @@ def main(out_dir: str, quick: bool = False, argv=None) -> dict:
         loose_blocks=int(loose.sum()), loose_mass_kg=float(mass[loose].sum()),
         loose_weight_fraction=float(mass[loose].sum() / mass.sum()),
         loose_list=[[int(lay.blocks[i].course), int(lay.blocks[i].index)] for i in idx],
+        moved_list=[[int(lay.blocks[i].course), int(lay.blocks[i].index), float(-uz[i])]
+                    for i in np.flatnonzero(-uz > 0.5 * hstep * hstep * G)],  # fell > h^2 g / 2 in total
         loose_bed_blocks_not_on_piers=int(sum(1 for i in idx if lay.blocks[i].course == 0
                                               and lay.blocks[i].index not in pier_blocks)),
         max_fall_m=float(-uz.min()), broken_contacts=broken, run_time_s=run_time,
+        nlgs_unconverged_steps=int(cst.n_unconverged), nlgs_last_residual=float(info.contact["residual"]),
+        nlgs_tol=cst.opts.tol, nlgs_max_sweeps=cst.opts.max_sweeps,
         outputs=dict(paraview="paraview/blocks.pvd", contacts="paraview/contacts.pvd", history="history.csv",
                      png="dome.png"))
     write_summary(os.path.join(out_dir, "summary.json"), summary)

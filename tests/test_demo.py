@@ -71,3 +71,12 @@ def test_dome_quick(tmp_path, joints):
     assert abs(s["pier_reaction_over_weight"] - (1 - s["loose_weight_fraction"])) <= 1e-3
     for f in ("paraview/blocks.pvd", "paraview/contacts.pvd", "history.csv", "dome.png"):
         assert (out / f).exists(), f
+
+
+def test_demo_options_passed_or_rejected():
+    """A .py demo's own options go to its main(out, quick, argv); a demo without them, or `run`, rejects
+    extra arguments with exit status 2 and one line naming them."""
+    for args in (["demo", "prism", "--joints", "dry"], ["run", "x.toml", "--out", "o", "--joints", "dry"]):
+        p = subprocess.run([sys.executable, "-m", "fem_blocks.cli", *args], capture_output=True, text=True, cwd=ROOT,
+                           timeout=120)
+        assert p.returncode == 2 and "unrecognized arguments" in p.stderr and "--joints" in p.stderr, p.stderr
