@@ -1,6 +1,5 @@
 """Thesis dome (§7.2.1.c, 12 courses of 22 voussoirs, span 4 m) on 4 piers (§7.2.2.a) under gravity: dry joints let the blocks between the piers come loose, brittle adhesion holds them (--joints dry|brittle)."""
 import argparse
-import math
 import os
 import sys
 import time
@@ -11,6 +10,7 @@ from fem_blocks.bodies import BlockType3D, DeformableBody3D, Material, RigidBody
 from fem_blocks.builders3d import dome
 from fem_blocks.contact.step import ContactOptions, ContactStep, InterfaceSpec
 from fem_blocks.dynamics import Simulation
+from fem_blocks.laws import S_BROKEN
 from fem_blocks.meshing import mesh_hexahedron
 
 G = 9.81
@@ -88,7 +88,6 @@ def main(out_dir: str, quick: bool = False, argv=None) -> dict:
         loose = (zprev - uz) > 0.5 * hstep * hstep * G
         zprev = uz
         Rz = float(sum(p.reaction[2] - p.mass * G for p in piers))  # driver reaction minus the pier's own weight
-        from fem_blocks.laws import S_BROKEN
         broken = int((cst.state[:, S_BROKEN] > 0).sum()) if opts.joints == "brittle" else 0
         hist.write(dict(step=k, time=sim.time, pier_reaction_z=Rz, pier_reaction_over_weight=Rz / weight,
                         max_fall=float(-uz.min()), loose_blocks=int(loose.sum()),

@@ -1,5 +1,4 @@
 """3D tilting table: a dry running-bond wall of deformable bricks on a rigid base tilted about the wall's long axis until it overturns; tilt at collapse vs tan(alpha) = t/H."""
-import json
 import math
 import os
 import sys
@@ -66,7 +65,8 @@ def main(out_dir: str, quick: bool = False, argv=None) -> dict:
     from fem_blocks.output.paraview import BodiesWriter3D
     from fem_blocks.output.summary import write_summary
     if argv:
-        raise SystemExit(f"wall3d_tilt: unexpected arguments {argv}; expected none (options: --out, --quick)")
+        from fem_blocks.errors import InputError
+        raise InputError(f"demo wall3d_tilt: unrecognized arguments {' '.join(argv)}; expected none (--out, --quick)")
     cfg = CONFIG[bool(quick)]
     os.makedirs(out_dir, exist_ok=True)
     wall0 = time.perf_counter()
