@@ -38,11 +38,21 @@ def _first_line(path: str) -> str:
     return ""
 
 
-def _run_script(path: str, out: str) -> int:
-    """A Python demo: a module with main(out_dir)."""
+def _run_script(path: str, out: str, quick: bool = False, extra=()) -> int:
+    """A Python demo: a module with main(out_dir[, quick, argv]); `quick` and the demo's own options (`extra`,
+    e.g. `--joints brittle`) are passed if its main accepts them."""
+    import inspect
     import runpy
     mod = runpy.run_path(path, run_name="fem_blocks_demo")
-    mod["main"](out)
+    params = inspect.signature(mod["main"]).parameters
+    kw = {}
+    if "quick" in params:
+        kw["quick"] = quick
+    if "argv" in params:
+        kw["argv"] = list(extra)
+    elif extra:
+        raise InputError(f"demo {os.path.basename(path)}: unrecognized arguments {' '.join(extra)}")
+    mod["main"](out, **kw)
     return 0
 
 
@@ -95,7 +105,9 @@ def main(argv=None) -> int:
     d.add_argument("--out", default=None, help="output directory (default out/demo-NAME)")
     d.add_argument("--quiet", action="store_true")
     d.add_argument("--quick", action="store_true", help="reduced resolution (smoke test, first look)")
-    args = p.parse_args(argv)
+    args, extra = p.parse_known_args(argv)
+    if extra and args.command != "demo":
+        p.error(f"unrecognized arguments: {' '.join(extra)}")
     if args.command is None:
         p.print_help()
         return 2
@@ -114,7 +126,9 @@ def main(argv=None) -> int:
             raise InputError(f"demo {name!r} not found; expected one of {sorted(demos)} (fem-blocks demo --list)")
         out = args.out or os.path.join("out", f"demo-{name}")
         if demos[name].endswith(".py"):
-            return _run_script(demos[name], out)
+            return _run_script(demos[name], out, args.quick, extra)
+        if extra:
+            raise InputError(f"demo {name}: unrecognized arguments {' '.join(extra)}")
         return _run(demos[name], out, args.quiet, args.quick)
     except InputError as e:
         print(f"fem-blocks: error: {e}", file=sys.stderr)
