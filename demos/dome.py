@@ -34,24 +34,13 @@ def build(joints: str, cfg):
         law = dict(law="coulomb", mu=MU)
     else:
         law = dict(law="brittle", params=dict(variant="dugdale", r_c=R_C, l_c=L_C, mu=MU))
-    itfs = [InterfaceSpec("joints", ("dome", "dome"), g0=lay.joint, alert=ALERT, **law),
-            InterfaceSpec("piers", ("dome", "piers"), g0=lay.joint, alert=ALERT, candidate="dome", **law)]
+    itfs = [InterfaceSpec("joints", ("dome", "dome"), g0=lay.joint, alert=ALERT, reference="as_built", **law),
+            InterfaceSpec("piers", ("dome", "piers"), g0=lay.joint, alert=ALERT, candidate="dome",
+                          reference="as_built", **law)]
     cst = ContactStep(itfs, ["dome"] * len(blocks) + ["piers"] * len(piers),
                       ContactOptions(tol=1e-6, max_sweeps=cfg["max_sweeps"], criterion="residual", check_every=5))
     sim = Simulation(blocks + piers, h=cfg["h"], theta=1.0, velocity_reset=True, contact=cst)
     return lay, blocks, piers, sim, cst
-
-
-def joints_as_built(sim, cst):
-    """Detect the contacts in the reference configuration and take every initial joint gap as its reference
-    (gap_ref = 0): the staggered bed joints are wedges t +- delta (builders3d.dome), built full (mortar or
-    dry packing), so they are closed at t = 0 instead of open/penetrated by +-delta. Frozen geometry: the
-    gap then follows the displacement jump, g = (G q)_N."""
-    cst._setup(sim)
-    cst._geometry(sim, True)
-    wedge = float(np.abs(cst.gap_ref).max())
-    cst.gap_ref[:] = 0.0
-    return wedge
 
 
 def main(out_dir: str, quick: bool = False, argv=None) -> dict:
@@ -67,7 +56,6 @@ def main(out_dir: str, quick: bool = False, argv=None) -> dict:
     os.makedirs(out_dir, exist_ok=True)
     wall0 = time.perf_counter()
     lay, blocks, piers, sim, cst = build(opts.joints, cfg)
-    wedge = joints_as_built(sim, cst)
     nb = len(blocks)
     mass = np.array([b.type.M.diagonal().sum() / 3 for b in blocks])
     weight = float(mass.sum() * G)
@@ -111,7 +99,8 @@ def main(out_dir: str, quick: bool = False, argv=None) -> dict:
         name=f"dome_{opts.joints}" + ("_quick" if quick else ""), quick=bool(quick), joints=opts.joints,
         courses=cfg["courses"], blocks=nb, hexahedra_per_block=int(np.prod(cfg["divisions"])),
         dofs=int(sum(3 * b.type.n_nodes for b in blocks)), contacts=int(len(cst.cs.gap)),
-        max_initial_wedge_m=wedge, h=hstep, steps=cfg["steps"], velocity_reset=True, mu=MU,
+        max_initial_wedge_m=float(np.abs(cst.cs.gap - cst.cs.g0).max()),  # joints closed as built
+        h=hstep, steps=cfg["steps"], velocity_reset=True, mu=MU,
         r_c_Pa=R_C if opts.joints == "brittle" else None, l_c_m=L_C if opts.joints == "brittle" else None,
         weight_N=weight, pier_reaction_over_weight=Rz / weight,
         loose_blocks=int(loose.sum()), loose_mass_kg=float(mass[loose].sum()),

@@ -291,6 +291,7 @@ class InterfaceCaseSpec:
     candidate: str | None
     orientation: str
     params: dict = field(default_factory=dict)
+    reference: str = "nominal"
 
 
 # interface-law parameters and their physical dimension (for unit conversion)
@@ -646,7 +647,8 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
             alert=t.number("alert", 1e-3, lo=0, lo_open=True, dim="length"),
             placement=t.string("placement", "positions", choices=("positions", "nodes")),
             positions=tuple(float(x) for x in pos), candidate=cand,
-            orientation=t.string("orientation", "any", choices=("any", "bed", "head", "crack"))))
+            orientation=t.string("orientation", "any", choices=("any", "bed", "head", "crack")),
+            reference=t.string("reference", "nominal", choices=("nominal", "as_built"))))
         t.done()
     pairs = {}
     for itf in interfaces:
@@ -724,6 +726,10 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
         cb = output["curve"]["body"]
         if cb not in rigid_names:
             raise InputError(f"{source}: output.curve.body = {cb!r}: expected a rigid body among {sorted(rigid_names)}")
+    for itf in interfaces:
+        if itf.reference == "as_built" and contact and contact.get("geometry") != "frozen":
+            raise InputError(f"{source}: interfaces.{itf.name}.reference = 'as_built': expected contact.geometry = "
+                             f"'frozen' (joints closed as built are a small-displacement model)")
     return Case(source=source, name=name, units=units, gravity=gravity, materials=materials,
                 block_types=block_types, blocks=blocks, rigid_bodies=rigid, stages=stages, output=output,
                 contact=contact, interfaces=interfaces, checks=checks)

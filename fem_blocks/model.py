@@ -79,7 +79,8 @@ def build_model(case: Case) -> Model:
         from .contact.step import ContactOptions, ContactStep, InterfaceSpec
         specs = [InterfaceSpec(name=i.name, groups=i.groups, law=i.law, mu=i.mu, g0=i.g0, alert=i.alert,
                                placement=i.placement, positions=i.positions, candidate=i.candidate,
-                               orientation=i.orientation, params=i.params) for i in case.interfaces]
+                               orientation=i.orientation, params=i.params, reference=i.reference)
+                 for i in case.interfaces]
         parent = [-1] * len(names)
         index = {n: k for k, n in enumerate(names)}
         for b in case.blocks:

@@ -353,3 +353,34 @@ def test_fremond_joint_pulled_3d(pull):
     else:
         assert np.all(cst.state[:, S_BETA] < 1e-3)
         assert lift > 10 * np.sqrt(w / c_N)
+
+
+@pytest.mark.parametrize("reference", ["nominal", "as_built"])
+def test_joint_reference_as_built(reference):
+    """A rigid block placed 1 mm above the floor (alert 5 mm). Nominal reference: the joint is open, the block
+    falls the 1 mm before it lands. `reference = "as_built"`: the joint is closed as built (reference gap = initial
+    gap), the floor carries the weight from the first step and the block does not move (≤ 1e-12 m)."""
+    m = 1000.0
+    blk = RigidBody3D(box_corners(1.0, 1.0, 0.5, (-0.5, -0.5, 1e-3)), mass=m, name="block")
+    itf = InterfaceSpec("joint", ("block", "floor"), mu=0.5, alert=5e-3, candidate="block", reference=reference)
+    floor = floor_on(np.eye(3))
+    sim = Simulation([floor, blk], 1e-3, 1.0, contact=contact([itf], ["floor", "block"]))
+    sim.step()
+    if reference == "as_built":
+        assert abs(floor.reaction[2] / (m * G) - 1) <= 1e-9
+        for _ in range(20):
+            sim.step()
+        assert abs(blk.q[2]) <= 1e-12
+    else:
+        assert abs(floor.reaction[2]) <= 1e-9 * m * G  # still in free fall
+        for _ in range(40):
+            sim.step()
+        assert abs(blk.q[2] + 1e-3) <= 1e-9  # landed on the floor
+
+
+def test_joint_reference_as_built_needs_frozen_geometry():
+    itf = InterfaceSpec("joint", ("block", "floor"), reference="as_built")
+    with pytest.raises(InputError, match="interfaces.joint.reference"):
+        contact([itf], ["floor", "block"], geometry="updated")
+    with pytest.raises(InputError, match="interfaces.j.reference"):
+        InterfaceSpec("j", ("a", "b"), reference="built")

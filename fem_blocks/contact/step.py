@@ -58,9 +58,12 @@ class InterfaceSpec:
     candidate: str | None = None  # group name whose bodies are candidates
     orientation: str = "any"  # "any" | "bed" (normal within 45° of vertical) | "head"
     params: dict = field(default_factory=dict)
+    reference: str = "nominal"  # "nominal": joint closed at gap = g0; "as_built": closed at the initial gap (frozen)
 
     def __post_init__(self):
         n = f"interfaces.{self.name}"
+        if self.reference not in ("nominal", "as_built"):
+            raise InputError(f"{n}.reference = {self.reference!r}: expected 'nominal' or 'as_built'")
         check_range(f"{n}.mu", self.mu, 0.0, expected="mu >= 0")
         check_range(f"{n}.g0", self.g0, 0.0, expected="g0 >= 0 [m] (joint thickness)")
         check_range(f"{n}.alert", self.alert, 0.0, lo_open=True, expected="alert > 0 [m]")
@@ -128,6 +131,10 @@ class ContactStep:
         self.body_parent = (-np.ones(len(body_groups), dtype=np.int64) if body_parent is None
                             else np.asarray(body_parent, dtype=np.int64))
         self.opts = options or ContactOptions()
+        for itf in self.interfaces:
+            if itf.reference == "as_built" and self.opts.geometry != "frozen":
+                raise InputError(f"interfaces.{itf.name}.reference = 'as_built' needs contact.geometry = 'frozen' "
+                                 f"(got {self.opts.geometry!r})")
         self.group_names = sorted(set(body_groups))
         gid = {g: i for i, g in enumerate(self.group_names)}
         self.body_group = np.array([gid[g] for g in body_groups], dtype=np.int64)
@@ -243,8 +250,9 @@ class ContactStep:
                 self.P[ok] = oldP[m[ok]]
                 st[ok] = self.state[m[ok]]
             self.state = st
-            if ref:
+            if ref:  # frozen geometry: reference gaps; "as_built" joints are closed in the initial configuration
                 self.gap_ref = self.cs.gap - self.cs.g0
+                self.gap_ref[self._as_built()[self.cs.interface]] = 0.0
         elif updated and self.dim == 3 and len(self.cs.gap):
             self.cs = det3.update_geometry(self.cs, s.positions(), s.bfaces)  # same pairs, current frames and gaps
         if redetect or (updated and self.dim == 3):
@@ -275,11 +283,15 @@ class ContactStep:
             return
         gt = self.cs.gap - self.cs.g0
         alerts = np.array([itf.alert for itf in self.interfaces])[self.cs.interface]
-        bad = np.flatnonzero(gt < -alerts)
+        bad = np.flatnonzero((gt < -alerts) & ~self._as_built()[self.cs.interface])
         if bad.size:
             a = bad[np.argmin(gt[bad])]
             raise InputError(f"bodies {names[self.cs.cand_body[a]]} and {names[self.cs.ant_body[a]]} overlap at the "
                              f"start by {-gt[a]:.3g} m (more than the alert distance {alerts[a]:.3g} m)")
+
+    def _as_built(self) -> np.ndarray:
+        """Per interface: joints closed as built (reference gap = initial gap, frozen geometry only)."""
+        return np.array([itf.reference == "as_built" for itf in self.interfaces], dtype=bool)
 
     def _setup(self, sim):
         self.dim = getattr(sim, "dim", 2)
