@@ -602,7 +602,11 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
                        max_refinements=ct.integer("max_refinements", 4, lo=1, hi=12),
                        solver=ct.string("solver", "nlgs", choices=("nlgs", "newton")),
                        criterion=ct.string("criterion", "change", choices=("change", "residual")),
-                       check_every=ct.integer("check_every", 10, lo=1))
+                       check_every=ct.integer("check_every", 10, lo=1),
+                       fallback=ct.string("fallback", "none", choices=("none", "newton")))
+        if contact["fallback"] == "newton" and (contact["solver"] != "nlgs" or contact["criterion"] != "residual"):
+            raise InputError(f"{source}: contact.fallback = 'newton': expected solver = 'nlgs' and criterion = "
+                             f"'residual' (stagnation is measured on the residual)")
         ct.done()
     all_groups = {b.group for b in blocks} | {r.group for r in rigid}
     interfaces = []

@@ -384,3 +384,31 @@ def test_joint_reference_as_built_needs_frozen_geometry():
         contact([itf], ["floor", "block"], geometry="updated")
     with pytest.raises(InputError, match="interfaces.j.reference"):
         InterfaceSpec("j", ("a", "b"), reference="built")
+
+
+def test_contact_fallback_newton_option(monkeypatch):
+    """[contact] fallback = "newton": the option reaches the NLGS call of the time step (stack of 3 rigid boxes on a
+    floor at equilibrium: reactions = weight to 1e-9) and bad combinations are rejected."""
+    from fem_blocks.solver import nlgs
+    seen = []
+    real = nlgs.solve_block_csr
+
+    def spy(*a, **k):
+        seen.append(k.get("fallback"))
+        return real(*a, **k)
+    monkeypatch.setattr(nlgs, "solve_block_csr", spy)
+    boxes = [RigidBody3D(box_corners(1.0, 1.0, 0.5, (-0.5, -0.5, 0.5 * k)), mass=100.0, name=f"b{k}") for k in range(3)]
+    itfs = [InterfaceSpec("bed", ("block", "floor"), mu=0.6, candidate="block"),
+            InterfaceSpec("joint", ("block", "block"), mu=0.6)]
+    floor = floor_on(np.eye(3))
+    cst = contact(itfs, ["floor", "block", "block", "block"], fallback="newton", tol=1e-10)
+    sim = Simulation([floor] + boxes, 1e-3, 1.0, velocity_reset=True, contact=cst)
+    for _ in range(5):
+        info = sim.step()
+    assert info.contact["converged"]
+    assert seen.count("newton") == 5  # one call per step (the fallback then calls the plain solver in windows)
+    assert abs(floor.reaction[2] / (300.0 * G) - 1) <= 1e-9
+    with pytest.raises(InputError, match="contact.fallback"):
+        ContactOptions(fallback="newton", criterion="change")
+    with pytest.raises(InputError, match="contact.fallback"):
+        ContactOptions(fallback="yes")

@@ -95,6 +95,7 @@ class ContactOptions:
     criterion: str = "change"   # "change": ‖ΔP‖/‖P‖ between sweeps; "residual": natural-map residual ‖F‖/‖q‖
     solver: str = "nlgs"        # "nlgs" | "newton" (global semismooth Newton, NLGS start and fallback; 2D Coulomb)
     check_every: int = 10
+    fallback: str = "none"      # "newton": NLGS hands over to the global Newton when it stagnates (Coulomb contacts)
 
     def __post_init__(self):
         if self.geometry not in ("frozen", "updated"):
@@ -109,6 +110,11 @@ class ContactOptions:
         if self.criterion not in ("change", "residual"):
             raise InputError(f"contact.criterion = {self.criterion!r}: expected 'change' or 'residual'")
         check_range("contact.check_every", self.check_every, 1, expected="check_every >= 1")
+        if self.fallback not in ("none", "newton"):
+            raise InputError(f"contact.fallback = {self.fallback!r}: expected 'none' or 'newton'")
+        if self.fallback == "newton" and (self.solver != "nlgs" or self.criterion != "residual"):
+            raise InputError("contact.fallback = 'newton': expected solver = 'nlgs' and criterion = 'residual' "
+                             "(stagnation is measured on the residual)")
         if self.on_nonconvergence not in ("warn", "fail", "refine"):
             raise InputError(f"contact.on_nonconvergence = {self.on_nonconvergence!r}: expected 'warn', 'fail' or "
                              "'refine' (refine: handled by the runner, warn here)")
@@ -423,7 +429,8 @@ class ContactStep:
                 res = nlgs.solve_block_csr(self.Wdel, q.ravel(), self.mu, r0=self.P.ravel(), tol=self.opts.tol,
                                            max_sweeps=self.opts.max_sweeps, omega=self.opts.omega,
                                            order=self.opts.order, seed=self.opts.seed + self.steps,
-                                           criterion=self.opts.criterion, check_every=self.opts.check_every)
+                                           criterion=self.opts.criterion, check_every=self.opts.check_every,
+                                           fallback=self.opts.fallback)
             from ..laws import NSTATE, S_UN, S_UT
             vs = res.u.reshape(-1, d)
             self.state[:, S_UN] += h * ((1 - th) * vi[:, 0] + th * (vs[:, 0] - gbar / (h * th)))
