@@ -4,7 +4,7 @@ VPY    := $(VENV)/bin/python
 STAMP  := $(VENV)/.setup-stamp
 OUT    ?= out
 
-.PHONY: setup demo test test-fast bench clean
+.PHONY: setup demo test test-fast bench clean pyvista
 
 setup: $(STAMP)
 
@@ -17,6 +17,10 @@ demo: $(STAMP)
 
 test: $(STAMP)
 	$(VPY) -m pytest -q -p no:cacheprovider tests
+
+# optional: pyvista/VTK renderer for the 3D PNGs (about 700 MB in the venv; numpy kept at the Debian version)
+pyvista: $(STAMP)
+	$(VPY) -m pip install -q -c constraints.txt pyvista
 
 bench: $(STAMP)
 	$(VPY) bench/run_all.py

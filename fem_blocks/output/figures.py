@@ -7,7 +7,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from .plots import plot_crack_pattern, plot_curve, plot_polygons_3d
+from .plots import plot_crack_pattern, plot_curve, plot_polygons_3d, plot_polygons_3d_pyvista
 
 
 def _loop(edges: np.ndarray) -> np.ndarray:
@@ -127,10 +127,18 @@ def body_faces_3d(bodies, amplification: float = 1.0):
 
 
 def write_blocks_3d(path, bodies, body_values=None, value_label="", title="", amplification=None,
-                    view=(25.0, -60.0), size=(1000, 800)):
-    """PNG of 3D bodies (list, or an object with .bodies) rendered off-screen (plots.plot_polygons_3d),
-    deformed with `amplification` (default auto_amplification), each face coloured by the mean |displacement|
-    of its corners, or by `body_values` (one value per body, e.g. the damage of its joints)."""
+                    view=(25.0, -60.0), size=(1000, 800), backend: str = "auto"):
+    """PNG of 3D bodies (list, or an object with .bodies) rendered off-screen, deformed with `amplification`
+    (default auto_amplification), each face coloured by the mean |displacement| of its corners, or by
+    `body_values` (one value per body, e.g. the damage of its joints). backend "pyvista" (VTK, off-screen EGL;
+    the optional extra `make pyvista`), "matplotlib" (mplot3d, plots.plot_polygons_3d) or "auto" (pyvista when
+    it is installed)."""
+    if backend not in ("auto", "pyvista", "matplotlib"):
+        from ..errors import InputError
+        raise InputError(f"backend = {backend!r}: expected 'auto', 'pyvista' or 'matplotlib'")
+    if backend == "auto":
+        from .plots import has_pyvista
+        backend = "pyvista" if has_pyvista() else "matplotlib"
     bodies = list(getattr(bodies, "bodies", bodies))
     amp = auto_amplification(SimpleNamespace(bodies=bodies)) if amplification is None else float(amplification)
     polys, owner, dmag = body_faces_3d(bodies, amp)
@@ -142,5 +150,5 @@ def write_blocks_3d(path, bodies, body_values=None, value_label="", title="", am
             from ..errors import InputError
             raise InputError(f"body_values: expected {len(bodies)} values (one per body), got {len(bv)}")
         vals, label = bv[owner], value_label
-    return plot_polygons_3d(path, polys, vals, label, title=title, view=view, size=size,
-                            note=f"displacements x{amp:g}")
+    plot = plot_polygons_3d_pyvista if backend == "pyvista" else plot_polygons_3d
+    return plot(path, polys, vals, label, title=title, view=view, size=size, note=f"displacements x{amp:g}")

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import io
 
+import os
+
 import numpy as np
 
 from ..errors import InputError
@@ -137,13 +139,14 @@ def _subdivide(polys, rgba):
     return out, np.array(col), edge
 
 
-def plot_polygons_3d(path, polygons, values=None, value_label="", title="", view=(25.0, -60.0),
-                     size=(1000, 800), dpi=100, vmin=None, vmax=None, note=""):
-    """Off-screen 3D rendering of planar polygons (block boundary faces) with matplotlib's mplot3d
-    (Poly3DCollection, depth-sorted by the painter's algorithm, light shading by the face normal), coloured
-    by `values` (one per polygon, viridis between vmin and vmax, default their range; NaN grey; None: one
-    masonry colour). `view` = (elevation, azimuth) in degrees; the PNG is exactly size = (width, height)
-    pixels; equal scales on x, y, z. `polygons`: a (m, k, 3) array or a list of (k_i, 3) arrays. Returns path."""
+def has_pyvista() -> bool:
+    """True when the optional pyvista/VTK renderer is importable (`make pyvista`)."""
+    import importlib.util
+    return importlib.util.find_spec("pyvista") is not None
+
+
+def _check_polygons(polygons, values, size):
+    """Validated (polygons, width, height, values) for the 3D renderers."""
     polys = []
     for i, p in enumerate(polygons if polygons is not None else []):
         p = np.asarray(p, dtype=float)
@@ -161,6 +164,17 @@ def plot_polygons_3d(path, polygons, values=None, value_label="", title="", view
         val = np.asarray(values, dtype=float).ravel()
         if len(val) != len(polys):
             raise InputError(f"values: expected {len(polys)} values (one per polygon), got {len(val)}")
+    return polys, w, h, val
+
+
+def plot_polygons_3d(path, polygons, values=None, value_label="", title="", view=(25.0, -60.0),
+                     size=(1000, 800), dpi=100, vmin=None, vmax=None, note=""):
+    """Off-screen 3D rendering of planar polygons (block boundary faces) with matplotlib's mplot3d
+    (Poly3DCollection, depth-sorted by the painter's algorithm, light shading by the face normal), coloured
+    by `values` (one per polygon, viridis between vmin and vmax, default their range; NaN grey; None: one
+    masonry colour). `view` = (elevation, azimuth) in degrees; the PNG is exactly size = (width, height)
+    pixels; equal scales on x, y, z. `polygons`: a (m, k, 3) array or a list of (k_i, 3) arrays. Returns path."""
+    polys, w, h, val = _check_polygons(polygons, values, size)
     from matplotlib import colormaps
     from matplotlib.cm import ScalarMappable
     from matplotlib.colors import LightSource, Normalize
@@ -203,3 +217,71 @@ def plot_polygons_3d(path, polygons, values=None, value_label="", title="", view
     if note:
         fig.text(0.01, 0.01, note, fontsize=10)
     return _save(fig, path, dpi)
+
+
+def plot_polygons_3d_pyvista(path, polygons, values=None, value_label="", title="", view=(25.0, -60.0),
+                             size=(1000, 800), vmin=None, vmax=None, note=""):
+    """Same picture as plot_polygons_3d rendered with pyvista/VTK off-screen (EGL, no X server needed): the
+    polygons as one PolyData, coloured by `values` (viridis, NaN grey) with a scalar bar, camera at (elevation,
+    azimuth) = `view` looking at the model's centre, title and note as text; PNG of exactly `size` pixels.
+    VTK's renderer aborts in a process that has imported dolfinx (measured with vtk 9.7 / dolfinx 0.5.2), so the
+    picture is then drawn in a child process (`python -m fem_blocks.output.plots ARGS.npz`)."""
+    import sys
+    polys, w, h, val = _check_polygons(polygons, values, size)
+    if "dolfinx" in sys.modules:
+        import subprocess
+        import tempfile
+        with tempfile.TemporaryDirectory() as tmp:
+            f = os.path.join(tmp, "args.npz")
+            np.savez(f, n=np.array([len(p) for p in polys], dtype=np.int64),
+                     pts=np.concatenate(polys) if polys else np.zeros((0, 3)),
+                     val=np.array([]) if val is None else val, has_val=val is not None,
+                     meta=np.array([os.path.abspath(path), value_label, title, note]),
+                     num=np.array([view[0], view[1], w, h, np.nan if vmin is None else vmin,
+                                   np.nan if vmax is None else vmax], dtype=float))
+            r = subprocess.run([sys.executable, "-m", "fem_blocks.output.plots", f], capture_output=True, text=True)
+            if r.returncode != 0 or not os.path.exists(path):
+                raise RuntimeError(f"pyvista rendering of {path} failed (exit {r.returncode}): "
+                                   f"{(r.stderr or '').strip().splitlines()[-1:]}")
+        return path
+    import pyvista as pv
+    pl = pv.Plotter(off_screen=True, window_size=(w, h))
+    pl.set_background("white")
+    if polys:
+        pts = np.concatenate(polys)
+        faces = np.concatenate([np.r_[len(p), np.arange(len(p)) + o]
+                                for p, o in zip(polys, np.cumsum([0] + [len(p) for p in polys[:-1]]))])
+        mesh = pv.PolyData(pts, faces)
+        if val is not None:
+            fin = val[np.isfinite(val)]
+            lo = float(vmin) if vmin is not None else (float(fin.min()) if fin.size else 0.0)
+            hi = float(vmax) if vmax is not None else (float(fin.max()) if fin.size else 1.0)
+            mesh.cell_data[value_label or "value"] = val
+            pl.add_mesh(mesh, scalars=value_label or "value", cmap="viridis", clim=(lo, hi if hi > lo else lo + 1.0),
+                        nan_color="grey", show_edges=True, edge_color="black", line_width=0.3,
+                        scalar_bar_args=dict(title=value_label, color="black", vertical=True))
+        else:
+            pl.add_mesh(mesh, color=(0.91, 0.84, 0.75), show_edges=True, edge_color="black", line_width=0.3)
+        lo3, hi3 = pts.min(axis=0), pts.max(axis=0)
+        c, r = 0.5 * (lo3 + hi3), float(np.linalg.norm(hi3 - lo3))
+        el, az = np.radians(float(view[0])), np.radians(float(view[1]))
+        eye = c + 2.0 * r * np.array([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])
+        pl.camera_position = [tuple(eye), tuple(c), (0.0, 0.0, 1.0)]
+        pl.reset_camera_clipping_range()
+    if title:
+        pl.add_text(title, position="upper_edge", font_size=12, color="black")
+    if note:
+        pl.add_text(note, position="lower_left", font_size=9, color="black")
+    pl.screenshot(path)
+    pl.close()
+    return path
+
+
+if __name__ == "__main__":  # child process of plot_polygons_3d_pyvista (no dolfinx here)
+    import sys
+    a = np.load(sys.argv[1])
+    polys = np.split(a["pts"], np.cumsum(a["n"])[:-1]) if len(a["n"]) else []
+    path, label, title, note = (str(x) for x in a["meta"])
+    el, az, w, h, lo, hi = a["num"]
+    plot_polygons_3d_pyvista(path, polys, a["val"] if bool(a["has_val"]) else None, label, title, (el, az),
+                             (int(w), int(h)), None if np.isnan(lo) else lo, None if np.isnan(hi) else hi, note)
