@@ -323,7 +323,7 @@ def commit_step(law, par, st, trial, ueff, P, v, area, h, theta):
     P (impulses) and v (shifted velocities, u = u_eff + hθ v) are flat, d entries per contact. At the cap
     (P̃_N = P_N + hA(k_N u_N + f_N) >= h f_c A) the closure is plastic: Δu_p = min(0, hθ(v_N + cmp P̃_N)) (cmp the
     compliance 1/(h²θ k A) of compliant joints in compression); the laws see the elastic jump u_N - Δu_p, then
-    u_p += Δu_p and f_c A |Δu_p| is dissipated. Same arithmetic as the 2D ContactStep (step.py)."""
+    u_p += Δu_p and f_c A |Δu_p| is dissipated. Called by ContactStep (step.py) at the end of every cohesive step."""
     d = ueff.shape[1]
     for a in range(law.shape[0]):
         uN = ueff[a, 0] + h * theta * v[d * a]

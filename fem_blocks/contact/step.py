@@ -30,10 +30,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from numba import njit
-
 from ..errors import InputError, check_range
-from ..laws import commit
 from . import detection as det
 from . import detection3d as det3
 from . import kinematics as kin
@@ -121,12 +118,6 @@ class ContactOptions:
         check_range("contact.max_refinements", self.max_refinements, 1, 12, expected="1 <= max_refinements <= 12")
 
 
-@njit(cache=True)
-def _commit_all(law, par, st, trial, u_new, area):
-    for a in range(law.shape[0]):
-        commit(law[a], par[a], st[a], trial[a], u_new[a, 0], u_new[a, 1], area[a])
-
-
 class ContactStep:
     """The `contact` hook of `dynamics.Simulation` (solve / on_step_change)."""
 
@@ -207,21 +198,6 @@ class ContactStep:
             bad = next(itf for itf in self.interfaces if itf.law_code != 0 or itf.law_par[P_FC] > 0)
             raise InputError(f"interfaces.{bad.name}.law = {bad.law!r}: the 3D Newton solver handles the Coulomb law "
                              f"without crushing cap only; expected contact.solver = 'nlgs' for 3D interface laws")
-
-    def _crushing(self, P, ueff, v, x, h, th):
-        """Plastic closure increment Δu_p <= 0 of the contacts whose r̃_N reached the cap h f_c A: the penetration
-        of the effective surface hθ v'_N (v' = v_N + cmp r̃_N for the compliant laws)."""
-        from ..laws import P_FC
-        from ..solver.newton import _cohesive_terms
-        n = len(P)
-        self._cap_force = self.par[:, P_FC] * self.cs.area
-        if not np.any(self._cap_force > 0):
-            return np.zeros(n)
-        S, c, mue, cmp, capv = np.zeros((n, 2)), np.zeros((n, 2)), np.zeros(n), np.zeros(n), np.zeros(n)
-        _cohesive_terms(self.law, self.par, self.state, x, ueff, v, self.cs.area, h, th, S, c, mue, cmp, capv)
-        Pt = P[:, 0] + S[:, 0] * v[0::2] + c[:, 0]
-        at_cap = np.isfinite(capv) & (Pt >= capv * (1 - 1e-9))
-        return np.where(at_cap, np.minimum(0.0, h * th * (v[0::2] + cmp * Pt)), 0.0)
 
     def _assign_cracks(self):
         """Contacts between the two halves of one split brick take the crack interface of their group pair."""
@@ -407,19 +383,8 @@ class ContactStep:
                                                  max_sweeps=self.opts.max_sweeps, omega=self.opts.omega,
                                                  order=self.opts.order, seed=self.opts.seed + self.steps,
                                                  criterion=self.opts.criterion, check_every=self.opts.check_every)
-            vs = res.u.reshape(-1, d)
-            if d == 3:  # crushing at the cap, then commit (laws.commit_step, any dimension)
-                from ..laws import commit_step
-                commit_step(self.law, self.par, self.state, trial, ueff, res.r, res.u, cs.area, h, th)
-            else:
-                u_new = ueff + h * th * vs
-                dup = self._crushing(res.r.reshape(-1, 2), ueff, res.u, trial, h, th)
-                u_new[:, 0] -= dup  # the laws see the elastic jump
-                _commit_all(self.law, self.par, self.state, trial, u_new, cs.area)
-                if np.any(dup):
-                    from ..laws import S_DISS
-                    self.state[:, S_UP] += dup
-                    self.state[:, S_DISS] += self._cap_force * np.abs(dup)
+            from ..laws import commit_step  # crushing at the cap, then the laws' commit (any dimension)
+            commit_step(self.law, self.par, self.state, trial, ueff, res.r, res.u, cs.area, h, th)
         else:
             if self.opts.solver == "newton":
                 from ..solver.newton import solve_newton
