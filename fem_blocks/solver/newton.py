@@ -10,7 +10,7 @@ elastic bricks): its sweeps count grows with the size of the wall. Newton on the
 
 with ρ_N = 1/W_αα,NN and ρ_T = 1/W_αα,TT. F is piecewise linear in r; a generalized Jacobian is
 J = D + E W with 2×2 block-diagonal D, E chosen per contact by its case (open, stick, slip), so J has the
-block pattern of W. Each iteration solves J Δr = -F with a sparse LU (scipy SuperLU), then a backtracking
+block pattern of W. Each iteration solves J Δr = -F with a sparse LU (scipy SuperLU below 3000 unknowns, MUMPS above: linalg.lu_solve), then a backtracking
 line search on ½‖F‖² (Armijo). When the line search fails (Newton's direction is not a descent direction
 where the cases change), a few NLGS sweeps are taken from the current iterate and Newton resumes.
 
@@ -48,11 +48,11 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 
 from numba import njit
 
 from ..errors import InputError
+from ..linalg import lu_solve
 from ..laws import P_FC, compression_stiffness, linear_part
 from . import nlgs
 from .nlgs import BlockCSR, NLGSResult
@@ -238,13 +238,10 @@ def _newton(W: BlockCSR, q, mu, r, tol, max_iter, gs, max_sweeps_total, coh=None
         fref = max(merits)
         Jb = np.einsum("kij,kjl->kil", E[rows], W.blocks)
         Jb[W.diag_pos] += D + eps * E
-        J = sp.bsr_matrix((Jb, W.indices, W.indptr), shape=(dim * n, dim * n)).tocsc()
+        J = sp.bsr_matrix((Jb, W.indices, W.indptr), shape=(dim * n, dim * n))
         n_it += 1
-        try:
-            dr = spla.splu(J).solve(-F)
-            ok = bool(np.all(np.isfinite(dr)))
-        except RuntimeError:  # exactly singular Jacobian
-            ok = False
+        dr = lu_solve(J, -F)  # SuperLU on small systems, MUMPS on large ones; None if J is singular
+        ok = dr is not None
         accepted = False
         t = 1.0
         if ok:
