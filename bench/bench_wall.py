@@ -37,7 +37,8 @@ from fem_blocks.meshing import mesh_rectangle  # noqa: E402
 FREMOND = dict(c_N=0.5e10, c_T=0.3e10, w=18.0, mu=0.7)
 
 
-def wall(n_bricks, joints="dry", h=1e-3, max_steps=300, steady_steps=20):
+def build(n_bricks, joints="dry", h=1e-3, theta=1.0, velocity_reset=True):
+    """The wall, its floor, the contact step and the simulation; returns (sim, cs, floor, blocks, weight, t_build)."""
     per = max(2, int(round(np.sqrt(n_bricks * 0.25 / 0.5))))  # about twice as wide as high (in bricks)
     courses = max(1, int(round(n_bricks / per)))
     t0 = time.perf_counter()
@@ -55,9 +56,38 @@ def wall(n_bricks, joints="dry", h=1e-3, max_steps=300, steady_steps=20):
              InterfaceSpec("j", ("b", "b"), law="fremond", params=dict(FREMOND)))
     cs = ContactStep([joint, InterfaceSpec("f", ("b", "g"), mu=0.7)],
                      ["b"] * len(bodies) + ["g"], ContactOptions(tol=1e-4, max_sweeps=1000))
-    sim = Simulation(bodies + [floor], h=h, theta=1.0, contact=cs, velocity_reset=True)
+    sim = Simulation(bodies + [floor], h=h, theta=theta, contact=cs, velocity_reset=velocity_reset)
     t_build = time.perf_counter() - t0
     weight = sum(1800.0 * b.length * b.height * 0.12 for b in blocks) * 9.81
+    return sim, cs, floor, blocks, weight, t_build
+
+
+def wall_dynamic(n_bricks, joints="dry", steps=200):
+    """Dynamic run with benchmark 1's settings (h = 1e-4 s, θ = 0.505, no velocity reset), `steps` steps from
+    rest: the cost per step of a dynamic simulation (the wall does not reach equilibrium in that time)."""
+    sim, cs, floor, blocks, weight, t_build = build(n_bricks, joints, h=1e-4, theta=0.505, velocity_reset=False)
+    info = sim.step()  # setup step (scene, detection, W_bb, Delassus), not timed below
+    t_setup = t_build + cs.timers["detection"]
+    for k in cs.timers:
+        cs.timers[k] = 0.0
+    sweeps, smax, limit = [], 0, 0
+    t1 = time.perf_counter()
+    for _ in range(steps):
+        info = sim.step()
+        sweeps.append(info.contact["sweeps"])
+        limit += int(not info.contact.get("converged", True))
+    dt = (time.perf_counter() - t1) / steps
+    nc = info.contact["contacts"]
+    tm = {k: v / steps * 1e3 for k, v in cs.timers.items()}
+    rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    return dict(bricks=len(blocks), contacts=nc, setup_s=t_setup, steps=steps, ms_per_step=dt * 1e3,
+                sweeps_per_step=float(np.mean(sweeps)), max_sweeps=int(np.max(sweeps)), limit_steps=limit,
+                us_per_update=cs.timers["nlgs"] / max(sum(sweeps) * nc, 1) * 1e6, split=tm,
+                floor_reaction_over_weight=floor.reaction[1] / weight, rss_mb=rss)
+
+
+def wall(n_bricks, joints="dry", h=1e-3, max_steps=300, steady_steps=20):
+    sim, cs, floor, blocks, weight, t_build = build(n_bricks, joints, h=h)
 
     t1 = time.perf_counter()
     info = sim.step()  # first step: scene, detection, W_bb, Delassus, then a cold NLGS solve
@@ -101,8 +131,29 @@ if __name__ == "__main__":
     ap.add_argument("sizes", nargs="*", type=int, default=[100, 1000])
     ap.add_argument("--joints", choices=("dry", "fremond"), default="dry")
     ap.add_argument("--max-steps", type=int, default=300)
+    ap.add_argument("--dynamic", type=int, default=0, metavar="STEPS",
+                    help="instead: STEPS dynamic steps with benchmark 1's settings (h = 1e-4 s, theta = 0.505)")
     a = ap.parse_args()
     print(f"joints: {a.joints}")
+    if a.dynamic:
+        print(f"dynamic: h = 1e-4 s, theta = 0.505, {a.dynamic} steps from rest\n")
+        print("| bricks | contacts | setup [s] | ms/step | sweeps/step (max; steps at the sweep limit) | NLGS µs/update | "
+              "split ms/step (local, nlgs, correction) | floor reaction / weight at the end | peak RSS [MB] |")
+        print("|---|---|---|---|---|---|---|---|---|")
+        rows = []
+        for n in a.sizes:
+            r = wall_dynamic(n, a.joints, a.dynamic)
+            rows.append(r)
+            s = r["split"]
+            print(f"| {r['bricks']} | {r['contacts']} | {r['setup_s']:.2f} | {r['ms_per_step']:.1f} | "
+                  f"{r['sweeps_per_step']:.1f} ({r['max_sweeps']}; {r['limit_steps']}) | {r['us_per_update']:.3f} | "
+                  f"{s['local']:.1f}, {s['nlgs']:.1f}, {s['correction']:.1f} | {r['floor_reaction_over_weight']:.4f} | "
+                  f"{r['rss_mb']:.0f} |", flush=True)
+        if len(rows) >= 2:
+            c = [r["contacts"] for r in rows]
+            print(f"\nexponents vs contacts: time per step {fit_exponent(c, [r['ms_per_step'] for r in rows]):.2f}, "
+                  f"sweeps per step {fit_exponent(c, [r['sweeps_per_step'] for r in rows]):.2f}")
+        sys.exit(0)
     print("| bricks | contacts | setup [s] | steps to equilibrium | time to equilibrium [s] (sweeps; steps at the "
           "sweep limit) | ms/step at equilibrium | sweeps/step | ms/sweep | NLGS µs/update | split ms/step (local, "
           "nlgs, correction) | floor reaction / weight | peak RSS [MB] |")

@@ -13,6 +13,7 @@ RUNS = [("bench_kernel.py", []),
         ("bench_wall.py", sizes + ["--joints", "dry"]),
         ("bench_wall.py", sizes + ["--joints", "fremond"]),
         ("bench_contact_solvers.py", []),
+        ("bench_lu.py", [] if FULL else ["--quick"]),
         ("bench_shear_walls.py", [] if FULL else ["--quick"])]
 for script, args in RUNS:
     print(f"\n## {script} {' '.join(args)}\n", flush=True)

@@ -20,8 +20,8 @@ R_C = 0.40e6        # thesis §7.2.2.a: cohesion threshold 0.40 MPa ("adhesif fr
 L_C = 1e-4          # our choice: the rigid-brittle joint breaks after 0.1 mm of opening (thesis: no flexibility)
 ALERT = 0.02        # > the 1.15 cm wedge of the staggered bed joints (builders3d.dome)
 FIXED = {k: ("velocity", 0.0) for k in ("x", "y", "z", "rx", "ry", "rz")}
-CONFIG = {False: dict(courses=12, divisions=(2, 2, 2), h=0.01, steps=6, max_sweeps=4000),
-          True: dict(courses=4, divisions=(1, 1, 1), h=0.01, steps=4, max_sweeps=5000)}
+CONFIG = {False: dict(courses=12, divisions=(2, 2, 2), h=0.01, steps=6, max_sweeps=4000, tol=1e-6, order="given"),
+          True: dict(courses=4, divisions=(1, 1, 1), h=0.01, steps=4, max_sweeps=5000, tol=1e-6, order="given")}
 
 
 def build(joints: str, cfg):
@@ -38,7 +38,8 @@ def build(joints: str, cfg):
             InterfaceSpec("piers", ("dome", "piers"), g0=lay.joint, alert=ALERT, candidate="dome",
                           reference="as_built", **law)]
     cst = ContactStep(itfs, ["dome"] * len(blocks) + ["piers"] * len(piers),
-                      ContactOptions(tol=1e-6, max_sweeps=cfg["max_sweeps"], criterion="residual", check_every=5))
+                      ContactOptions(tol=cfg["tol"], max_sweeps=cfg["max_sweeps"], criterion="residual", check_every=5,
+                                     order=cfg["order"]))
     sim = Simulation(blocks + piers, h=cfg["h"], theta=1.0, velocity_reset=True, contact=cst)
     return lay, blocks, piers, sim, cst
 
@@ -51,8 +52,16 @@ def main(out_dir: str, quick: bool = False, argv=None) -> dict:
     from fem_blocks.output.summary import write_summary
     ap = argparse.ArgumentParser(prog="fem-blocks demo dome")
     ap.add_argument("--joints", choices=("dry", "brittle"), default="dry")
+    ap.add_argument("--max-sweeps", type=int, default=None, help="NLGS sweeps per step (default 4000; quick 5000)")
+    ap.add_argument("--tol", type=float, default=None, help="NLGS residual tolerance ||F||/||q|| (default 1e-6)")
+    ap.add_argument("--order", choices=("given", "reversed", "shuffled"), default=None,
+                    help="NLGS contact order (default given)")
+    ap.add_argument("--steps", type=int, default=None, help="time steps (default 6; quick 4)")
     opts = ap.parse_args(argv or [])
-    cfg = CONFIG[bool(quick)]
+    cfg = dict(CONFIG[bool(quick)])
+    for k in ("max_sweeps", "tol", "order", "steps"):
+        if getattr(opts, k) is not None:
+            cfg[k] = getattr(opts, k)
     os.makedirs(out_dir, exist_ok=True)
     wall0 = time.perf_counter()
     lay, blocks, piers, sim, cst = build(opts.joints, cfg)
@@ -67,8 +76,10 @@ def main(out_dir: str, quick: bool = False, argv=None) -> dict:
     bw.write(0.0)
     zprev = np.zeros(nb)
     hstep = cfg["h"]
+    max_res = 0.0
     for k in range(1, cfg["steps"] + 1):
         info = sim.step()
+        max_res = max(max_res, float(info.contact["residual"]))
         if not info.contact["converged"]:
             print(f"dome: step {k}: NLGS not converged (residual {info.contact['residual']:.2g})", file=sys.stderr)
         uz = np.array([b.displacement_global()[:, 2].mean() for b in blocks])
@@ -112,7 +123,7 @@ def main(out_dir: str, quick: bool = False, argv=None) -> dict:
                                               and lay.blocks[i].index not in pier_blocks)),
         max_fall_m=float(-uz.min()), broken_contacts=broken, run_time_s=run_time,
         nlgs_unconverged_steps=int(cst.n_unconverged), nlgs_last_residual=float(info.contact["residual"]),
-        nlgs_tol=cst.opts.tol, nlgs_max_sweeps=cst.opts.max_sweeps,
+        nlgs_max_residual=max_res, nlgs_tol=cst.opts.tol, nlgs_max_sweeps=cst.opts.max_sweeps, nlgs_order=cst.opts.order,
         outputs=dict(paraview="paraview/blocks.pvd", contacts="paraview/contacts.pvd", history="history.csv",
                      png="dome.png"))
     write_summary(os.path.join(out_dir, "summary.json"), summary)
