@@ -19,12 +19,16 @@ DEFAULT_DEMO = "shear_wall"
 
 
 def list_demos() -> dict[str, str]:
-    """name -> case file path of the demos shipped in `demos/`."""
+    """name -> case file path of the demos shipped in `demos/`. A case file with the stem of a Python demo
+    (demos/dome.toml next to demos/dome.py) is listed with its extension (`dome.toml`)."""
     out = {}
     if os.path.isdir(DEMO_DIR):
-        for f in sorted(os.listdir(DEMO_DIR)):
-            if f.endswith(".toml") or (f.endswith(".py") and not f.startswith("_")):
-                out[os.path.splitext(f)[0]] = os.path.join(DEMO_DIR, f)
+        files = sorted(f for f in os.listdir(DEMO_DIR)
+                       if f.endswith(".toml") or (f.endswith(".py") and not f.startswith("_")))
+        scripts = {os.path.splitext(f)[0] for f in files if f.endswith(".py")}
+        for f in files:
+            stem = os.path.splitext(f)[0]
+            out[f if f.endswith(".toml") and stem in scripts else stem] = os.path.join(DEMO_DIR, f)
     return out
 
 
