@@ -491,8 +491,8 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
             block_types[tname] = _parse_block_type_3d(t, tname, materials, base)
             t.done()
             continue
-        t.dimension_keys(D, dict(size=3, corners=3, divisions=3))
         _check_geometry_dimension(t, D)
+        t.dimension_keys(D, dict(size=3, corners=3, divisions=3))
         geom = t.string("geometry", required=True, choices=("rectangle", "polygon", "file"))
         mat = t.string("material", required=True)
         if mat not in materials:
@@ -1074,19 +1074,19 @@ def _mesh_resolution(t: Table, geom: str):
     return size, div
 
 
-def _check_corners(t: Table, key: str, C):
+def _check_corners(t: Table, C):
+    """`corners` (or a box's) of table t: a proper hexahedron in the gmsh order (meshing.check_hex_corners)."""
     from .meshing import check_hex_corners
     try:
-        check_hex_corners(np.asarray(C, dtype=float), t.key(key))
+        check_hex_corners(np.asarray(C, dtype=float), t.path)
     except InputError as e:
-        raise InputError(f"{t.source}: {e}: expected 8 corners in the gmsh hexahedron order (0-3 the bottom face, "
-                         f"counter-clockwise seen from the top, corner 4+i above corner i)") from None
+        raise InputError(f"{t.source}: {e}") from None
 
 
 def _parse_block_type_3d(t: Table, tname: str, materials: dict, base: str) -> BlockTypeSpec:
     """[block_types.NAME] in dimension 3: box (size), hexahedron (8 corners) or a 3D .msh/.geo file."""
-    t.dimension_keys(3, dict(lx=2, ly=2, vertices=2))
     _check_geometry_dimension(t, 3)
+    t.dimension_keys(3, dict(lx=2, ly=2, vertices=2))
     geom = t.string("geometry", required=True, choices=GEOMETRIES[3])
     mat = t.string("material", required=True)
     if mat not in materials:
@@ -1103,7 +1103,7 @@ def _parse_block_type_3d(t: Table, tname: str, materials: dict, base: str) -> Bl
         bt.lx, bt.ly, bt.lz = lx, ly, lz
     elif geom == "hexahedron":
         bt.corners = t.points("corners", n=3, min_count=8, exact=True)
-        _check_corners(t, "corners", bt.corners)
+        _check_corners(t, bt.corners)
     else:
         bt.file = _mesh_file(t, base)
     return bt
@@ -1133,7 +1133,7 @@ def _solid_corners(t: Table) -> list:
         corners = box_corners(*size, t.vector("origin", 3, (0.0, 0.0, 0.0), dim="length"))
     elif "origin" in t.data:
         raise t.error("origin", "only with size (a box); corners are absolute positions")
-    _check_corners(t, "corners", corners)
+    _check_corners(t, corners)
     return [tuple(float(x) for x in c) for c in corners]
 
 
