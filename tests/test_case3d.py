@@ -286,3 +286,63 @@ def test_wall3d_push_quick_through_the_cli(tmp_path):
     assert s["n_bodies"] == 14 + 2
     for f in ("paraview/blocks.pvd", "paraview/contacts.pvd", "blocks.png", "force_displacement.png"):
         assert (out / f).exists(), f
+
+
+def test_3d_block_types_file_hexahedron_box_and_rotation(tmp_path):
+    """The three 3D block-type geometries through build_model: a .geo file (tetrahedra), 8 corners (a sheared
+    hexahedron), a tetrahedral box; the lumped mass of each instance is ρV (to 1e-12), and the placement
+    x = R X + c with R = 90° about x maps the file's box [0, .3] x [0, .2] x [0, .1] onto
+    [0, .3] x [-.1, 0] x [0, .2] + c (to 1e-15)."""
+    from fem_blocks.model import build_model
+    (tmp_path / "box.geo").write_text('SetFactory("OpenCASCADE");\nBox(1) = {0, 0, 0, 0.3, 0.2, 0.1};\n'
+                                      'Physical Surface("xmin") = {1};\nPhysical Volume("block") = {1};\n')
+    text = """dimension = 3
+[materials.m]
+E = 1e9
+nu = 0.2
+rho = 1000.0
+[block_types.f]
+geometry = "file"
+file = "box.geo"
+mesh_size = 0.1
+material = "m"
+[block_types.h]
+geometry = "hexahedron"
+corners = [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0.2, 0, 1], [1.2, 0, 1], [1.2, 1, 1], [0.2, 1, 1]]
+divisions = [2, 2, 2]
+material = "m"
+[block_types.b]
+geometry = "box"
+size = [0.5, 0.5, 0.5]
+mesh_size = 0.25
+cell = "tetrahedron"
+material = "m"
+[[blocks]]
+type = "f"
+position = [5.0, 0.0, 0.0]
+rotation_axis = [2.0, 0.0, 0.0]
+rotation_angle = 90.0
+[[blocks.clamps]]
+tag = "xmin"
+[[blocks]]
+type = "h"
+position = [0.0, 0.0, 0.0]
+[[blocks]]
+type = "b"
+position = [0.0, 3.0, 0.0]
+[[stages]]
+duration = 0.01
+h = 0.01
+"""
+    model = build_model(_case(tmp_path, text))
+    f, h, b = model.bodies
+    assert f.type.mesh.cell_type == "tetrahedron" and h.type.mesh.cells.shape == (8, 8)
+    assert b.type.mesh.cells.shape == (6 * 8, 4)
+    for body, V in ((f, 0.3 * 0.2 * 0.1), (h, 1.0), (b, 0.125)):
+        assert abs(body.type.M.diagonal().sum() / 3 / (1000.0 * V) - 1) <= 1e-12
+    X = f.reference_points
+    assert np.allclose([X.min(axis=0), X.max(axis=0)], [[5.0, -0.1, 0.0], [5.3, 0.0, 0.2]], rtol=0, atol=1e-15)
+    on_xmin = np.flatnonzero(np.abs(f.type.mesh.points[:, 0]) <= 1e-12)  # the clamped face x = 0 (type frame)
+    assert on_xmin.size >= 4 and np.array_equal(np.flatnonzero(f.clamped), np.sort(np.r_[3 * on_xmin,
+                                                                                         3 * on_xmin + 1,
+                                                                                         3 * on_xmin + 2]))
