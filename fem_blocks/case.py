@@ -1169,7 +1169,8 @@ def _check_overlaps_3d(source: str, block_types: dict, blocks: list, rigid: list
                          f"({len(bad)} overlapping pair(s)); expected blocks that at most touch")
 
 
-def _resolution_3d(t: Table, U: dict):
+def _resolution_3d(t: Table):
+    """mesh_size or divisions, cell, mass of the block types a 3D builder table makes."""
     size, div = _mesh_resolution(t, "box")
     return dict(mesh_size=size, divisions=div, cell=t.string("cell", "hexahedron", choices=("hexahedron",
                                                                                            "tetrahedron")),
@@ -1218,7 +1219,7 @@ def _parse_wall3d(w: Table, U: dict, materials, block_types, blocks, rigid, name
             isinstance(v, NUMBER) and not isinstance(v, bool) and math.isfinite(v) for v in o) for o in ops):
         raise w.error("openings", "expected a list of [x0, z0, x1, z1] rectangles [m] (wall frame)")
     ops = [[float(v) * U["length"] for v in o] for o in ops]
-    res = _resolution_3d(w, U)
+    res = _resolution_3d(w)
     group = w.string("group", "bricks")
     name = f"{w.source}: wall3d"
     lay = builders3d.running_bond_wall(w.integer("courses", required=True, lo=1, hi=2000),
@@ -1264,7 +1265,7 @@ def _parse_dome(a: Table, U: dict, materials, block_types, blocks, rigid, names)
     from . import builders3d
     mat = _material(a, materials)
     top = a.number("top_elevation", None, lo=0, hi=90, lo_open=True, hi_open=True)
-    res = _resolution_3d(a, U)
+    res = _resolution_3d(a)
     group = a.string("group", "dome")
     pier_group = a.string("pier_group", "piers")
     lay = builders3d.dome(span=a.number("span", 4.0, lo=0, lo_open=True, dim="length"),
