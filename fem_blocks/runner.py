@@ -138,7 +138,7 @@ def _enter_stage(model: Model, sim: Simulation, case: Case, si: int):
             b.set_force(dof, force_hist)
             changed = True
     if changed and model.contact is not None:
-        model.contact.W_dirty = True  # rigid W (driven dofs) changed
+        model.contact.mark_W_dirty()  # rigid W (driven dofs) changed
     sim.set_step(st.h, st.theta)
     sim.velocity_reset = st.velocity_reset
     if model.contact is not None:

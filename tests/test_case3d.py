@@ -186,30 +186,39 @@ def test_driven_platen_reaction_is_E_A_delta_over_L(tmp_path):
 
 # a free rigid box (6 dofs) on a deformable block on a fixed floor: gravity, then a force and a moment about z
 # make it slide and turn on the block (rigid rotations, friction state, two time steps must survive a restart)
-RESUME = STACK.replace('name = "stack3d"', 'name = "resume3d"').replace("""[[rigid_bodies]]
+RESUME = STACK.replace('name = "stack3d"', 'name = "resume3d"').replace("max_sweeps = 20000", "max_sweeps = 3000").replace(
+    "duration = 0.2\n", "duration = 0.05\n").replace("""[[rigid_bodies]]
 name = "floor\"""", """[[rigid_bodies]]
 name = "lid"
 size = [0.3, 0.2, 0.1]
 origin = [0.1, 0.1, 0.6]
 rho = 2000.0
-group = "blocks"
+group = "lid"
 [[rigid_bodies]]
-name = "floor\"""").replace("""[stages.stop_at_equilibrium]
-max_velocity = 1e-9
-min_steps = 5
-""", """[output]
+name = "floor\"""").replace("""[[stages]]
+name = "gravity\"""", """[[interfaces]]
+between = ["lid", "blocks"]
+candidate = "lid"
+mu = 0.6
+placement = "nodes"
+[output]
 checkpoint_every = 4
 stress = false
 [[stages]]
+name = "gravity\"""").replace("""[stages.stop_at_equilibrium]
+max_velocity = 1e-9
+min_steps = 5
+""", """[[stages]]
 name = "push"
-duration = 0.3
-h = 0.005
+duration = 0.5
+h = 0.0025
 theta = 1.0
 output_every = 7
 [stages.forces.lid]
-x = 300.0
-rz = 20.0
+x = 75.0
+rz = 4.0
 """)
+assert RESUME.count("duration = 0.05") == 1 and RESUME.count('name = "lid"') == 1 and RESUME.count("[output]") == 1 and 'name = "push"' in RESUME
 
 
 def _cli(case, out, *extra, wait=True):
@@ -226,7 +235,7 @@ def test_resume_3d_after_sigkill_is_bitwise_identical(tmp_path):
     path.write_text(RESUME)
     ref = tmp_path / "ref"
     s = run_case(load_case(str(path)), str(ref), progress=False)
-    assert s["status"] == "completed" and s["steps"] == 20 + 60
+    assert s["status"] == "completed" and s["steps"] == 5 + 200
     out = tmp_path / "killed"
     proc = _cli(path, out, wait=False)
     t0, step = time.monotonic(), None
@@ -241,6 +250,7 @@ def test_resume_3d_after_sigkill_is_bitwise_identical(tmp_path):
     assert proc.poll() is None, "the run ended before the kill"
     proc.send_signal(signal.SIGKILL)
     proc.wait()
+    assert int(read_checkpoint(out / "checkpoint.npz")["sim.step"]) < 205  # killed mid-run
     p = _cli(path, out, "--resume")
     assert p.returncode == 0, p.stderr
     assert (out / "history.csv").read_text() == (ref / "history.csv").read_text()
@@ -252,6 +262,8 @@ def test_resume_3d_after_sigkill_is_bitwise_identical(tmp_path):
         assert np.array_equal(a[k], b[k]), k
     lid = [k for k in keys if k.endswith(".orientation")][0]
     assert abs(np.arctan2(a[lid][1, 0], a[lid][0, 0])) > 1e-3  # the lid did turn about z
+    h = read_history(str(ref / "history.csv"))
+    assert 0.01 < h["lid.ux"][-1] < 0.15 and abs(h["lid.urz"][-1]) > 0.05  # and slid, staying on the block
 
 
 def test_quick_halves_divisions_and_3d_keys(tmp_path):
