@@ -113,20 +113,32 @@ class Table:
         f = self.units[dim] if dim else 1.0
         return tuple(float(x) * f for x in v)
 
-    def points(self, k: str, dim: str = "length", min_count: int = 3, required=True):
+    def points(self, k: str, dim: str = "length", min_count: int = 3, required=True, n: int = 2,
+               exact: bool = False):
+        """A list of points of n coordinates ([x, y] or [x, y, z]); at least `min_count` (exactly, if exact)."""
         self.used.add(k)
+        xyz = "[x, y]" if n == 2 else "[x, y, z]"
+        count = f"{'exactly' if exact else 'at least'} {min_count}"
         if k not in self.data:
             if required:
-                raise self.error(k, f"missing; expected a list of at least {min_count} [x, y] points")
+                raise self.error(k, f"missing; expected a list of {count} {xyz} points")
             return None
         v = self.data[k]
-        ok = isinstance(v, list) and len(v) >= min_count and all(
-            isinstance(p, list) and len(p) == 2 and all(
+        ok = isinstance(v, list) and (len(v) == min_count if exact else len(v) >= min_count) and all(
+            isinstance(p, list) and len(p) == n and all(
                 not isinstance(x, bool) and isinstance(x, NUMBER) and math.isfinite(x) for x in p) for p in v)
         if not ok:
-            raise self.error(k, f"expected a list of at least {min_count} [x, y] points of finite numbers")
+            raise self.error(k, f"expected a list of {count} {xyz} points of finite numbers")
         f = self.units[dim]
-        return [(float(p[0]) * f, float(p[1]) * f) for p in v]
+        return [tuple(float(x) * f for x in p) for p in v]
+
+    def dimension_keys(self, D: int, only: dict):
+        """Keys that exist in one dimension only (`only`: key -> its dimension) are an error in the other one,
+        naming the key and the dimension."""
+        for k, d in only.items():
+            if k in self.data and d != D:
+                raise self.error(k, f"not used in dimension {D} (a key of dimension {d} case files); "
+                                    f"see docs/case-files.md, 'dimension'")
 
     def history(self, k: str, dim: str | None, default=None, required=False):
         """A number or {times = [...], values = [...]} (times strictly increasing)."""
@@ -237,6 +249,9 @@ class BlockTypeSpec:
     ly: float = 0.0
     vertices: list | None = None
     file: str | None = None
+    lz: float = 0.0                   # 3D box: size (lx, ly, lz)
+    divisions: tuple | None = None    # 3D box/hexahedron: hexahedra along the 3 edges (instead of mesh_size)
+    corners: list | None = None       # 3D hexahedron: 8 corners, gmsh order
 
 
 @dataclass
@@ -263,15 +278,16 @@ class BlockSpec:
     clamps: list = field(default_factory=list)
     tractions: list = field(default_factory=list)
     parent: int = -1  # split_bricks: the two halves of one brick share a parent id (crack interface)
+    R: Any = None     # 3D: rotation matrix (x = R X + position); None in 2D (angle)
 
 
 @dataclass
 class RigidSpec:
     name: str
-    vertices: list
+    vertices: list          # 2D: polygon; 3D: the 8 corners of a hexahedron (gmsh order)
     rho: float | None
     mass: float | None
-    inertia: float | None
+    inertia: Any            # 2D: float [kg m^2]; 3D: 3 principal values or None
     thickness: float
     drivers: dict
     forces: dict
@@ -342,6 +358,37 @@ class Case:
     interfaces: list = field(default_factory=list)
     checks: dict = field(default_factory=lambda: dict(max_penetration=None, max_energy_growth=10.0))
     variant: str = ""  # "" or "quick x2" (reduced-resolution variant, part of the fingerprint)
+    dimension: int = 2
+
+    @property
+    def dofs(self) -> tuple:
+        return dofs_of(self.dimension)
+
+
+DOFS_2D = ("x", "y", "rz")
+DOFS_3D = ("x", "y", "z", "rx", "ry", "rz")
+
+
+def dofs_of(D: int) -> tuple:
+    """Rigid-body dofs of dimension D: x, y, rz (2D); x, y, z, rx, ry, rz (3D). A dof "r*" is a rotation."""
+    return DOFS_2D if D == 2 else DOFS_3D
+
+
+def _dof_text(D: int) -> str:
+    return "x, y or rz" if D == 2 else "x, y, z, rx, ry or rz (dimension 3)"
+
+
+def _dof_error(t, dof, D):
+    other = [d for d in dofs_of(5 - D) if d not in dofs_of(D)]
+    hint = f" ({', '.join(other)}: dofs of dimension {5 - D} only)" if dof in other else ""
+    return t.error(dof, f"unknown dof; expected {_dof_text(D)}{hint}")
+
+
+def rotation_matrix(axis, angle: float) -> np.ndarray:
+    """R = exp(angle [a]x), a = axis/|axis| (right-hand rule, angle in radians): Rodrigues' formula
+    R = I + sin(angle) [a]x + (1 - cos(angle)) [a]x^2."""
+    from .bodies import rotation3d
+    return rotation3d(np.asarray(axis, dtype=float), float(angle))
 
 
 def _check_simple_polygon(t, key, verts):
@@ -414,11 +461,17 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
     U = UNIT_SYSTEMS[units]
     root.units = U
     name = root.string("name", os.path.splitext(os.path.basename(source))[0])
-    gravity = root.vector("gravity", 2)
-    gravity = (0.0, -9.81) if gravity is None else tuple(g * U["length"] / U["time"] ** 2 for g in gravity)
+    D = root.raw("dimension", 2)
+    if isinstance(D, bool) or D not in (2, 3):
+        raise root.error("dimension", f"= {D!r}: expected 2 or 3")
+    root.dimension_keys(D, dict(wall=2, arch=2, wall3d=3, dome=3))
+    gravity = root.vector("gravity", D)
+    gravity = ((0.0, -9.81) if D == 2 else (0.0, 0.0, -9.81)) if gravity is None else \
+        tuple(g * U["length"] / U["time"] ** 2 for g in gravity)
 
     materials = {}
     for mname, t in root.named_tables("materials").items():
+        t.dimension_keys(D, dict(thickness=2, plane=2))
         ray = t.vector("rayleigh", 2, default=(0.0, 0.0), lo=0.0)
         materials[mname] = MaterialSpec(
             name=mname,
@@ -434,6 +487,12 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
 
     block_types = {}
     for tname, t in root.named_tables("block_types").items():
+        if D == 3:
+            block_types[tname] = _parse_block_type_3d(t, tname, materials, base)
+            t.done()
+            continue
+        _check_geometry_dimension(t, D)
+        t.dimension_keys(D, dict(size=3, corners=3, divisions=3))
         geom = t.string("geometry", required=True, choices=("rectangle", "polygon", "file"))
         mat = t.string("material", required=True)
         if mat not in materials:
@@ -450,14 +509,7 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
         elif geom == "polygon":
             bt.vertices = t.points("vertices")
         else:
-            f = t.string("file", required=True)
-            full = f if os.path.isabs(f) else os.path.join(base, f)
-            if not os.path.isfile(full):
-                raise t.error("file", f"= {f!r}: mesh file not found (expected a .geo or .msh file, "
-                                      f"relative to the case file)")
-            if not full.endswith((".geo", ".msh")):
-                raise t.error("file", f"= {f!r}: expected a .geo or .msh file")
-            bt.file = full
+            bt.file = _mesh_file(t, base)
         t.done()
         block_types[tname] = bt
 
@@ -471,21 +523,27 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
         if bname in names:
             raise t.error("name", f"= {bname!r}: duplicate body name")
         names.add(bname)
-        b = BlockSpec(name=bname, type=ty, position=t.vector("position", 2, (0.0, 0.0), dim="length"),
-                      angle=math.radians(t.number("angle", 0.0)), group=t.string("group", "blocks"))
+        t.dimension_keys(D, dict(angle=2, rotation_axis=3, rotation_angle=3))
+        b = BlockSpec(name=bname, type=ty, position=t.vector("position", D, (0.0,) * D, dim="length"),
+                      angle=0.0 if D == 3 else math.radians(t.number("angle", 0.0)),
+                      group=t.string("group", "blocks"))
+        if D == 3:
+            b.R = _rotation(t)
         for c in t.tables("clamps"):
-            box = c.vector("box", 4, dim="length")
+            box = c.vector("box", 2 * D, dim="length")
             tag = c.string("tag")
+            names_box = "[xmin, xmax, ymin, ymax]" if D == 2 else "[xmin, xmax, ymin, ymax, zmin, zmax]"
             if (box is None) == (tag is None):
-                raise c.error("box", "give exactly one of box = [xmin, xmax, ymin, ymax] or tag")
-            if box is not None and (box[1] < box[0] or box[3] < box[2]):
-                raise c.error("box", f"= {list(box)}: expected [xmin, xmax, ymin, ymax] with xmin <= xmax, "
-                                     f"ymin <= ymax")
-            b.clamps.append(ClampSpec(box, tag, c.string("components", "xy", choices=("x", "y", "xy"))))
+                raise c.error("box", f"give exactly one of box = {names_box} or tag")
+            if box is not None and any(box[2 * k + 1] < box[2 * k] for k in range(D)):
+                raise c.error("box", f"= {list(box)}: expected {names_box} with xmin <= xmax, ymin <= ymax"
+                                     + ("" if D == 2 else ", zmin <= zmax"))
+            comps = ("x", "y", "xy") if D == 2 else ("x", "y", "z", "xy", "xz", "yz", "xyz")
+            b.clamps.append(ClampSpec(box, tag, c.string("components", comps[-1], choices=comps)))
             c.done()
         for c in t.tables("tractions"):
             b.tractions.append(TractionSpec(tag=c.string("tag", required=True),
-                                            value=c.vector("value", 2, dim="stress", required=True),
+                                            value=c.vector("value", D, dim="stress", required=True),
                                             history=c.history("history", None, default=1.0)))
             c.done()
         t.done()
@@ -497,9 +555,13 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
         if rname in names:
             raise t.error("name", f"= {rname!r}: duplicate body name")
         names.add(rname)
-        verts = t.points("vertices")
-        _check_simple_polygon(t, "vertices", verts)
-        r = _parse_rigid(t, U, rname, verts)
+        t.dimension_keys(D, dict(vertices=2, thickness=2, size=3, origin=3, corners=3))
+        if D == 2:
+            verts = t.points("vertices")
+            _check_simple_polygon(t, "vertices", verts)
+        else:
+            verts = _solid_corners(t)
+        r = _parse_rigid(t, U, rname, verts, D)
         r.group = t.string("group", "rigid")
         rigid.append(r)
         t.done()
@@ -511,6 +573,11 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
     if arch is not None:
         _parse_arch(arch, U, materials, block_types, blocks, rigid, names)
         arch.done()
+    for key, parse in (("wall3d", _parse_wall3d), ("dome", _parse_dome)):
+        tb = root.table(key)
+        if tb is not None:
+            parse(tb, U, materials, block_types, blocks, rigid, names)
+            tb.done()
     if not blocks and not rigid:
         raise root.error("blocks", "missing; expected at least one [[blocks]] or [[rigid_bodies]] entry")
 
@@ -537,15 +604,16 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
                 bt_ = dtab.table(body)
                 st.drivers[body] = {}
                 for dof in list(bt_.data):
-                    if dof not in ("x", "y", "rz"):
-                        raise bt_.error(dof, "unknown dof; expected x, y or rz")
+                    if dof not in dofs_of(D):
+                        raise _dof_error(bt_, dof, D)
                     if bt_.data[dof] == "free":
                         bt_.used.add(dof)
                         st.drivers[body][dof] = None
                         continue
                     d = bt_.table(dof)
                     st.drivers[body][dof] = (d.string("kind", required=True, choices=("velocity", "displacement")),
-                                             d.history("history", None if dof == "rz" else "length", required=True))
+                                             d.history("history", None if dof[0] == "r" else "length",
+                                                       required=True))
                     d.done()
                 bt_.done()
             dtab.done()
@@ -555,11 +623,11 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
                 bt_ = ftab.table(body)
                 st.forces[body] = {}
                 for dof in list(bt_.data):
-                    if dof not in ("x", "y", "rz"):
-                        raise bt_.error(dof, "unknown dof; expected x, y or rz")
+                    if dof not in dofs_of(D):
+                        raise _dof_error(bt_, dof, D)
                     if dof in st.drivers.get(body, {}) and st.drivers[body][dof] is not None:
                         raise bt_.error(dof, "this dof is driven in this stage; a driven dof cannot also carry a force")
-                    st.forces[body][dof] = bt_.history(dof, "force" if dof != "rz" else None)
+                    st.forces[body][dof] = bt_.history(dof, "force" if dof[0] != "r" else None)
                 bt_.done()
             ftab.done()
         st.tol = t.number("tol", None, lo=0, lo_open=True)
@@ -568,14 +636,14 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
         sd = t.table("stop_at_displacement")
         if sd is not None:
             body = sd.string("body", required=True)
-            dof = sd.string("dof", required=True, choices=("x", "y", "rz"))
-            st.stop_displacement = (body, dof, abs(sd.number("value", required=True, dim=None if dof == "rz"
+            dof = sd.string("dof", required=True, choices=dofs_of(D))
+            st.stop_displacement = (body, dof, abs(sd.number("value", required=True, dim=None if dof[0] == "r"
                                                              else "length")))
             sd.done()
         sp = t.table("stop_after_peak")
         if sp is not None:
             st.stop_after_peak = (sp.string("body", required=True), sp.string("dof", required=True,
-                                                                              choices=("x", "y", "rz")),
+                                                                              choices=dofs_of(D)),
                                   sp.number("drop", 0.2, lo=0, hi=1, lo_open=True, hi_open=True),
                                   sp.integer("min_steps", 20, lo=1))
             sp.done()
@@ -691,8 +759,8 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
         cv = out.table("curve")
         if cv is not None:
             output["curve"] = dict(body=cv.string("body", required=True),
-                                   force=cv.string("force", "x", choices=("x", "y", "rz")),
-                                   displacement=cv.string("displacement", "x", choices=("x", "y", "rz")))
+                                   force=cv.string("force", "x", choices=dofs_of(D)),
+                                   displacement=cv.string("displacement", "x", choices=dofs_of(D)))
             cv.done()
         output["crack_pattern"] = out.boolean("crack_pattern", True)
         out.done()
@@ -730,42 +798,57 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
         cb = output["curve"]["body"]
         if cb not in rigid_names:
             raise InputError(f"{source}: output.curve.body = {cb!r}: expected a rigid body among {sorted(rigid_names)}")
+    if D == 3:
+        _check_overlaps_3d(source, block_types, blocks, rigid)
+        if "curve" not in output:  # 3D: the force-displacement curve of the first dof a stage drives
+            for st in stages:
+                drv = [(b, d) for b, dofs in st.drivers.items() for d, spec in dofs.items() if spec is not None]
+                if drv:
+                    output["curve"] = dict(body=drv[0][0], force=drv[0][1], displacement=drv[0][1])
+                    break
     for itf in interfaces:
         if itf.reference == "as_built" and contact and contact.get("geometry") != "frozen":
             raise InputError(f"{source}: interfaces.{itf.name}.reference = 'as_built': expected contact.geometry = "
                              f"'frozen' (joints closed as built are a small-displacement model)")
     return Case(source=source, name=name, units=units, gravity=gravity, materials=materials,
                 block_types=block_types, blocks=blocks, rigid_bodies=rigid, stages=stages, output=output,
-                contact=contact, interfaces=interfaces, checks=checks)
+                contact=contact, interfaces=interfaces, checks=checks, dimension=D)
 
 
-def _parse_rigid(t: Table, U: dict, rname: str, vertices) -> RigidSpec:
-    """Mass, thickness, drivers and forces of a rigid body table."""
+def _parse_rigid(t: Table, U: dict, rname: str, vertices, D: int = 2) -> RigidSpec:
+    """Mass, thickness (2D), inertia, drivers and forces of a rigid body table (dofs of dimension D)."""
     rho = t.number("rho", lo=0, lo_open=True, dim="density")
     mass = t.number("mass", lo=0, lo_open=True, dim="mass")
-    inertia = t.number("inertia", lo=0, lo_open=True)
-    if inertia is not None:
-        inertia *= U["mass"] * U["length"] ** 2
+    if D == 2:
+        inertia = t.number("inertia", lo=0, lo_open=True)
+        if inertia is not None:
+            inertia *= U["mass"] * U["length"] ** 2
+    else:  # principal moments about axes through the centre of mass parallel to x, y, z
+        inertia = t.vector("inertia", 3)
+        if inertia is not None:
+            if min(inertia) <= 0:
+                raise t.error("inertia", f"= {list(inertia)}: expected 3 principal values > 0 [kg m^2]")
+            inertia = tuple(v * U["mass"] * U["length"] ** 2 for v in inertia)
     drivers, forces = {}, {}
     dt = t.table("drivers")
     if dt is not None:
         for dof in list(dt.data):
-            if dof not in ("x", "y", "rz"):
-                raise dt.error(dof, "unknown dof; expected x, y or rz")
+            if dof not in dofs_of(D):
+                raise _dof_error(dt, dof, D)
             d = dt.table(dof)
             kind = d.string("kind", required=True, choices=("velocity", "displacement"))
-            hist = d.history("history", None if dof == "rz" else "length", required=True)
+            hist = d.history("history", None if dof[0] == "r" else "length", required=True)
             drivers[dof] = (kind, hist)
             d.done()
         dt.done()
     ft = t.table("forces")
     if ft is not None:
         for dof in list(ft.data):
-            if dof not in ("x", "y", "rz"):
-                raise ft.error(dof, "unknown dof; expected x, y or rz")
+            if dof not in dofs_of(D):
+                raise _dof_error(ft, dof, D)
             if dof in drivers:
                 raise ft.error(dof, "this dof is driven; a driven dof cannot also carry a force")
-            forces[dof] = ft.history(dof, "force" if dof != "rz" else None)
+            forces[dof] = ft.history(dof, "force" if dof[0] != "r" else None)
         ft.done()
     if rho is not None and mass is not None:
         raise t.error("mass", "given together with rho: give rho [kg/m^3] (mass and inertia from the polygon) or "
@@ -773,11 +856,11 @@ def _parse_rigid(t: Table, U: dict, rname: str, vertices) -> RigidSpec:
     if rho is not None and inertia is not None:
         raise t.error("inertia", "given together with rho (the inertia then comes from the polygon): give it with "
                                  "mass instead")
-    if rho is None and mass is None and not (len(drivers) == 3):
-        raise t.error("rho", "missing; give rho [kg/m^3] or mass [kg] (only a body with all three dofs "
-                             "driven may omit both)")
+    if rho is None and mass is None and not (len(drivers) == len(dofs_of(D))):
+        raise t.error("rho", "missing; give rho [kg/m^3] or mass [kg] (only a body with all "
+                             f"{'three' if D == 2 else 'six'} dofs driven may omit both)")
     return RigidSpec(name=rname, vertices=vertices, rho=rho, mass=mass, inertia=inertia,
-                     thickness=t.number("thickness", 1.0, lo=0, lo_open=True, dim="length"),
+                     thickness=t.number("thickness", 1.0, lo=0, lo_open=True, dim="length") if D == 2 else 1.0,
                      drivers=drivers, forces=forces)
 
 
@@ -896,6 +979,8 @@ def quick(case: Case, factor: float = 2.0) -> Case:
     for bt in case.block_types.values():
         if bt.mesh_size is not None and bt.geometry != "file":
             bt.mesh_size *= factor
+        if bt.divisions is not None:  # 3D: fewer elements along each edge, n / factor rounded up
+            bt.divisions = tuple(max(1, math.ceil(n / factor)) for n in bt.divisions)
     for st in case.stages:
         st.h = min(st.h * factor, st.duration)
         st.output_every = max(1, int(round(st.output_every / factor)))
@@ -940,3 +1025,262 @@ def _parse_arch(a: Table, U: dict, materials, block_types, blocks, rigid, names)
         names.add(pname)
         rigid.append(RigidSpec(name=pname, vertices=[tuple(p) for p in P], rho=None, mass=None, inertia=None,
                                thickness=1.0, drivers=dict(FIXED), forces={}, group="piers"))
+
+
+# ----------------------------------------------------------------------------- dimension 3
+GEOMETRIES = {2: ("rectangle", "polygon", "file"), 3: ("box", "hexahedron", "file")}
+FIXED_3D = {k: ("velocity", 0.0) for k in DOFS_3D}
+
+
+def _check_geometry_dimension(t: Table, D: int):
+    g = t.data.get("geometry")
+    if isinstance(g, str) and g in GEOMETRIES[5 - D] and g not in GEOMETRIES[D]:
+        raise t.error("geometry", f"= {g!r}: a geometry of dimension {5 - D}; expected one of "
+                                  f"{list(GEOMETRIES[D])} in dimension {D}")
+
+
+def _mesh_file(t: Table, base: str) -> str:
+    f = t.string("file", required=True)
+    full = f if os.path.isabs(f) else os.path.join(base, f)
+    if not os.path.isfile(full):
+        raise t.error("file", f"= {f!r}: mesh file not found (expected a .geo or .msh file, "
+                              f"relative to the case file)")
+    if not full.endswith((".geo", ".msh")):
+        raise t.error("file", f"= {f!r}: expected a .geo or .msh file")
+    return full
+
+
+def _divisions(t: Table, key: str = "divisions"):
+    """[n0, n1, n2]: hexahedra along the edges 0-1, 0-3, 0-4 of a block (x, y, z of a box), integers 1..200."""
+    v = t.raw(key)
+    if v is None:
+        return None
+    if not (isinstance(v, list) and len(v) == 3 and all(isinstance(n, int) and not isinstance(n, bool)
+                                                          and 1 <= n <= 200 for n in v)):
+        raise t.error(key, f"= {v!r}: expected [n0, n1, n2], 3 integers from 1 to 200 (elements along x, y, z)")
+    return tuple(v)
+
+
+def _mesh_resolution(t: Table, geom: str):
+    """mesh_size [m] or divisions (exactly one for generated blocks; a .geo file takes an optional size cap)."""
+    size = t.number("mesh_size", None, lo=0, lo_open=True, dim="length")
+    div = _divisions(t)
+    if geom == "file":
+        if div is not None:
+            raise t.error("divisions", "not used with geometry = 'file' (the file sets its mesh); expected "
+                                       "mesh_size (an element size cap for .geo files) or nothing")
+    elif (size is None) == (div is None):
+        raise t.error("mesh_size", "give exactly one of mesh_size [m] (element size) or divisions = [n0, n1, n2]")
+    return size, div
+
+
+def _check_corners(t: Table, C):
+    """`corners` (or a box's) of table t: a proper hexahedron in the gmsh order (meshing.check_hex_corners)."""
+    from .meshing import check_hex_corners
+    try:
+        check_hex_corners(np.asarray(C, dtype=float), t.path)
+    except InputError as e:
+        raise InputError(f"{t.source}: {e}") from None
+
+
+def _parse_block_type_3d(t: Table, tname: str, materials: dict, base: str) -> BlockTypeSpec:
+    """[block_types.NAME] in dimension 3: box (size), hexahedron (8 corners) or a 3D .msh/.geo file."""
+    _check_geometry_dimension(t, 3)
+    t.dimension_keys(3, dict(lx=2, ly=2, vertices=2))
+    geom = t.string("geometry", required=True, choices=GEOMETRIES[3])
+    mat = t.string("material", required=True)
+    if mat not in materials:
+        raise t.error("material", f"= {mat!r}: expected one of the [materials] {sorted(materials)}")
+    size, div = _mesh_resolution(t, geom)
+    bt = BlockTypeSpec(name=tname, geometry=geom, material=mat, mesh_size=size, divisions=div,
+                       cell=t.string("cell", None if geom == "file" else "hexahedron",
+                                     choices=("hexahedron", "tetrahedron")),
+                       mass=t.string("mass", "lumped", choices=("lumped", "consistent")))
+    if geom == "box":
+        lx, ly, lz = t.vector("size", 3, dim="length", required=True)
+        if min(lx, ly, lz) <= 0:
+            raise t.error("size", f"= {t.data['size']!r}: expected [lx, ly, lz] > 0 [m]")
+        bt.lx, bt.ly, bt.lz = lx, ly, lz
+    elif geom == "hexahedron":
+        bt.corners = t.points("corners", n=3, min_count=8, exact=True)
+        _check_corners(t, bt.corners)
+    else:
+        bt.file = _mesh_file(t, base)
+    return bt
+
+
+def _rotation(t: Table) -> np.ndarray:
+    """3D block placement x = R X + position, R the rotation by rotation_angle [deg] about rotation_axis
+    (right-hand rule, through the block type's origin; default axis z)."""
+    axis = t.vector("rotation_axis", 3, (0.0, 0.0, 1.0))
+    angle = t.number("rotation_angle", 0.0)
+    if math.hypot(*axis) == 0.0:
+        raise t.error("rotation_axis", "= [0, 0, 0]: expected a non-zero vector")
+    return rotation_matrix(axis, math.radians(angle))
+
+
+def _solid_corners(t: Table) -> list:
+    """A 3D rigid body's 8 corners: a box (size [lx, ly, lz] from origin [x, y, z]) or corners (gmsh order)."""
+    from .meshing import box_corners
+    size = t.vector("size", 3, dim="length")
+    corners = t.points("corners", n=3, min_count=8, exact=True, required=False)
+    if (size is None) == (corners is None):
+        raise t.error("size", "give exactly one of size = [lx, ly, lz] (a box from origin) or corners = 8 [x, y, z] "
+                              "points")
+    if size is not None:
+        if min(size) <= 0:
+            raise t.error("size", f"= {t.data['size']!r}: expected [lx, ly, lz] > 0 [m]")
+        corners = box_corners(*size, t.vector("origin", 3, (0.0, 0.0, 0.0), dim="length"))
+    elif "origin" in t.data:
+        raise t.error("origin", "only with size (a box); corners are absolute positions")
+    _check_corners(t, corners)
+    return [tuple(float(x) for x in c) for c in corners]
+
+
+def type_corners(bt: BlockTypeSpec):
+    """(8, 3) corners of a 3D box/hexahedron block type in its own frame (None for a mesh file)."""
+    from .meshing import box_corners
+    if bt.geometry == "box":
+        return box_corners(bt.lx, bt.ly, bt.lz)
+    if bt.geometry == "hexahedron":
+        return np.asarray(bt.corners, dtype=float)
+    return None
+
+
+def _check_overlaps_3d(source: str, block_types: dict, blocks: list, rigid: list):
+    """Hexahedral blocks and rigid bodies must not overlap at the start (separating-axis test,
+    builders3d.overlapping_pairs; touching is fine). Blocks meshed from a file are not checked here."""
+    from .builders3d import overlapping_pairs
+    C, who = [], []
+    for b in blocks:
+        P = type_corners(block_types[b.type])
+        if P is not None:
+            C.append(P @ b.R.T + np.asarray(b.position))
+            who.append(b.name)
+    for r in rigid:
+        C.append(np.asarray(r.vertices, dtype=float))
+        who.append(r.name)
+    if len(C) < 2:
+        return
+    bad = overlapping_pairs(np.array(C))
+    if len(bad):
+        i, j = bad[0]
+        raise InputError(f"{source}: blocks: bodies {who[i]!r} and {who[j]!r} overlap at the start "
+                         f"({len(bad)} overlapping pair(s)); expected blocks that at most touch")
+
+
+def _resolution_3d(t: Table):
+    """mesh_size or divisions, cell, mass of the block types a 3D builder table makes."""
+    size, div = _mesh_resolution(t, "box")
+    return dict(mesh_size=size, divisions=div, cell=t.string("cell", "hexahedron", choices=("hexahedron",
+                                                                                           "tetrahedron")),
+                mass=t.string("mass", "lumped", choices=("lumped", "consistent")))
+
+
+def _material(t: Table, materials: dict) -> str:
+    mat = t.string("material", required=True)
+    if mat not in materials:
+        raise t.error("material", f"= {mat!r}: expected one of the [materials] {sorted(materials)}")
+    return mat
+
+
+def _add_layout_blocks(lay, prefix: str, mat: str, res: dict, block_types, blocks, names, group, t: Table):
+    """Block types (one per prototype, 'hexahedron' from its corners) and blocks of a builders3d.Layout3D."""
+    types = {}
+    for key, C in lay.prototypes.items():
+        tname = f"{prefix}_{len(types)}"
+        types[key] = tname
+        block_types[tname] = BlockTypeSpec(name=tname, geometry="hexahedron", material=mat,
+                                           corners=[tuple(float(x) for x in c) for c in C], **res)
+    for k, b in enumerate(lay.blocks):
+        bname = f"{prefix}_c{b.course}_{b.index}" + (f"_l{b.leaf}" if b.leaf else "")
+        if bname in names:
+            raise t.error("group", f"body name {bname!r} already used")
+        names.add(bname)
+        blocks.append(BlockSpec(name=bname, type=types[b.key], position=tuple(float(x) for x in b.position),
+                                angle=0.0, group=group, R=np.array(b.R)))
+
+
+def _parse_wall3d(w: Table, U: dict, materials, block_types, blocks, rigid, names):
+    """[wall3d]: running-bond wall of bricks (builders3d.running_bond_wall), its block types, optional rigid
+    foundation (fixed) and top beam (rigid body with drivers/forces) in the wall's frame."""
+    from . import builders3d
+    from .meshing import box_corners
+    mat = _material(w, materials)
+    L = w.number("brick_length", required=True, lo=0, lo_open=True, dim="length")
+    H = w.number("brick_height", required=True, lo=0, lo_open=True, dim="length")
+    W = w.number("brick_width", required=True, lo=0, lo_open=True, dim="length")
+    joint = w.number("joint", 0.0, lo=0, dim="length")
+    origin = w.vector("position", 3, (0.0, 0.0, 0.0), dim="length")
+    angle = math.radians(w.number("angle", 0.0))
+    leaves = w.integer("leaves", 1, lo=1, hi=2)
+    ops = w.raw("openings", [])
+    if not isinstance(ops, list) or not all(isinstance(o, list) and len(o) == 4 and all(
+            isinstance(v, NUMBER) and not isinstance(v, bool) and math.isfinite(v) for v in o) for o in ops):
+        raise w.error("openings", "expected a list of [x0, z0, x1, z1] rectangles [m] (wall frame)")
+    ops = [[float(v) * U["length"] for v in o] for o in ops]
+    res = _resolution_3d(w)
+    group = w.string("group", "bricks")
+    name = f"{w.source}: wall3d"
+    lay = builders3d.running_bond_wall(w.integer("courses", required=True, lo=1, hi=2000),
+                                       w.integer("bricks_per_course", required=True, lo=1, hi=2000), L, H, W, joint,
+                                       half_bricks=w.boolean("half_bricks", True), openings=ops, leaves=leaves,
+                                       stagger_leaves=w.boolean("stagger_leaves", False), origin=origin,
+                                       angle=angle, name=name)
+    lay.check_no_overlap(name)
+    _add_layout_blocks(lay, "brick", mat, res, block_types, blocks, names, group, w)
+    R = builders3d.rot_z(angle)
+    o = np.asarray(origin)
+    local = (lay.corners() - o) @ R  # wall frame
+    x0, x1 = local[..., 0].min(), local[..., 0].max()
+    y0, y1 = local[..., 1].min(), local[..., 1].max()
+    z0, z1 = local[..., 2].min(), local[..., 2].max()
+
+    def slab(over, zb, depth):
+        C = box_corners(x1 - x0 + 2 * over, y1 - y0 + 2 * over, depth, (x0 - over, y0 - over, zb))
+        return [tuple(float(v) for v in c) for c in C @ R.T + o]
+    f = w.table("foundation")
+    if f is not None:
+        depth = f.number("depth", 0.1, lo=0, lo_open=True, dim="length")
+        over = f.number("overhang", 0.0, lo=0, dim="length")
+        names.add("foundation")
+        rigid.append(RigidSpec(name="foundation", vertices=slab(over, z0 - joint - depth, depth), rho=None,
+                               mass=None, inertia=None, thickness=1.0, drivers=dict(FIXED_3D), forces={},
+                               group="foundation"))
+        f.done()
+    bt = w.table("beam")
+    if bt is not None:
+        depth = bt.number("depth", required=True, lo=0, lo_open=True, dim="length")
+        over = bt.number("overhang", 0.0, lo=0, dim="length")
+        r = _parse_rigid(bt, U, "beam", slab(over, z1 + joint, depth), 3)
+        r.group = "beam"
+        names.add("beam")
+        rigid.append(r)
+        bt.done()
+
+
+def _parse_dome(a: Table, U: dict, materials, block_types, blocks, rigid, names):
+    """[dome]: spherical dome of hexahedral voussoirs (builders3d.dome, thesis §7.2.1.c), one block type per
+    course (instances rotated about z), optional fixed rigid piers under the bed course (§7.2.2.a)."""
+    from . import builders3d
+    mat = _material(a, materials)
+    top = a.number("top_elevation", None, lo=0, hi=90, lo_open=True, hi_open=True)
+    res = _resolution_3d(a)
+    group = a.string("group", "dome")
+    pier_group = a.string("pier_group", "piers")
+    lay = builders3d.dome(span=a.number("span", 4.0, lo=0, lo_open=True, dim="length"),
+                          thickness=a.number("thickness", 0.48, lo=0, lo_open=True, dim="length"),
+                          n_courses=a.integer("courses", 12, lo=1, hi=1000),
+                          blocks_per_course=a.integer("blocks_per_course", 22, lo=3, hi=10000),
+                          joint=a.number("joint", 0.03, lo=0, dim="length"),
+                          top_elevation=None if top is None else math.radians(top),
+                          running_bond=a.boolean("running_bond", True),
+                          piers=a.integer("piers", 0, lo=0), pier_blocks=a.integer("pier_blocks", 3, lo=1),
+                          pier_height=a.number("pier_height", 0.5, lo=0, lo_open=True, dim="length"),
+                          name=f"{a.source}: dome")
+    _add_layout_blocks(lay, "voussoir", mat, res, block_types, blocks, names, group, a)
+    for p in lay.rigid:
+        names.add(p.name)
+        rigid.append(RigidSpec(name=p.name, vertices=[tuple(float(v) for v in c) for c in p.corners], rho=None,
+                               mass=None, inertia=None, thickness=1.0, drivers=dict(FIXED_3D), forces={},
+                               group=pier_group))

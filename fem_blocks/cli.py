@@ -19,12 +19,16 @@ DEFAULT_DEMO = "shear_wall"
 
 
 def list_demos() -> dict[str, str]:
-    """name -> case file path of the demos shipped in `demos/`."""
+    """name -> case file path of the demos shipped in `demos/`. A case file with the stem of a Python demo
+    (demos/dome.toml next to demos/dome.py) is listed with its extension (`dome.toml`)."""
     out = {}
     if os.path.isdir(DEMO_DIR):
-        for f in sorted(os.listdir(DEMO_DIR)):
-            if f.endswith(".toml") or (f.endswith(".py") and not f.startswith("_")):
-                out[os.path.splitext(f)[0]] = os.path.join(DEMO_DIR, f)
+        files = sorted(f for f in os.listdir(DEMO_DIR)
+                       if f.endswith(".toml") or (f.endswith(".py") and not f.startswith("_")))
+        scripts = {os.path.splitext(f)[0] for f in files if f.endswith(".py")}
+        for f in files:
+            stem = os.path.splitext(f)[0]
+            out[f if f.endswith(".toml") and stem in scripts else stem] = os.path.join(DEMO_DIR, f)
     return out
 
 
@@ -78,7 +82,7 @@ def _run(case_path: str, out: str, quiet: bool, quick: bool = False, resume: boo
         print(f"ParaView files: {os.path.join(os.path.abspath(out), pv)}")
     print(f"history: {os.path.join(os.path.abspath(out), 'history.csv')}; "
           f"summary: {os.path.join(os.path.abspath(out), 'summary.json')}")
-    figs = [summary[k] for k in ("force_displacement", "crack_pattern") if summary.get(k)]
+    figs = [summary[k] for k in ("force_displacement", "crack_pattern", "blocks_png") if summary.get(k)]
     if figs:
         print("figures: " + ", ".join(os.path.join(os.path.abspath(out), f) for f in figs))
     if "peak_horizontal_force_kN" in summary:

@@ -5,8 +5,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .bodies import BlockType, Clamp, DeformableBody, Driver, Material, RigidBody, Traction
-from .case import Case, BlockTypeSpec
+from .bodies import (BlockType, BlockType3D, Clamp, Clamp3D, DeformableBody, DeformableBody3D, Driver, Material,
+                     RigidBody, RigidBody3D, Traction)
+from .case import Case, BlockTypeSpec, dofs_of
 from .errors import InputError
 
 
@@ -18,6 +19,12 @@ class Model:
     gravity: np.ndarray
     groups: list = field(default_factory=list)
     contact: object = None  # contact.step.ContactStep or None
+    dimension: int = 2
+
+    @property
+    def dofs(self) -> tuple:
+        """Rigid-body dof names: x, y, rz (2D); x, y, z, rx, ry, rz (3D)."""
+        return dofs_of(self.dimension)
 
     def index(self, name: str) -> int:
         try:
@@ -26,9 +33,23 @@ class Model:
             raise InputError(f"body {name!r} not found; expected one of {self.names}") from None
 
 
-def mesh_block_type(spec: BlockTypeSpec):
-    """gmsh mesh of a block type (rectangle, polygon or user .geo/.msh file)."""
+def mesh_block_type(spec: BlockTypeSpec, dimension: int = 2):
+    """gmsh mesh of a block type: rectangle, polygon or user .geo/.msh file (2D); box, hexahedron (8 corners,
+    structured: mesh_size or divisions) or a 3D .geo/.msh file (3D)."""
     from . import meshing
+    if dimension == 3:
+        if spec.geometry == "box":
+            return meshing.mesh_box(spec.lx, spec.ly, spec.lz, size=spec.mesh_size, divisions=spec.divisions,
+                                    cell=spec.cell)
+        if spec.geometry == "hexahedron":
+            return meshing.mesh_hexahedron(np.asarray(spec.corners), size=spec.mesh_size, divisions=spec.divisions,
+                                           cell=spec.cell)
+        if spec.file.endswith(".geo"):
+            return meshing.load_geo3d(spec.file, size=spec.mesh_size, cell=spec.cell)
+        mesh = meshing.load_msh3d(spec.file)
+        if spec.cell is not None and mesh.cell_type != spec.cell:
+            raise InputError(f"cell = {spec.cell!r}: the file {spec.file} holds {mesh.cell_type} elements")
+        return mesh
     if spec.geometry == "rectangle":
         return meshing.mesh_rectangle(spec.lx, spec.ly, spec.mesh_size, cell=spec.cell)
     if spec.geometry == "polygon":
@@ -39,6 +60,11 @@ def mesh_block_type(spec: BlockTypeSpec):
 
 
 def build_model(case: Case) -> Model:
+    """Bodies of dimension case.dimension (2: BlockType/DeformableBody/RigidBody; 3: the *3D classes) and the
+    ContactStep of the interfaces (the same for both dimensions)."""
+    D = case.dimension
+    Type, Body, ClampCls = ((BlockType, DeformableBody, Clamp) if D == 2 else
+                            (BlockType3D, DeformableBody3D, Clamp3D))
     block_types = {}
     used_types = {b.type for b in case.blocks}
     for name, spec in case.block_types.items():
@@ -48,19 +74,19 @@ def build_model(case: Case) -> Model:
         mat = Material(ms.E, ms.nu, ms.rho, ms.thickness, ms.plane, ms.alpha, ms.beta,
                        name=f"materials.{ms.name}")
         try:
-            mesh = mesh_block_type(spec)
+            mesh = mesh_block_type(spec, D)
         except InputError as e:
             raise InputError(f"{case.source}: block_types.{name}: {e}") from None
-        block_types[name] = BlockType(mesh, mat, mass=spec.mass, name=f"block_types.{name}")
+        block_types[name] = Type(mesh, mat, mass=spec.mass, name=f"block_types.{name}")
     bodies, names, groups = [], [], []
     for i, b in enumerate(case.blocks):
         bt = block_types[b.type]
         label = f"{case.source}: blocks[{i}]"
         try:
-            body = DeformableBody(bt, b.position, b.angle,
-                                  clamps=[Clamp(c.box, c.tag, c.components) for c in b.clamps],
-                                  tractions=[Traction(t.tag, t.value, t.history) for t in b.tractions],
-                                  name=label)
+            body = Body(bt, b.position, b.angle if D == 2 else b.R,
+                        clamps=[ClampCls(c.box, c.tag, c.components) for c in b.clamps],
+                        tractions=[Traction(t.tag, t.value, t.history) for t in b.tractions],
+                        name=label)
         except InputError as e:
             raise InputError(str(e)) from None
         bodies.append(body)
@@ -69,8 +95,15 @@ def build_model(case: Case) -> Model:
     for i, r in enumerate(case.rigid_bodies):
         label = f"{case.source}: body {r.name!r}"
         drivers = {dof: Driver(kind, hist, name=f"{label}.drivers.{dof}") for dof, (kind, hist) in r.drivers.items()}
-        body = RigidBody(r.vertices, rho=r.rho, thickness=r.thickness, mass=r.mass, inertia=r.inertia,
-                         drivers=drivers, forces=r.forces, name=label)
+        if D == 2:
+            body = RigidBody(r.vertices, rho=r.rho, thickness=r.thickness, mass=r.mass, inertia=r.inertia,
+                             drivers=drivers, forces=r.forces, name=label)
+        else:
+            try:
+                body = RigidBody3D(np.asarray(r.vertices, dtype=float), rho=r.rho, mass=r.mass, inertia=r.inertia,
+                                   drivers=drivers, forces=r.forces, name=label)
+            except InputError as e:
+                raise InputError(str(e)) from None
         bodies.append(body)
         names.append(r.name)
         groups.append(r.group)
@@ -86,4 +119,4 @@ def build_model(case: Case) -> Model:
         for b in case.blocks:
             parent[index[b.name]] = b.parent
         contact = ContactStep(specs, groups, ContactOptions(**case.contact), body_names=names, body_parent=parent)
-    return Model(bodies, block_types, names, np.asarray(case.gravity, dtype=float), groups, contact)
+    return Model(bodies, block_types, names, np.asarray(case.gravity, dtype=float), groups, contact, D)

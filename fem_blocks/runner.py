@@ -19,11 +19,11 @@ from .dynamics import Simulation
 from .model import Model, build_model
 from .output.history import HistoryWriter
 from .output.checkpoint import write_checkpoint
-from .output.contacts import ContactsWriter
-from .output.paraview import BodiesWriter
+from .output.contacts import ContactsWriter, ContactsWriter3D
+from .output.paraview import BodiesWriter, BodiesWriter3D
 from .output.summary import write_summary
 
-DOFS = ("x", "y", "rz")
+DOFS = ("x", "y", "rz")  # 2D; model.dofs gives the dofs of the model's dimension (3D: x, y, z, rx, ry, rz)
 
 
 class Progress:
@@ -60,8 +60,8 @@ def history_columns(model: Model) -> list[str]:
     for i, b in enumerate(model.bodies):
         if b.kind == 1:
             name = model.names[i]
-            cols += [f"{name}.u{d}" for d in DOFS]
-            cols += [f"{name}.R{d}" for d in DOFS]  # 0 on free dofs; stages may drive or free dofs
+            cols += [f"{name}.u{d}" for d in model.dofs]
+            cols += [f"{name}.R{d}" for d in model.dofs]  # 0 on free dofs; stages may drive or free dofs
     if model.contact is not None:
         cols += ["contacts", "closed", "slip", "sweeps", "change", "residual", "converged"]
     return cols
@@ -75,9 +75,9 @@ def history_row(model: Model, info, stage_index: int, sim=None, h=None) -> dict:
     for i, b in enumerate(model.bodies):
         if b.kind == 1:
             name = model.names[i]
-            for k, d in enumerate(DOFS):
+            for k, d in enumerate(model.dofs):
                 row[f"{name}.u{d}"] = b.q[k]
-            for k, d in enumerate(DOFS):
+            for k, d in enumerate(model.dofs):
                 row[f"{name}.R{d}"] = b.reaction[k]
     if model.contact is not None:
         c = info.contact or {}
@@ -138,7 +138,7 @@ def _enter_stage(model: Model, sim: Simulation, case: Case, si: int):
             b.set_force(dof, force_hist)
             changed = True
     if changed and model.contact is not None:
-        model.contact.W_dirty = True  # rigid W (driven dofs) changed
+        model.contact.mark_W_dirty()  # rigid W (driven dofs) changed
     sim.set_step(st.h, st.theta)
     sim.velocity_reset = st.velocity_reset
     if model.contact is not None:
@@ -309,10 +309,15 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
             raise InputError(f"{out_dir}: checkpoint does not match this case's model ({e})") from None
     pdir = os.path.join(out_dir, "paraview")
     t_resume = float(ck["sim.time"]) if ck is not None else None
-    pv = BodiesWriter(sim, pdir, stress=case.output["stress"], append=resume, keep_until_time=t_resume) \
+    Bodies = BodiesWriter if case.dimension == 2 else BodiesWriter3D
+    pv = Bodies(sim, pdir, stress=case.output["stress"], append=resume, keep_until_time=t_resume) \
         if case.output["paraview"] else None
-    pc = ContactsWriter(model.contact, pdir, append=resume, keep_until_time=t_resume) \
-        if case.output["paraview"] and model.contact is not None else None
+    if case.dimension == 2:
+        pc = ContactsWriter(model.contact, pdir, append=resume, keep_until_time=t_resume) \
+            if case.output["paraview"] and model.contact is not None else None
+    else:
+        pc = ContactsWriter3D(pdir, append=resume, keep_until_time=t_resume, contact=model.contact) \
+            if case.output["paraview"] and model.contact is not None else None
     ckpt_every = case.output.get("checkpoint_every", 0)
     cv = case.output.get("curve")
     curve_body = model.bodies[model.index(cv["body"])] if cv else None
@@ -366,7 +371,7 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
                 stop_body = {}
                 for key, ref in (("disp", st.stop_displacement), ("peak", st.stop_after_peak)):
                     if ref is not None:
-                        stop_body[key] = (model.bodies[model.index(ref[0])], DOFS.index(ref[1])) + tuple(ref[2:])
+                        stop_body[key] = (model.bodies[model.index(ref[0])], model.dofs.index(ref[1])) + tuple(ref[2:])
                 n_steps = max(1, int(round(st.duration / st.h)))
                 t_stage = _time.perf_counter()
                 unconv0 = cstats["unconverged"]
@@ -427,7 +432,7 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
                     if level:
                         extra += f" (refined x{2 ** level})"
                     if curve_body is not None:
-                        extra += f" F{cv['force']} = {curve_body.reaction[DOFS.index(cv['force'])] / 1e3:.4g} kN"
+                        extra += f" F{cv['force']} = {curve_body.reaction[model.dofs.index(cv['force'])] / 1e3:.4g} kN"
                     bar.update(f"[{si + 1}/{len(case.stages)} {st.name}] step {k}/{n_steps} t = {sim.time:.6g} s "
                                f"E = {info.total_energy:.6g} J vmax = {info.max_velocity:.3g} m/s{extra}",
                                force=last)
@@ -513,16 +518,17 @@ def _dof_control(case, body: str, dof: str, stage: int):
 
 
 def _vertical_force(case, hist, body: str, k: int):
-    """Vertical force on `body` at history row k [kN], positive upwards: the reaction `body.Ry` when its vertical
-    dof is driven (e.g. blocked), the applied force history at that time when the dof is free (force control;
-    its reaction column is then 0)."""
-    if f"{body}.Ry" not in hist:
+    """Vertical force on `body` at history row k [kN], positive upwards: the reaction `body.Ry` (3D: `Rz`) when its
+    vertical dof is driven (e.g. blocked), the applied force history at that time when the dof is free (force
+    control; its reaction column is then 0)."""
+    up = "y" if case.dimension == 2 else "z"
+    if f"{body}.R{up}" not in hist:
         return None
-    kind, force = _dof_control(case, body, "y", int(hist["stage"][k]))
+    kind, force = _dof_control(case, body, up, int(hist["stage"][k]))
     if kind == "driven":
-        return float(hist[f"{body}.Ry"][k] / 1e3)
+        return float(hist[f"{body}.R{up}"][k] / 1e3)
     from .bodies import as_history
-    return 0.0 if force is None else float(as_history(force, f"{body}.forces.y")(float(hist["time"][k])) / 1e3)
+    return 0.0 if force is None else float(as_history(force, f"{body}.forces.{up}")(float(hist["time"][k])) / 1e3)
 
 
 def _figures(case, sim, model, out_dir) -> dict:
@@ -530,7 +536,11 @@ def _figures(case, sim, model, out_dir) -> dict:
     from .output.figures import write_crack_pattern, write_curve
     from .output.history import read_history
     out = {}
-    if case.output.get("crack_pattern", True) and any(b.kind == 0 for b in model.bodies):
+    if case.dimension == 3:  # deformed blocks, off-screen (pyvista when installed, else matplotlib)
+        from .output.figures import write_blocks_3d
+        write_blocks_3d(os.path.join(out_dir, "blocks.png"), sim, title=case.name, backend="auto")
+        out["blocks_png"] = "blocks.png"
+    elif case.output.get("crack_pattern", True) and any(b.kind == 0 for b in model.bodies):
         write_crack_pattern(os.path.join(out_dir, "crack_pattern.png"), sim, model.contact, title=case.name)
         out["crack_pattern"] = "crack_pattern.png"
     cv = case.output.get("curve")

@@ -140,8 +140,10 @@ class ContactScene:
         return c
 
     # ------------------------------------------------------------------ W numbering
-    def W_blocks(self):
-        """(W_flat, W_offset, W_size): dense W per body, row-major; bodies sharing a step operator share it."""
+    def W_blocks(self, rigid_W=None):
+        """(W_flat, W_offset, W_size): dense W per body, row-major; bodies sharing a step operator share it.
+        `rigid_W` (nr, d, d): the W of the rigid bodies to use instead of their current `W` (a restored run: in 3D
+        W = inverse of the free block of diag(m) ⊕ Rot I0 Rotᵀ depends on the orientation when it was built)."""
         parts, off = [], 0
         W_offset = np.zeros(self.nb, dtype=np.int64)
         for gr, uidx, xidx, R, C in self.groups:
@@ -149,8 +151,8 @@ class ContactScene:
             parts.append(Wbb.ravel())
             W_offset[gr.members] = off
             off += Wbb.size
-        for i in self.rigid:
-            Wr = self.rigid_W[i] = self.sim.bodies[i].W
+        for k, i in enumerate(self.rigid):
+            Wr = self.rigid_W[i] = self.sim.bodies[i].W if rigid_W is None else np.array(rigid_W[k])
             parts.append(Wr.ravel())
             W_offset[i] = off
             off += Wr.size

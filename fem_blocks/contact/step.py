@@ -145,6 +145,7 @@ class ContactStep:
         self.cs = None
         self.P = None  # impulses of the last step (nc, 2)
         self.W_dirty = True
+        self._rigid_W_restored = None  # 3D resume: rigid W of the checkpoint, used at the next Delassus build
         self.n_unconverged = 0
         self.steps = 0
         self.last = {}
@@ -153,9 +154,14 @@ class ContactStep:
     # ------------------------------------------------------------------ set-up
     def on_step_change(self, sim):
         """New (h, theta): the simulation rebuilt its groups (new state arrays and step operators)."""
-        self.W_dirty = True
+        self.mark_W_dirty()
         if self.scene is not None:
             self.scene._group_index()
+
+    def mark_W_dirty(self):
+        """The Delassus operator must be rebuilt (new h, drivers changed): rigid W from the current orientation."""
+        self.W_dirty = True
+        self._rigid_W_restored = None
 
     def _table(self):
         gid = {g: i for i, g in enumerate(self.group_names)}
@@ -240,11 +246,12 @@ class ContactStep:
         if redetect or (updated and self.dim == 3):
             centers = s.centers(reference=redetect and first and not updated)
             self.G = self._kin.build_G(self.cs, s.kind, s.rot, centers, s.bnode_index_flat, s.bnode_offset)
-            self.W_dirty = True
+            self.mark_W_dirty()
         if self.W_dirty:
             from time import perf_counter
             c = perf_counter()
-            W_flat, W_offset, W_size = s.W_blocks()
+            W_flat, W_offset, W_size = s.W_blocks(self._rigid_W_restored)
+            self._rigid_W_restored = None
             self.Wdel = self._delassus(W_flat, W_offset, W_size)
             self.W_dirty = False
             self.timers["delassus"] += perf_counter() - c
@@ -312,6 +319,11 @@ class ContactStep:
         for k in self._OUT:
             if getattr(self, k, None) is not None:
                 d[f"contact.out.{k}"] = getattr(self, k)
+        if self.dim == 3 and self.scene is not None and len(self.scene.rigid) and self.scene.rigid_W:
+            # 3D: the rigid W of the last Delassus assembly depends on the orientation then (frozen geometry keeps
+            # it until the next rebuild), so it is part of the state
+            d["contact.rigid_W"] = np.array([self.scene.rigid_W[i] for i in self.scene.rigid])
+            d["contact.W_dirty"] = np.bool_(self.W_dirty)
         return d
 
     def restore_state(self, sim, d: dict) -> None:
@@ -331,7 +343,9 @@ class ContactStep:
         for k in self._OUT:
             if f"contact.out.{k}" in d:
                 setattr(self, k, np.array(d[f"contact.out.{k}"]))
-        self.W_dirty = True
+        self.W_dirty = True  # rebuilt at the next step (new scene); 3D: with the rigid W in use at the export
+        self._rigid_W_restored = (np.array(d["contact.rigid_W"]) if "contact.rigid_W" in d
+                                  and not bool(d["contact.W_dirty"]) else None)
 
     # ------------------------------------------------------------------ the step
     def solve(self, sim, t0, t1):

@@ -63,10 +63,14 @@ class ContactsWriter3D(SeriesWriter):
     Point data: reaction = r_N n + r_t t + r_s s (force of the antagonist on the candidate, global frame, N),
     r_local (r_N, r_t, r_s), r_N, r_T = |(r_t, r_s)|, normal n, t, s, gap (joint-corrected gap, default
     cs.gap - cs.g0, m), status (0 open, 1 stick, 2 slip; -1 when not given), interface, area (m²), and with a
-    law state the fields of `law_state_fields`. Points: the candidate points cs.point."""
+    law state the fields of `law_state_fields`. Points: the candidate points cs.point.
+
+    With `contact` (a 3D contact.step.ContactStep), `write(time)` takes everything from it (as the 2D
+    ContactsWriter: its contact set, impulses/reactions r, law codes, states, status and end-of-step gaps)."""
 
     def __init__(self, directory: str, append: bool = False, basename: str = "contacts",
-                 keep_until_time: float | None = None):
+                 keep_until_time: float | None = None, contact=None):
+        self.contact = contact
         super().__init__(directory, basename, append, keep_until_time)
 
     @staticmethod
@@ -83,8 +87,19 @@ class ContactsWriter3D(SeriesWriter):
             data.update(law_state_fields(np.zeros(nc, np.int64) if law is None else law, np.asarray(state)))
         return np.asarray(cs.point, dtype=float).reshape(nc, 3), data
 
-    def write(self, time: float, cs, r, law=None, state=None, status=None, gap=None) -> str:
+    def write(self, time: float, cs=None, r=None, law=None, state=None, status=None, gap=None) -> str:
         """One frame: contact set `cs`, local reactions r (nc, 3) = (r_N, r_t, r_s) [N], optional law codes
-        and states (nc, laws.NSTATE), status (nc,), gap (nc,)."""
+        and states (nc, laws.NSTATE), status (nc,), gap (nc,); without cs, the current state of `contact`."""
+        if cs is None:
+            c = self.contact
+            cs = getattr(c, "cs", None)
+            r = getattr(c, "r", None)
+            if cs is None or r is None or len(cs.gap) == 0 or len(r) != len(cs.gap):
+                return self.write_frame(time, np.zeros((0, 3)), [("vertex", np.arange(0))], point_data={})
+            gt = getattr(c, "gt_end", None)
+            st = getattr(c, "state", None)
+            law, state = c.law, (st if st is not None and len(st) == len(cs.gap) else None)
+            status = getattr(c, "status", None)
+            gap = np.asarray(gt, dtype=float) if gt is not None and len(gt) == len(cs.gap) else None
         x, data = self.arrays(cs, r, law, state, status, gap)
         return self.write_frame(time, x, [("vertex", np.arange(len(x)))], point_data=data)
