@@ -39,6 +39,13 @@ restart (ε and the merit memory reset). From r = 0 the non-monotone iteration c
 hundreds of iterations (KaplasTower, 570 contacts: residual between 1e-3 and 5e-2 for 400 iterations); with the
 watch it reaches 1e-8 in 150. The 2D path keeps its rules (memory = 1, no watch, results unchanged).
 
+Interface laws (2D, `solve_cohesive_newton`): the Alart–Curnier function of the transformed problem
+P̃ = P + h A r_adh(u), v' = v + cmp P̃_N e_N (u = u_eff + hθ v; cmp = 1/(h²θ k A) for compliant joints, applied in
+tension too so that F is continuous where u_N changes sign: at every solution P̃_N = 0 in tension, the same
+solutions as the branch-wise natural map), J = D' + E' W by the chain rule. The mixed-mode damage is evaluated
+inside the iteration, D(u) = max(D_committed, D(λ(u))), with its derivative in J (consistent tangent, no outer
+staggered loop); Frémond's β is staggered (docs/laws.md, "Integration in the global Newton").
+
 Choosing the solver: `solve_newton` (20 NLGS sweeps, then Newton) where W couples contacts strongly (stacks,
 packings, stiff walls: Gauss–Seidel stalls or cycles there); `nlgs.solve(..., criterion="residual",
 fallback="newton")` keeps Gauss–Seidel where it converges and hands over to this Newton when a window of 200 sweeps
@@ -142,9 +149,10 @@ def alart_curnier_3d(r, u, mu, rn, rt, jacobian=False):
 
 
 @njit(cache=True)
-def _cohesive_terms(law, par, st, x, ueff, v, area, h, theta, S, c, mue, cmp, capv, inside, T, continuous):
+def _cohesive_terms(law, par, st, x, ueff, v, area, h, theta, S, c, mue, cmp, capv, inside, T):
     """Per contact at fixed internal variables x: P̃ = P + S v + c (adhesive impulse h A r_adh(u), u = u_eff + hθ v),
-    friction coefficient, and compliance cmp of the compliant laws in compression (v'_N = v_N + cmp P̃_N).
+    friction coefficient, and compliance cmp of the compliant laws (v'_N = v_N + cmp P̃_N; in tension too, where
+    P̃_N = 0 at the solutions, so that v' does not jump when u_N changes sign).
     inside: the mixed-mode damage is a function of the current jump, x_α = D(u) = max(D_committed, D(λ(u))) (set
     here), and T_α = -h A hθ (k_n u_N⁺, k_s u_T)ᵀ ⊗ ∇_u D (2×2, 0 elsewhere) completes the derivative
     dP̃/dv = diag(S) + T (consistent tangent; S v + c stays the secant P_adh at the current D)."""
@@ -172,7 +180,7 @@ def _cohesive_terms(law, par, st, x, ueff, v, area, h, theta, S, c, mue, cmp, ca
         mue[a] = m
         capv[a] = h * par[a, P_FC] * area[a] if par[a, P_FC] > 0.0 else np.inf
         cmp[a] = 0.0
-        if law[a] != 0 and (continuous or not tension):
+        if law[a] != 0:
             kc = compression_stiffness(law[a], par[a]) * area[a]
             if kc > 0.0:
                 cmp[a] = 1.0 / (h * h * theta * kc)
@@ -205,7 +213,7 @@ def _newton(W: BlockCSR, q, mu, r, tol, max_iter, gs, max_sweeps_total, coh=None
         if coh is None:
             return r_, u_
         law, par, st, x, ueff, area, h, th, ins = coh
-        _cohesive_terms(law, par, st, x, ueff, u_, area, h, th, S, c, mue, cmp, capv, ins, T, True)
+        _cohesive_terms(law, par, st, x, ueff, u_, area, h, th, S, c, mue, cmp, capv, ins, T)
         Pt = r_.reshape(-1, 2) + S * u_.reshape(-1, 2) + c
         vp = u_.reshape(-1, 2).copy()
         vp[:, 0] += cmp * Pt[:, 0]
@@ -379,7 +387,7 @@ def solve_cohesive_newton(W: BlockCSR, q, mu, law, par, st, ueff, area, h: float
         nlgs.matvec_bcsr(W.indptr, W.indices, W.blocks, r_, u_)
         u_ += q
         S_, c_, m_, cmp_, cap_, T_ = scratch
-        _cohesive_terms(law, par, st, x, ueff, u_, area, float(h), float(theta), S_, c_, m_, cmp_, cap_, True, T_, True)
+        _cohesive_terms(law, par, st, x, ueff, u_, area, float(h), float(theta), S_, c_, m_, cmp_, cap_, True, T_)
 
     def gs(r_, k):
         if inside:
@@ -406,7 +414,7 @@ def solve_cohesive_newton(W: BlockCSR, q, mu, law, par, st, ueff, area, h: float
         if n_it >= budget or n_gs >= max_sweeps_total:
             break
         r, u, i1, g1, f1, change, res = _newton(W, q, mu, r, tol, min(max_iter, budget - n_it), gs,
-                                                max_sweeps_total - n_gs, coh)
+                                                max_sweeps_total - n_gs, coh, stall_window=10 if inside else 0)
         n_it, n_gs, n_fb = n_it + i1, n_gs + g1, n_fb + f1
         x_old = x.copy()
         dx = nlgs._update_internal(law, par, st, ueff, u, float(h), float(theta), x)  # x <- g(x_old)
