@@ -362,8 +362,11 @@ def solve_cohesive_newton(W: BlockCSR, q, mu, law, par, st, ueff, area, h: float
     function, with the consistent tangent dP̃/dv = diag(S) + T (T: the damage term, laws.mixed_damage_gradient).
     Newton then solves the coupled problem at once; the residual is the natural map at x = D(u). Other laws
     (Frémond β) and damage_inside = False: staggered — Newton at fixed x, then x updated from the converged jumps
-    (Aitken-relaxed), until x stops changing. A Newton pass that stops above the tolerance with the internal
-    variables consistent is restarted from its last iterate while the budget lasts. The whole step is bounded by
+    (Aitken-relaxed), until x stops changing. The coupled pass restarts (20 Gauss–Seidel sweeps, regularisation
+    reset) when 10 iterations have not halved its residual; if it ends above the tolerance (`max_iter`), the
+    staggered iteration takes over from the committed damage and the Gauss–Seidel start (message says so): it
+    selects the least damaged solution where a large step makes the coupled iteration jump between branches of
+    the softening law. The whole step is bounded by
     `max_total_iter` Newton iterations (default 10 x max_iter) and `max_sweeps_total` fallback sweeps over all
     passes; beyond, it reports non-convergence. Returns (NLGSResult, trial internal variables)."""
     q, mu, r = _prepare(W, q, mu, r0, tol)
@@ -377,9 +380,9 @@ def solve_cohesive_newton(W: BlockCSR, q, mu, law, par, st, ueff, area, h: float
         return NLGSResult(r, q.copy(), 0, True, 0.0, 0.0, 0.0, "no contact"), x
     from ..laws import FREMOND
     inside = bool(damage_inside) and bool(np.any(law == MIXED))
-    coh = (law, par, st, x, ueff, area, float(h), float(theta), inside)
     n = W.n
     scratch = (np.zeros((n, 2)), np.zeros((n, 2)), np.zeros(n), np.zeros(n), np.zeros(n), np.zeros((n, 2, 2)))
+    mode = {"inside": False}  # damage inside for the Gauss-Seidel fallbacks of the current pass
 
     def refresh(r_):
         """x_α = D(u(r_)) for the mixed-mode contacts (damage inside)."""
@@ -390,21 +393,22 @@ def solve_cohesive_newton(W: BlockCSR, q, mu, law, par, st, ueff, area, h: float
         _cohesive_terms(law, par, st, x, ueff, u_, area, float(h), float(theta), S_, c_, m_, cmp_, cap_, True, T_)
 
     def gs(r_, k):
-        if inside:
+        if mode["inside"]:
             refresh(r_)
         res, _ = nlgs.solve_cohesive(W, q, mu, law, par, st, ueff, area, h, theta, r0=r_, tol=tol, max_sweeps=k,
                                      max_outer=1, criterion="residual", check_every=k, x0=x)
         return res.r.copy(), res.sweeps
 
     n_it = n_gs = n_fb = 0
-    if gs_sweeps:
+    if gs_sweeps:  # at the committed internal variables
         r, n_gs = gs(r, gs_sweeps)
+    r_start = r.copy()
+    fell_back = False
     converged_x = False
     # the internal-variable fixed point x <- g(x) (g: Newton at fixed x, then the law update) converges linearly
     # on softening laws (ratio ~0.6 on the shear wall: ~30 outer solves); Aitken's dynamic relaxation
-    # (Irons–Tuck) on the staggered continuous variables (Frémond β; mixed-mode D without damage_inside), kept in
-    # their admissible range (β in [0, β_committed], D in [D_committed, 1]), cuts that to a few.
-    relax = (law == FREMOND) | ((law == MIXED) & (not inside))
+    # (Irons–Tuck) on the staggered continuous variables (Frémond β; mixed-mode D unless inside), kept in their
+    # admissible range (β in [0, β_committed], D in [D_committed, 1]), cuts that to a few.
     lo = np.where(law == FREMOND, 0.0, st[:, S_BETA])
     hi = np.where(law == FREMOND, st[:, S_BETA], 1.0)
     omega, res_prev = 1.0, None
@@ -413,16 +417,25 @@ def solve_cohesive_newton(W: BlockCSR, q, mu, law, par, st, ueff, area, h: float
     for _ in range(max_outer):  # `budget` Newton iterations and max_sweeps_total sweeps bound the whole step
         if n_it >= budget or n_gs >= max_sweeps_total:
             break
+        mode["inside"] = inside
+        relax = (law == FREMOND) | ((law == MIXED) & (not inside))
+        coh = (law, par, st, x, ueff, area, float(h), float(theta), inside)
         r, u, i1, g1, f1, change, res = _newton(W, q, mu, r, tol, min(max_iter, budget - n_it), gs,
                                                 max_sweeps_total - n_gs, coh, stall_window=10 if inside else 0)
         n_it, n_gs, n_fb = n_it + i1, n_gs + g1, n_fb + f1
+        if inside and res > tol:
+            # the coupled iteration did not converge (e.g. a load step large enough to jump onto the softening
+            # branch): the staggered iteration from the committed state instead, which selects the least
+            # damaged solution
+            inside, fell_back, res_prev, omega = False, True, None, 1.0
+            x[:] = st[:, S_BETA]
+            r = r_start.copy()
+            continue
         x_old = x.copy()
         dx = nlgs._update_internal(law, par, st, ueff, u, float(h), float(theta), x)  # x <- g(x_old)
         converged_x = dx <= 1e-12
         if converged_x:
-            if res <= tol or not inside or i1 == 0:
-                break
-            continue  # damage inside, consistent but above the tolerance: restart Newton from here
+            break
         res_k = np.where(relax, x - x_old, 0.0)
         if res_prev is not None:
             d = res_k - res_prev
@@ -437,6 +450,8 @@ def solve_cohesive_newton(W: BlockCSR, q, mu, law, par, st, ueff, area, h: float
     if not converged_x:
         out.converged = False
         out.message += "; internal variables still changing"
+    if fell_back:
+        out.message += "; coupled damage iteration did not converge, staggered instead"
     return out, x
 
 
