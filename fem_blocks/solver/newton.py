@@ -189,8 +189,9 @@ def _cohesive_terms(law, par, st, x, ueff, v, area, h, theta, S, c, mue, cmp, ca
 def _newton(W: BlockCSR, q, mu, r, tol, max_iter, gs, max_sweeps_total, coh=None, memory=1, stall_window=0):
     """Core iteration (2D or 3D by W.dim). coh = (law, par, st, x, ueff, area, h, theta, inside) for interface laws
     (2D only), else None: x fixed, except with inside = True, where the mixed-mode damage follows the jump
-    (x_α = D(u), consistent tangent, see _cohesive_terms). `gs(r, k)` runs k Gauss–Seidel sweeps from r -> (r, sweeps). `memory`: the line
-    search accepts t when ½‖F(r + tΔr)‖² <= max(last `memory` merits) - 2e-4 t ½‖F(r)‖² (1: monotone Armijo).
+    (x_α = D(u), consistent tangent, see _cohesive_terms). `gs(r, k)` runs k Gauss–Seidel sweeps from r ->
+    (r, sweeps). `memory`: the line search accepts t when ½‖F(r + tΔr)‖² <= max(last `memory` merits)
+    - 2e-4 t ½‖F(r)‖² (1: monotone Armijo).
     `stall_window` > 0: when that many iterations have not halved the residual, 20 Gauss–Seidel sweeps and a
     restart (ε and the merit memory reset), counted as a fallback.
     Returns (r, u, iterations, sweeps, fallbacks, change, residual)."""
@@ -366,9 +367,9 @@ def solve_cohesive_newton(W: BlockCSR, q, mu, law, par, st, ueff, area, h: float
     reset) when 10 iterations have not halved its residual; if it ends above the tolerance (`max_iter`), the
     staggered iteration takes over from the committed damage and the Gauss–Seidel start (message says so): it
     selects the least damaged solution where a large step makes the coupled iteration jump between branches of
-    the softening law. The whole step is bounded by
-    `max_total_iter` Newton iterations (default 10 x max_iter) and `max_sweeps_total` fallback sweeps over all
-    passes; beyond, it reports non-convergence. Returns (NLGSResult, trial internal variables)."""
+    the softening law. The whole step is bounded by `max_total_iter` Newton iterations (default 10 x max_iter) and
+    `max_sweeps_total` fallback sweeps over all passes; beyond, it reports non-convergence.
+    Returns (NLGSResult, trial internal variables)."""
     q, mu, r = _prepare(W, q, mu, r0, tol)
     law = np.ascontiguousarray(law, dtype=np.int64)
     par = np.ascontiguousarray(par, dtype=np.float64)
