@@ -205,6 +205,55 @@ def _mixed_damage(par, D0, uN, uT):
 
 
 @njit(cache=True)
+def mixed_damage_gradient(par, D0, uN, uT):
+    """Damage of the mixed-mode law implied by the jump (uN, uT), D = max(D0, D(λ, m)) as in `internal_update`,
+    and its derivative (∂D/∂u_N, ∂D/∂u_T) on the active piece (0 where D = D0, λ <= 1 or D = 1), for the
+    consistent tangent of the global Newton (solver/newton.py). With a = ⟨u_N⟩₊/δ_I, b = u_T/δ_II, λ² = a² + b²,
+    m = b²/λ²: ∂λ/∂a = a/λ, ∂λ/∂b = b/λ, ∂m/∂a = -2ab²/λ⁴, ∂m/∂b = 2ba²/λ⁴; linear softening
+    D = λ_f(1 - 1/λ)/(λ_f - 1): ∂D/∂λ = λ_f/((λ_f - 1)λ²), ∂D/∂λ_f = -(1 - 1/λ)/(λ_f - 1)²; exponential
+    D = 1 - e^{-(λ-1)/λ_e}/λ: ∂D/∂λ = e^{-(λ-1)/λ_e}(1/(λ_e λ) + 1/λ²), ∂D/∂λ_e = -e^{-(λ-1)/λ_e}(λ-1)/(λ λ_e²);
+    λ_f (λ_e) = mode I value + m (mode II - mode I). Returns (D, dD/du_N, dD/du_T)."""
+    kn, ks = par[P_CN], par[P_CT]
+    dI = par[P_FT] / kn
+    dII = par[P_C] / ks
+    un = max(uN, 0.0)
+    a = un / dI
+    b = uT / dII
+    lam2 = (un / dI) ** 2 + (uT / dII) ** 2  # the arithmetic of _mixed_damage (same D to the last bit)
+    if lam2 <= 1.0:
+        return D0, 0.0, 0.0
+    lam = np.sqrt(lam2)
+    m = (uT / dII) ** 2 / lam2
+    dm_da = -2.0 * a * b * b / (lam2 * lam2)
+    dm_db = 2.0 * b * a * a / (lam2 * lam2)
+    if par[P_SOFT] == 0.0:
+        lfI = 2.0 * par[P_GI] * kn / par[P_FT] ** 2
+        lfII = 2.0 * par[P_GII] * ks / par[P_C] ** 2
+        lf = (1.0 - m) * lfI + m * lfII
+        if lam >= lf:
+            D, gl, gm = 1.0, 0.0, 0.0
+        else:
+            D = lf * (lam - 1.0) / (lam * (lf - 1.0))
+            gl = lf / ((lf - 1.0) * lam2)
+            gm = -(1.0 - 1.0 / lam) / (lf - 1.0) ** 2 * (lfII - lfI)
+    else:
+        leI = (2.0 * par[P_GI] * kn / par[P_FT] ** 2 - 1.0) / 2.0
+        leII = (2.0 * par[P_GII] * ks / par[P_C] ** 2 - 1.0) / 2.0
+        le = (1.0 - m) * leI + m * leII
+        e = np.exp(-(lam - 1.0) / le)
+        D = 1.0 - e / lam
+        gl = e * (1.0 / (le * lam) + 1.0 / lam2)
+        gm = -e * (lam - 1.0) / (lam * le * le) * (leII - leI)
+    if D >= 1.0:
+        return 1.0, 0.0, 0.0
+    if D <= D0:
+        return D0, 0.0, 0.0
+    dD_da = gl * a / lam + gm * dm_da
+    dD_db = gl * b / lam + gm * dm_db
+    return D, (dD_da / dI if uN > 0.0 else 0.0), dD_db / dII
+
+
+@njit(cache=True)
 def internal_update(law, par, st, uN, uT, h):
     """Internal variable implied by the jump (uN, uT), irreversible with respect to the committed state:
     β (Frémond), intact flag 1/0 (brittle, Dugdale), damage D (mixed), 1 otherwise. The tangential jump

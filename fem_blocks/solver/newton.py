@@ -10,8 +10,8 @@ elastic bricks): its sweeps count grows with the size of the wall. Newton on the
 
 with ρ_N = 1/W_αα,NN and ρ_T = 1/W_αα,TT. F is piecewise linear in r; a generalized Jacobian is
 J = D + E W with 2×2 block-diagonal D, E chosen per contact by its case (open, stick, slip), so J has the
-block pattern of W. Each iteration solves J Δr = -F with a sparse LU (scipy SuperLU below 3000 unknowns, MUMPS above: linalg.lu_solve), then a backtracking
-line search on ½‖F‖² (Armijo). When the line search fails (Newton's direction is not a descent direction
+block pattern of W. Each iteration solves J Δr = -F with a sparse LU (scipy SuperLU below 3000 unknowns,
+MUMPS above: linalg.lu_solve), then a backtracking line search on ½‖F‖² (Armijo). When the line search fails (Newton's direction is not a descent direction
 where the cases change), a few NLGS sweeps are taken from the current iterate and Newton resumes.
 
 Stop: the FCLIB natural-map residual ‖F_nat‖/‖q‖ <= tol (the same measure as NLGS's "residual" criterion).
@@ -39,6 +39,13 @@ restart (ε and the merit memory reset). From r = 0 the non-monotone iteration c
 hundreds of iterations (KaplasTower, 570 contacts: residual between 1e-3 and 5e-2 for 400 iterations); with the
 watch it reaches 1e-8 in 150. The 2D path keeps its rules (memory = 1, no watch, results unchanged).
 
+Interface laws (2D, `solve_cohesive_newton`): the Alart–Curnier function of the transformed problem
+P̃ = P + h A r_adh(u), v' = v + cmp P̃_N e_N (u = u_eff + hθ v; cmp = 1/(h²θ k A) for compliant joints, applied in
+tension too so that F is continuous where u_N changes sign: at every solution P̃_N = 0 in tension, the same
+solutions as the branch-wise natural map), J = D' + E' W by the chain rule. The mixed-mode damage is evaluated
+inside the iteration, D(u) = max(D_committed, D(λ(u))), with its derivative in J (consistent tangent, no outer
+staggered loop); Frémond's β is staggered (docs/laws.md, "Integration in the global Newton").
+
 Choosing the solver: `solve_newton` (20 NLGS sweeps, then Newton) where W couples contacts strongly (stacks,
 packings, stiff walls: Gauss–Seidel stalls or cycles there); `nlgs.solve(..., criterion="residual",
 fallback="newton")` keeps Gauss–Seidel where it converges and hands over to this Newton when a window of 200 sweeps
@@ -52,8 +59,9 @@ import scipy.sparse as sp
 from numba import njit
 
 from ..errors import InputError
+from ..laws import MIXED, P_CN, P_CT, P_FC, S_BETA, S_BROKEN, compression_stiffness, linear_part, \
+    mixed_damage_gradient
 from ..linalg import lu_solve
-from ..laws import P_FC, compression_stiffness, linear_part
 from . import nlgs
 from .nlgs import BlockCSR, NLGSResult
 
@@ -141,13 +149,29 @@ def alart_curnier_3d(r, u, mu, rn, rt, jacobian=False):
 
 
 @njit(cache=True)
-def _cohesive_terms(law, par, st, x, ueff, v, area, h, theta, S, c, mue, cmp, capv):
+def _cohesive_terms(law, par, st, x, ueff, v, area, h, theta, S, c, mue, cmp, capv, inside, T):
     """Per contact at fixed internal variables x: P̃ = P + S v + c (adhesive impulse h A r_adh(u), u = u_eff + hθ v),
-    friction coefficient, and compliance cmp of the compliant laws in compression (v'_N = v_N + cmp P̃_N)."""
+    friction coefficient, and compliance cmp of the compliant laws (v'_N = v_N + cmp P̃_N; in tension too, where
+    P̃_N = 0 at the solutions, so that v' does not jump when u_N changes sign).
+    inside: the mixed-mode damage is a function of the current jump, x_α = D(u) = max(D_committed, D(λ(u))) (set
+    here), and T_α = -h A hθ (k_n u_N⁺, k_s u_T)ᵀ ⊗ ∇_u D (2×2, 0 elsewhere) completes the derivative
+    dP̃/dv = diag(S) + T (consistent tangent; S v + c stays the secant P_adh at the current D)."""
     n = law.shape[0]
     for a in range(n):
         uN = ueff[a, 0] + h * theta * v[2 * a]
         tension = uN > 1e-15
+        if inside:
+            T[a, 0, 0] = T[a, 0, 1] = T[a, 1, 0] = T[a, 1, 1] = 0.0
+            if law[a] == MIXED and st[a, S_BROKEN] == 0.0:
+                uT = ueff[a, 1] + h * theta * v[2 * a + 1]
+                D, gN, gT = mixed_damage_gradient(par[a], st[a, S_BETA], uN, uT)
+                x[a] = D
+                f = -h * area[a] * h * theta
+                if tension:
+                    T[a, 0, 0] = f * par[a, P_CN] * uN * gN
+                    T[a, 0, 1] = f * par[a, P_CN] * uN * gT
+                T[a, 1, 0] = f * par[a, P_CT] * uT * gN
+                T[a, 1, 1] = f * par[a, P_CT] * uT * gT
         kN, kT, fN, fT, m = linear_part(law[a], par[a], st[a], x[a], tension)
         S[a, 0] = h * area[a] * kN * h * theta
         S[a, 1] = h * area[a] * kT * h * theta
@@ -156,16 +180,18 @@ def _cohesive_terms(law, par, st, x, ueff, v, area, h, theta, S, c, mue, cmp, ca
         mue[a] = m
         capv[a] = h * par[a, P_FC] * area[a] if par[a, P_FC] > 0.0 else np.inf
         cmp[a] = 0.0
-        if law[a] != 0 and not tension:
+        if law[a] != 0:
             kc = compression_stiffness(law[a], par[a]) * area[a]
             if kc > 0.0:
                 cmp[a] = 1.0 / (h * h * theta * kc)
 
 
 def _newton(W: BlockCSR, q, mu, r, tol, max_iter, gs, max_sweeps_total, coh=None, memory=1, stall_window=0):
-    """Core iteration (2D or 3D by W.dim). coh = (law, par, st, x, ueff, area, h, theta) for interface laws at
-    fixed x (2D only), else None. `gs(r, k)` runs k Gauss–Seidel sweeps from r -> (r, sweeps). `memory`: the line
-    search accepts t when ½‖F(r + tΔr)‖² <= max(last `memory` merits) - 2e-4 t ½‖F(r)‖² (1: monotone Armijo).
+    """Core iteration (2D or 3D by W.dim). coh = (law, par, st, x, ueff, area, h, theta, inside) for interface laws
+    (2D only), else None: x fixed, except with inside = True, where the mixed-mode damage follows the jump
+    (x_α = D(u), consistent tangent, see _cohesive_terms). `gs(r, k)` runs k Gauss–Seidel sweeps from r ->
+    (r, sweeps). `memory`: the line search accepts t when ½‖F(r + tΔr)‖² <= max(last `memory` merits)
+    - 2e-4 t ½‖F(r)‖² (1: monotone Armijo).
     `stall_window` > 0: when that many iterations have not halved the residual, 20 Gauss–Seidel sweeps and a
     restart (ε and the merit memory reset), counted as a fallback.
     Returns (r, u, iterations, sweeps, fallbacks, change, residual)."""
@@ -180,13 +206,15 @@ def _newton(W: BlockCSR, q, mu, r, tol, max_iter, gs, max_sweeps_total, coh=None
     mue = mu.copy()
     cmp = np.zeros(n)
     capv = np.full(n, np.inf)
+    T = np.zeros((n, 2, 2))
+    inside = coh is not None and coh[8]
 
     def transformed(r_, u_):
         """(P̃, v') and the terms used: the plain problem when coh is None."""
         if coh is None:
             return r_, u_
-        law, par, st, x, ueff, area, h, th = coh
-        _cohesive_terms(law, par, st, x, ueff, u_, area, h, th, S, c, mue, cmp, capv)
+        law, par, st, x, ueff, area, h, th, ins = coh
+        _cohesive_terms(law, par, st, x, ueff, u_, area, h, th, S, c, mue, cmp, capv, ins, T)
         Pt = r_.reshape(-1, 2) + S * u_.reshape(-1, 2) + c
         vp = u_.reshape(-1, 2).copy()
         vp[:, 0] += cmp * Pt[:, 0]
@@ -195,7 +223,9 @@ def _newton(W: BlockCSR, q, mu, r, tol, max_iter, gs, max_sweeps_total, coh=None
     def residual(r_, u_):
         if coh is None:
             return float(nlgs.natural_map(r_, u_, mu, dim)) / qnorm
-        law, par, st, x, ueff, area, h, th = coh
+        law, par, st, x, ueff, area, h, th, ins = coh
+        if ins:  # the damage of the evaluated iterate
+            transformed(r_, u_)
         return float(nlgs.natural_map_cohesive(W.indptr, W.indices, W.blocks, q, mu, r_, law, par, st, x, ueff,
                                                area, h, th)) / qnorm
 
@@ -232,6 +262,8 @@ def _newton(W: BlockCSR, q, mu, r, tol, max_iter, gs, max_sweeps_total, coh=None
             D = D.copy()
             D[:, :, 0] += E[:, :, 0] * cmp[:, None]
             E = D * S[:, None, :] + E
+            if inside:  # damage inside: dP̃/dv = diag(S) + T
+                E += np.einsum("kij,kjl->kil", D, T)
         f0 = 0.5 * float(F @ F)
         merits.append(f0)
         del merits[:-memory]
@@ -316,55 +348,91 @@ def solve_newton(W: BlockCSR, q, mu, r0=None, tol: float = 1e-8, max_iter: int =
 
 def solve_cohesive_newton(W: BlockCSR, q, mu, law, par, st, ueff, area, h: float, theta: float, r0=None,
                           tol: float = 1e-8, max_iter: int = 200, gs_sweeps: int = 20,
-                          max_sweeps_total: int = 100000, max_outer: int = 1000, max_total_iter: int | None = None):
-    """Newton for the contact problem with interface laws (laws.py), same contract as nlgs.solve_cohesive:
-    staggered — Newton at fixed internal variables x (β, damage), then x updated from the converged jumps,
-    until x stops changing. At fixed x each law is piecewise linear in the jump u = u_eff + hθ v (tension /
+                          max_sweeps_total: int = 100000, max_outer: int = 1000, max_total_iter: int | None = None,
+                          damage_inside: bool = True):
+    """Newton for the contact problem with interface laws (laws.py), same contract as nlgs.solve_cohesive.
+    At fixed internal variables x (β, damage) each law is piecewise linear in the jump u = u_eff + hθ v (tension /
     compression branches), so the transformed problem P̃ = P + S v + c, v' = v + cmp P̃_N e_N keeps the
-    Alart–Curnier form and J = D' + E' W. The whole step is bounded by `max_total_iter` Newton iterations (default
-    10 x max_iter) and `max_sweeps_total` fallback sweeps over all outer solves; beyond, it reports non-convergence.
+    Alart–Curnier form and J = D' + E' W.
+
+    Mixed-mode damage (damage_inside = True, the default): D is not staggered but a function of the current jump,
+    D(u) = max(D_committed, D(λ(u))) (monotone: never below the committed damage), inside the Alart–Curnier
+    function, with the consistent tangent dP̃/dv = diag(S) + T (T: the damage term, laws.mixed_damage_gradient).
+    Newton then solves the coupled problem at once; the residual is the natural map at x = D(u). Other laws
+    (Frémond β) and damage_inside = False: staggered — Newton at fixed x, then x updated from the converged jumps
+    (Aitken-relaxed), until x stops changing. The coupled pass restarts (20 Gauss–Seidel sweeps, regularisation
+    reset) when 10 iterations have not halved its residual; if it ends above the tolerance (`max_iter`), the
+    staggered iteration takes over from the committed damage and the Gauss–Seidel start (message says so): it
+    selects the least damaged solution where a large step makes the coupled iteration jump between branches of
+    the softening law. The whole step is bounded by `max_total_iter` Newton iterations (default 10 x max_iter) and
+    `max_sweeps_total` fallback sweeps over all passes; beyond, it reports non-convergence.
     Returns (NLGSResult, trial internal variables)."""
     q, mu, r = _prepare(W, q, mu, r0, tol)
     law = np.ascontiguousarray(law, dtype=np.int64)
     par = np.ascontiguousarray(par, dtype=np.float64)
     st = np.ascontiguousarray(st, dtype=np.float64)
-    from ..laws import S_BETA
     x = np.ascontiguousarray(st[:, S_BETA].copy())
     ueff = np.ascontiguousarray(ueff, dtype=np.float64)
     area = np.ascontiguousarray(area, dtype=np.float64)
     if W.n == 0:
         return NLGSResult(r, q.copy(), 0, True, 0.0, 0.0, 0.0, "no contact"), x
-    coh = (law, par, st, x, ueff, area, float(h), float(theta))
+    from ..laws import FREMOND
+    inside = bool(damage_inside) and bool(np.any(law == MIXED))
+    n = W.n
+    scratch = (np.zeros((n, 2)), np.zeros((n, 2)), np.zeros(n), np.zeros(n), np.zeros(n), np.zeros((n, 2, 2)))
+    mode = {"inside": False}  # damage inside for the Gauss-Seidel fallbacks of the current pass
+
+    def refresh(r_):
+        """x_α = D(u(r_)) for the mixed-mode contacts (damage inside)."""
+        u_ = np.empty_like(q)
+        nlgs.matvec_bcsr(W.indptr, W.indices, W.blocks, r_, u_)
+        u_ += q
+        S_, c_, m_, cmp_, cap_, T_ = scratch
+        _cohesive_terms(law, par, st, x, ueff, u_, area, float(h), float(theta), S_, c_, m_, cmp_, cap_, True, T_)
 
     def gs(r_, k):
+        if mode["inside"]:
+            refresh(r_)
         res, _ = nlgs.solve_cohesive(W, q, mu, law, par, st, ueff, area, h, theta, r0=r_, tol=tol, max_sweeps=k,
                                      max_outer=1, criterion="residual", check_every=k, x0=x)
         return res.r.copy(), res.sweeps
 
     n_it = n_gs = n_fb = 0
-    if gs_sweeps:
+    if gs_sweeps:  # at the committed internal variables
         r, n_gs = gs(r, gs_sweeps)
+    r_start = r.copy()
+    fell_back = False
     converged_x = False
     # the internal-variable fixed point x <- g(x) (g: Newton at fixed x, then the law update) converges linearly
     # on softening laws (ratio ~0.6 on the shear wall: ~30 outer solves); Aitken's dynamic relaxation
-    # (Irons–Tuck) on the continuous variables (Frémond β, mixed-mode D), kept in their admissible range
-    # (β in [0, β_committed], D in [D_committed, 1]), cuts that to a few.
-    from ..laws import FREMOND, MIXED
-    relax = (law == FREMOND) | (law == MIXED)
+    # (Irons–Tuck) on the staggered continuous variables (Frémond β; mixed-mode D unless inside), kept in their
+    # admissible range (β in [0, β_committed], D in [D_committed, 1]), cuts that to a few.
     lo = np.where(law == FREMOND, 0.0, st[:, S_BETA])
     hi = np.where(law == FREMOND, st[:, S_BETA], 1.0)
     omega, res_prev = 1.0, None
     budget = max_total_iter if max_total_iter is not None else 10 * max_iter
+    res = np.inf
     for _ in range(max_outer):  # `budget` Newton iterations and max_sweeps_total sweeps bound the whole step
         if n_it >= budget or n_gs >= max_sweeps_total:
             break
+        mode["inside"] = inside
+        relax = (law == FREMOND) | ((law == MIXED) & (not inside))
+        coh = (law, par, st, x, ueff, area, float(h), float(theta), inside)
         r, u, i1, g1, f1, change, res = _newton(W, q, mu, r, tol, min(max_iter, budget - n_it), gs,
-                                                max_sweeps_total - n_gs, coh)
+                                                max_sweeps_total - n_gs, coh, stall_window=10 if inside else 0)
         n_it, n_gs, n_fb = n_it + i1, n_gs + g1, n_fb + f1
+        if inside and res > tol:
+            # the coupled iteration did not converge (e.g. a load step large enough to jump onto the softening
+            # branch): the staggered iteration from the committed state instead, which selects the least
+            # damaged solution
+            inside, fell_back, res_prev, omega = False, True, None, 1.0
+            x[:] = st[:, S_BETA]
+            r = r_start.copy()
+            continue
         x_old = x.copy()
         dx = nlgs._update_internal(law, par, st, ueff, u, float(h), float(theta), x)  # x <- g(x_old)
-        if dx <= 1e-12:
-            converged_x = True
+        converged_x = dx <= 1e-12
+        if converged_x:
             break
         res_k = np.where(relax, x - x_old, 0.0)
         if res_prev is not None:
@@ -380,6 +448,8 @@ def solve_cohesive_newton(W: BlockCSR, q, mu, law, par, st, ueff, area, h: float
     if not converged_x:
         out.converged = False
         out.message += "; internal variables still changing"
+    if fell_back:
+        out.message += "; coupled damage iteration did not converge, staggered instead"
     return out, x
 
 
