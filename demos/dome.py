@@ -56,8 +56,10 @@ def main(out_dir: str, quick: bool = False, argv=None) -> dict:
     from fem_blocks.output.summary import write_summary
     ap = argparse.ArgumentParser(prog="fem-blocks demo dome")
     ap.add_argument("--joints", choices=("dry", "brittle"), default="dry")
-    ap.add_argument("--max-sweeps", type=int, default=None, help="NLGS sweeps per step (default 20000 dry, 8000 brittle; quick 5000)")
-    ap.add_argument("--tol", type=float, default=None, help="NLGS residual tolerance ||F||/||q|| (default 1e-4; quick 1e-6)")
+    ap.add_argument("--max-sweeps", type=int, default=None,
+                    help="NLGS sweeps per step (default 20000 dry, 8000 brittle; quick 5000)")
+    ap.add_argument("--tol", type=float, default=None,
+                    help="NLGS residual tolerance ||F||/||q|| (default 1e-4; quick 1e-6)")
     ap.add_argument("--order", choices=("given", "reversed", "shuffled"), default=None,
                     help="NLGS contact order (default shuffled; quick given)")
     ap.add_argument("--steps", type=int, default=None, help="time steps (default 16 dry, 6 brittle; quick 4)")

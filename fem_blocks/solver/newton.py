@@ -11,8 +11,9 @@ elastic bricks): its sweeps count grows with the size of the wall. Newton on the
 with ρ_N = 1/W_αα,NN and ρ_T = 1/W_αα,TT. F is piecewise linear in r; a generalized Jacobian is
 J = D + E W with 2×2 block-diagonal D, E chosen per contact by its case (open, stick, slip), so J has the
 block pattern of W. Each iteration solves J Δr = -F with a sparse LU (scipy SuperLU below 3000 unknowns,
-MUMPS above: linalg.lu_solve), then a backtracking line search on ½‖F‖² (Armijo). When the line search fails (Newton's direction is not a descent direction
-where the cases change), a few NLGS sweeps are taken from the current iterate and Newton resumes.
+MUMPS above: linalg.lu_solve), then a backtracking line search on ½‖F‖² (Armijo). When the line search fails
+(Newton's direction is not a descent direction where the cases change), a few NLGS sweeps are taken from the
+current iterate and Newton resumes.
 
 Stop: the FCLIB natural-map residual ‖F_nat‖/‖q‖ <= tol (the same measure as NLGS's "residual" criterion).
 
