@@ -22,34 +22,49 @@ def _to_petsc(A: sp.csr_matrix) -> PETSc.Mat:
                                  comm=PETSc.COMM_SELF)
 
 
+# method -> (PETSc PC type, factor package)
+_METHODS = {"petsc-lu": ("lu", "petsc"), "cholmod": ("cholesky", "cholmod"), "mumps": ("cholesky", "mumps"),
+            "mumps-lu": ("lu", "mumps")}
+
+
 class Factor:
-    """Factorization of a sparse SPD matrix; `solve(b)` with b of shape (n,) or (n, k)."""
+    """Factorization of a sparse matrix — SPD for petsc-lu / cholmod / mumps (Cholesky), general for mumps-lu;
+    `solve(b)` with b of shape (n,) or (n, k); `destroy()` frees it at once (PETSc objects, MUMPS factors).
+    Raises PETSc.Error when the factorisation fails (singular matrix)."""
 
     def __init__(self, A: sp.spmatrix, method: str = "auto"):
         n = A.shape[0]
         if method == "auto":
             method = "petsc-lu" if n < SMALL_SYSTEM else "cholmod"
+        if method not in _METHODS:
+            raise ValueError(f"factor method {method!r}: expected auto, petsc-lu, cholmod, mumps or mumps-lu")
         self.n, self.method = n, method
         self._A = _to_petsc(A)
-        ksp = PETSc.KSP().create(PETSc.COMM_SELF)
+        ksp = self._ksp = PETSc.KSP().create(PETSc.COMM_SELF)
+        self._b, self._x = self._A.createVecs()
         ksp.setOperators(self._A)
         ksp.setType("preonly")
         pc = ksp.getPC()
-        if method == "petsc-lu":
-            pc.setType("lu")
-            pc.setFactorSolverType("petsc")
-        elif method == "cholmod":
-            pc.setType("cholesky")
-            pc.setFactorSolverType("cholmod")
-        elif method == "mumps":
-            pc.setType("cholesky")
-            pc.setFactorSolverType("mumps")
-        else:
-            raise ValueError(f"factor method {method!r}: expected auto, petsc-lu, cholmod or mumps")
-        ksp.setUp()
-        self._ksp = ksp
+        pc.setType(_METHODS[method][0])
+        pc.setFactorSolverType(_METHODS[method][1])
+        try:
+            ksp.setUp()
+        except PETSc.Error:
+            self.destroy()
+            raise
         self._F = pc.getFactorMatrix()
-        self._b, self._x = self._A.createVecs()
+
+    def failed(self) -> bool:
+        """The last solve did not succeed (PETSc's converged reason < 0)."""
+        return self._ksp.getConvergedReason() < 0
+
+    def destroy(self):
+        """Free the factor now: without PC.reset() + destroy() the memory of a MUMPS factorisation stays until the
+        interpreter exits (130 MB per factorisation of the dome's Newton Jacobian, measured)."""
+        self._ksp.getPC().reset()
+        for obj in (getattr(self, "_F", None), self._ksp, self._A, self._b, self._x):
+            if obj is not None:
+                obj.destroy()
 
     def solve(self, b: np.ndarray) -> np.ndarray:
         b = np.asarray(b, dtype=float)
@@ -81,7 +96,7 @@ def lu_solve(A: sp.spmatrix, b: np.ndarray, method: str = "auto") -> np.ndarray 
     (SuperLU below LU_SMALL unknowns, MUMPS above). Newton's Jacobians J = D + E W of a wall or a dome have
     hundreds of nonzeros per row (every contact point of a block is coupled through its W_bb): on the full 3D
     dome (24 336 unknowns, 8.1e6 nonzeros) SuperLU takes 26 s per factorisation, MUMPS 2.2 s
-    (bench/bench_newton_linear.py, docs/benchmarks.md)."""
+    (bench/bench_lu.py, docs/benchmarks.md)."""
     n = A.shape[0]
     if method == "auto":
         method = "superlu" if n < LU_SMALL else "mumps"
@@ -94,30 +109,13 @@ def lu_solve(A: sp.spmatrix, b: np.ndarray, method: str = "auto") -> np.ndarray 
         return x if np.all(np.isfinite(x)) else None
     if method != "mumps":
         raise ValueError(f"lu method {method!r}: expected auto, superlu or mumps")
-    M = _to_petsc(A)
-    ksp = PETSc.KSP().create(PETSc.COMM_SELF)
     try:
-        ksp.setOperators(M)
-        ksp.setType("preonly")
-        pc = ksp.getPC()
-        pc.setType("lu")
-        pc.setFactorSolverType("mumps")
-        try:
-            ksp.setUp()
-        except PETSc.Error:  # MUMPS reports a singular (or numerically singular) matrix
-            return None
-        xb, bb = M.createVecs()
-        try:
-            bb.array[:] = b
-            ksp.solve(bb, xb)
-            if ksp.getConvergedReason() < 0:
-                return None
-            x = xb.array.copy()
-        finally:
-            xb.destroy()
-            bb.destroy()
-        return x if np.all(np.isfinite(x)) else None
+        F = Factor(A, "mumps-lu")
+    except PETSc.Error:  # MUMPS reports a singular (or numerically singular) matrix
+        return None
+    try:
+        x = F.solve(b)
+        failed = F.failed()
     finally:
-        ksp.getPC().reset()  # frees the MUMPS factors now (without it the memory of every factorisation stays)
-        ksp.destroy()
-        M.destroy()
+        F.destroy()
+    return None if failed or not np.all(np.isfinite(x)) else x

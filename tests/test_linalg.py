@@ -12,7 +12,7 @@ def spd(n, seed=0):
     return (A @ A.T + sp.diags(1.0 + rng.random(n))).tocsr()
 
 
-@pytest.mark.parametrize("method", ["auto", "petsc-lu", "cholmod", "mumps"])
+@pytest.mark.parametrize("method", ["auto", "petsc-lu", "cholmod", "mumps", "mumps-lu"])
 @pytest.mark.parametrize("n", [50, 1500])
 def test_factor_solves(method, n):
     A = spd(n)
