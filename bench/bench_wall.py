@@ -126,6 +126,26 @@ def fit_exponent(x, y):
     return float(np.polyfit(np.log(x), np.log(y), 1)[0])
 
 
+def split_text(r):
+    s = r["split"]
+    return f"{s['local']:.1f}, {s['nlgs']:.1f}, {s['correction']:.1f}"
+
+
+def table(sizes, run, header, row, exponents):
+    """One markdown row per wall size (run(n) -> result dict, row(r) -> cells), then the fitted exponents
+    (label, key) of cost ∝ contacts^a."""
+    print("| " + " | ".join(header) + " |")
+    print("|" + "---|" * len(header))
+    rows = []
+    for n in sizes:
+        rows.append(run(n))
+        print("| " + " | ".join(row(rows[-1])) + " |", flush=True)
+    if len(rows) >= 2:
+        c = [r["contacts"] for r in rows]
+        print("\nexponents vs contacts: " + ", ".join(f"{label} {fit_exponent(c, [r[key] for r in rows]):.2f}"
+                                                     for label, key in exponents))
+
+
 if __name__ == "__main__":
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("sizes", nargs="*", type=int, default=[100, 1000])
@@ -137,41 +157,25 @@ if __name__ == "__main__":
     print(f"joints: {a.joints}")
     if a.dynamic:
         print(f"dynamic: h = 1e-4 s, theta = 0.505, {a.dynamic} steps from rest\n")
-        print("| bricks | contacts | setup [s] | ms/step | sweeps/step (max; steps at the sweep limit) | NLGS µs/update | "
-              "split ms/step (local, nlgs, correction) | floor reaction / weight at the end | peak RSS [MB] |")
-        print("|---|---|---|---|---|---|---|---|---|")
-        rows = []
-        for n in a.sizes:
-            r = wall_dynamic(n, a.joints, a.dynamic)
-            rows.append(r)
-            s = r["split"]
-            print(f"| {r['bricks']} | {r['contacts']} | {r['setup_s']:.2f} | {r['ms_per_step']:.1f} | "
-                  f"{r['sweeps_per_step']:.1f} ({r['max_sweeps']}; {r['limit_steps']}) | {r['us_per_update']:.3f} | "
-                  f"{s['local']:.1f}, {s['nlgs']:.1f}, {s['correction']:.1f} | {r['floor_reaction_over_weight']:.4f} | "
-                  f"{r['rss_mb']:.0f} |", flush=True)
-        if len(rows) >= 2:
-            c = [r["contacts"] for r in rows]
-            print(f"\nexponents vs contacts: time per step {fit_exponent(c, [r['ms_per_step'] for r in rows]):.2f}, "
-                  f"sweeps per step {fit_exponent(c, [r['sweeps_per_step'] for r in rows]):.2f}")
-        sys.exit(0)
-    print("| bricks | contacts | setup [s] | steps to equilibrium | time to equilibrium [s] (sweeps; steps at the "
-          "sweep limit) | ms/step at equilibrium | sweeps/step | ms/sweep | NLGS µs/update | split ms/step (local, "
-          "nlgs, correction) | floor reaction / weight | peak RSS [MB] |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
-    rows = []
-    for n in a.sizes:
-        r = wall(n, a.joints, max_steps=a.max_steps)
-        rows.append(r)
-        s = r["split"]
-        eq = r["eq_steps"] if r["eq_steps"] is not None else f"not reached in {r['steps']}"
-        print(f"| {r['bricks']} | {r['contacts']} | {r['setup_s']:.2f} | {eq} | {r['eq_s']:.1f} ({r['eq_sweeps']}; "
-              f"{r['limit_steps']}) | {r['ms_per_step']:.1f} | {r['sweeps_per_step']:.1f} | {r['ms_per_sweep']:.2f} | "
-              f"{r['us_per_update']:.3f} | {s['local']:.1f}, {s['nlgs']:.1f}, {s['correction']:.1f} | "
-              f"{r['floor_reaction_over_weight']:.6f} | {r['rss_mb']:.0f} |", flush=True)
-    if len(rows) >= 2:
-        c = [r["contacts"] for r in rows]
-        print(f"\nexponents vs contacts: time per step at equilibrium "
-              f"{fit_exponent(c, [r['ms_per_step'] for r in rows]):.2f}, time per sweep "
-              f"{fit_exponent(c, [r['ms_per_sweep'] for r in rows]):.2f}, time to equilibrium "
-              f"{fit_exponent(c, [r['eq_s'] for r in rows]):.2f}, setup "
-              f"{fit_exponent(c, [r['setup_s'] for r in rows]):.2f}")
+        table(a.sizes, lambda n: wall_dynamic(n, a.joints, a.dynamic),
+              ["bricks", "contacts", "setup [s]", "ms/step", "sweeps/step (max; steps at the sweep limit)",
+               "NLGS µs/update", "split ms/step (local, nlgs, correction)", "floor reaction / weight at the end",
+               "peak RSS [MB]"],
+              lambda r: [f"{r['bricks']}", f"{r['contacts']}", f"{r['setup_s']:.2f}", f"{r['ms_per_step']:.1f}",
+                         f"{r['sweeps_per_step']:.1f} ({r['max_sweeps']}; {r['limit_steps']})",
+                         f"{r['us_per_update']:.3f}", split_text(r), f"{r['floor_reaction_over_weight']:.4f}",
+                         f"{r['rss_mb']:.0f}"],
+              [("time per step", "ms_per_step"), ("sweeps per step", "sweeps_per_step")])
+    else:
+        table(a.sizes, lambda n: wall(n, a.joints, max_steps=a.max_steps),
+              ["bricks", "contacts", "setup [s]", "steps to equilibrium",
+               "time to equilibrium [s] (sweeps; steps at the sweep limit)", "ms/step at equilibrium", "sweeps/step",
+               "ms/sweep", "NLGS µs/update", "split ms/step (local, nlgs, correction)", "floor reaction / weight",
+               "peak RSS [MB]"],
+              lambda r: [f"{r['bricks']}", f"{r['contacts']}", f"{r['setup_s']:.2f}",
+                         f"{r['eq_steps']}" if r["eq_steps"] is not None else f"not reached in {r['steps']}",
+                         f"{r['eq_s']:.1f} ({r['eq_sweeps']}; {r['limit_steps']})", f"{r['ms_per_step']:.1f}",
+                         f"{r['sweeps_per_step']:.1f}", f"{r['ms_per_sweep']:.2f}", f"{r['us_per_update']:.3f}",
+                         split_text(r), f"{r['floor_reaction_over_weight']:.6f}", f"{r['rss_mb']:.0f}"],
+              [("time per step at equilibrium", "ms_per_step"), ("time per sweep", "ms_per_sweep"),
+               ("time to equilibrium", "eq_s"), ("setup", "setup_s")])
