@@ -361,6 +361,13 @@ def test_plots_write_png_and_survive_empty_data(tmp_path):
     plot_crack_pattern(tmp_path / "k1.png", polys, [], [], 1.0, "blocks only")
     with pytest.raises(InputError, match="values: expected 2 values"):
         plot_crack_pattern(tmp_path / "z.png", polys, seg, [0.5], 1.0, "bad")
+    out = plot_crack_pattern(tmp_path / "kw.png", polys, seg, [0.2, 1.0], 50.0, "crack", widths=[0.8, 5.0],
+                             width_note="line width: joint opening + slip (thickest 1 mm)")
+    assert _png_size(out)[:2] == (975, 780)
+    with pytest.raises(InputError, match="widths: expected 2 line widths"):
+        plot_crack_pattern(tmp_path / "z.png", polys, seg, [0.2, 1.0], 1.0, "bad", widths=[1.0])
+    with pytest.raises(InputError, match="widths: expected finite line widths > 0"):
+        plot_crack_pattern(tmp_path / "z.png", polys, seg, [0.2, 1.0], 1.0, "bad", widths=[1.0, 0.0])
     with pytest.raises(InputError, match="x and y must have the same length"):
         plot_curve(tmp_path / "z.png", [0, 1], [0], "u", "F", "bad")
     assert not (tmp_path / "z.png").exists()
@@ -383,3 +390,20 @@ def test_vtu_dtypes_and_empty_grid(tmp_path):
     piece = root.find("UnstructuredGrid/Piece")
     assert piece.get("NumberOfPoints") == "0" and piece.get("NumberOfCells") == "0"
     assert all(nbytes == 0 for _, nbytes, _ in arr.values()) and set(arr) >= {"Points", "types", "r_N"}
+
+
+def test_crack_width_is_opening_and_slip_and_sets_line_widths():
+    """w = sqrt(<u_N>+^2 + u_T^2): a closed, sliding joint counts its slip, a closed stuck one nothing; the line
+    width goes linearly from 0.8 pt (w = 0) to 5 pt (largest w)."""
+    from fem_blocks.laws import NSTATE, S_UN, S_UT
+    from fem_blocks.output.figures import crack_width, segment_widths
+    st = np.zeros((4, NSTATE))
+    st[:, S_UN] = [3e-4, -2e-5, 0.0, 6e-4]  # open, closed (compressed), touching, open
+    st[:, S_UT] = [4e-4, 1e-3, 0.0, -8e-4]
+    w = crack_width(st)
+    np.testing.assert_allclose(w, [5e-4, 1e-3, 0.0, 1e-3], rtol=1e-14, atol=0)
+    lw, wmax = segment_widths(w)
+    assert wmax == 1e-3
+    np.testing.assert_allclose(lw, [0.8 + 4.2 * 0.5, 5.0, 0.8, 5.0], rtol=1e-14)
+    lw0, w0 = segment_widths(np.zeros(3))
+    assert w0 == 0.0 and np.all(lw0 == 0.8)

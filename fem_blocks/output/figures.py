@@ -1,5 +1,6 @@
 """Run figures: force–displacement curve (from history.csv), crack pattern (deformed blocks, joints
-coloured by damage, or by opening for dry joints) and 3D views of 3D bodies (write_blocks_3d)."""
+coloured by damage, or by opening for dry joints, drawn thicker where they open or slip) and 3D views of 3D
+bodies (write_blocks_3d)."""
 from __future__ import annotations
 
 import os
@@ -38,11 +39,31 @@ def body_outlines(sim, amplification: float):
     return polys
 
 
+def crack_width(state: np.ndarray) -> np.ndarray:
+    """Width of the crack at each contact point [m]: w = sqrt(<u_N>+^2 + u_T^2), the joint's opening and slip
+    since the reference state (state columns S_UN, S_UT; 2D). A closed joint that does not slide has w ~ 0 (its
+    elastic jump only), whatever its damage."""
+    from ..laws import S_UN, S_UT
+    st = np.asarray(state, dtype=float)
+    return np.hypot(np.maximum(st[:, S_UN], 0.0), st[:, S_UT])
+
+
+def segment_widths(width: np.ndarray, thin: float = 0.8, thick: float = 5.0):
+    """Line widths [pt] of the joint segments: thin + (thick - thin) w / w_max (w_max = largest crack width;
+    all thin when nothing opens). Returns (widths, w_max)."""
+    w = np.nan_to_num(np.asarray(width, dtype=float), nan=0.0)
+    wmax = float(w.max()) if w.size else 0.0
+    if wmax <= 0.0:
+        return np.full(w.shape, thin), 0.0
+    return thin + (thick - thin) * np.clip(w / wmax, 0.0, 1.0), wmax
+
+
 def joint_segments(contact, sim, amplification: float):
-    """Short segments along each joint at the contact points and their crack value in [0, 1]."""
+    """Short segments along each joint at the contact points, their crack value in [0, 1], its label and the
+    crack width at each point (crack_width)."""
     cs = getattr(contact, "cs", None)
     if cs is None or len(cs.gap) == 0:
-        return np.zeros((0, 2, 2)), np.zeros(0), "damage"
+        return np.zeros((0, 2, 2)), np.zeros(0), "damage", np.zeros(0)
     thick = contact.body_thickness[cs.cand_body]
     half = 0.5 * cs.area / thick
     # current point: reference point moved by the candidate displacement (amplified)
@@ -66,7 +87,9 @@ def joint_segments(contact, sim, amplification: float):
         ref = max(float(np.percentile(opening, 99)) if opening.size else 0.0, 1e-12)
         val = np.clip(opening / ref, 0.0, 1.0)
         label = f"joint opening / {ref:.2g} m"
-    return seg, val, label
+    state = getattr(contact, "state", None)
+    width = crack_width(state) if state is not None else np.zeros(len(cs.gap))
+    return seg, val, label, width
 
 
 def auto_amplification(sim) -> float:
@@ -90,8 +113,12 @@ def auto_amplification(sim) -> float:
 def write_crack_pattern(path, sim, contact, title=""):
     amp = auto_amplification(sim)
     polys = body_outlines(sim, amp)
-    seg, val, label = joint_segments(contact, sim, amp) if contact is not None else (np.zeros((0, 2, 2)), [], "")
-    return plot_crack_pattern(path, polys, seg, val, amp, title=title, value_label=label)
+    seg, val, label, width = (joint_segments(contact, sim, amp) if contact is not None
+                              else (np.zeros((0, 2, 2)), [], "", np.zeros(0)))
+    lw, wmax = segment_widths(width)
+    return plot_crack_pattern(path, polys, seg, val, amp, title=title, value_label=label, widths=lw,
+                              width_note=f"line width: joint opening + slip (thickest {1e3 * wmax:.3g} mm)"
+                              if wmax > 0 else "")
 
 
 def curve_arrays(history: dict, body: str, force: str, displacement: str, scale_force=1e-3, scale_disp=1e3):

@@ -60,10 +60,12 @@ def plot_curve(path, x, y, xlabel, ylabel, title="", peak=True):
     return _save(fig, path, 120)
 
 
-def plot_crack_pattern(path, polygons, segments, values, amplification, title="", value_label="damage"):
+def plot_crack_pattern(path, polygons, segments, values, amplification, title="", value_label="damage",
+                       widths=None, width_note=""):
     """Deformed block outlines (displacements already amplified by `amplification`) and joint/contact
-    segments (m, 2, 2) coloured by `values` (m,) clipped to [0, 1] (NaN drawn grey), with a colourbar and the
-    text "displacements x{amplification:g}". Returns `path`."""
+    segments (m, 2, 2) coloured by `values` (m,) clipped to [0, 1] (NaN drawn grey), `widths` (m,) their line
+    widths [pt] (default 2.2; `width_note` says what they mean), with a colourbar and the text
+    "displacements x{amplification:g}". Returns `path`."""
     try:
         amp = float(amplification)
     except (TypeError, ValueError):
@@ -83,6 +85,11 @@ def plot_crack_pattern(path, polygons, segments, values, amplification, title=""
     val = np.asarray(values if values is not None else [], dtype=float).ravel()
     if len(val) != len(seg):
         raise InputError(f"values: expected {len(seg)} values (one per segment), got {len(val)}")
+    lw = np.full(len(seg), 2.2) if widths is None else np.asarray(widths, dtype=float).ravel()
+    if len(lw) != len(seg):
+        raise InputError(f"widths: expected {len(seg)} line widths (one per segment), got {len(lw)}")
+    if np.any(~np.isfinite(lw)) or np.any(lw <= 0):
+        raise InputError("widths: expected finite line widths > 0 [pt]")
 
     from matplotlib import colormaps
     from matplotlib.cm import ScalarMappable
@@ -98,8 +105,9 @@ def plot_crack_pattern(path, polygons, segments, values, amplification, title=""
         if polys:
             ax.add_collection(PolyCollection(polys, facecolors="#e8d5c0", edgecolors="#7a5c3e", linewidths=0.4))
         if len(seg):
-            ax.add_collection(LineCollection(seg, array=np.clip(val, 0.0, 1.0), cmap=cmap, norm=norm,
-                                             linewidths=2.2))
+            order = np.argsort(lw, kind="stable")  # widest (open cracks) drawn last, on top
+            ax.add_collection(LineCollection(seg[order], array=np.clip(val[order], 0.0, 1.0), cmap=cmap,
+                                             norm=norm, linewidths=lw[order]))
         pts = np.concatenate(polys + [seg.reshape(-1, 2)])
         pts = pts[np.all(np.isfinite(pts), axis=1)]
         if len(pts):
@@ -110,7 +118,7 @@ def plot_crack_pattern(path, polygons, segments, values, amplification, title=""
         ax.set_aspect("equal")
     fig.colorbar(ScalarMappable(norm=norm, cmap=cmap), ax=ax, shrink=0.7, label=value_label)
     ax.set_title(title)
-    fig.text(0.01, 0.01, f"displacements x{amp:g}", fontsize=10)
+    fig.text(0.01, 0.01, f"displacements x{amp:g}" + (f"; {width_note}" if width_note else ""), fontsize=10)
     fig.tight_layout(rect=(0, 0.03, 1, 1))
     return _save(fig, path, 130)
 
