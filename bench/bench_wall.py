@@ -37,7 +37,7 @@ from fem_blocks.meshing import mesh_rectangle  # noqa: E402
 FREMOND = dict(c_N=0.5e10, c_T=0.3e10, w=18.0, mu=0.7)
 
 
-def build(n_bricks, joints="dry", h=1e-3, theta=1.0, velocity_reset=True):
+def build(n_bricks, joints="dry", h=1e-3, theta=1.0, velocity_reset=True, coarse="none"):
     """The wall, its floor, the contact step and the simulation; returns (sim, cs, floor, blocks, weight, t_build)."""
     per = max(2, int(round(np.sqrt(n_bricks * 0.25 / 0.5))))  # about twice as wide as high (in bricks)
     courses = max(1, int(round(n_bricks / per)))
@@ -55,7 +55,7 @@ def build(n_bricks, joints="dry", h=1e-3, theta=1.0, velocity_reset=True):
     joint = (InterfaceSpec("j", ("b", "b"), mu=0.7) if joints == "dry" else
              InterfaceSpec("j", ("b", "b"), law="fremond", params=dict(FREMOND)))
     cs = ContactStep([joint, InterfaceSpec("f", ("b", "g"), mu=0.7)],
-                     ["b"] * len(bodies) + ["g"], ContactOptions(tol=1e-4, max_sweeps=1000))
+                     ["b"] * len(bodies) + ["g"], ContactOptions(tol=1e-4, max_sweeps=1000, coarse=coarse))
     sim = Simulation(bodies + [floor], h=h, theta=theta, contact=cs, velocity_reset=velocity_reset)
     t_build = time.perf_counter() - t0
     weight = sum(1800.0 * b.length * b.height * 0.12 for b in blocks) * 9.81
@@ -86,8 +86,8 @@ def wall_dynamic(n_bricks, joints="dry", steps=200):
                 floor_reaction_over_weight=floor.reaction[1] / weight, rss_mb=rss)
 
 
-def wall(n_bricks, joints="dry", h=1e-3, max_steps=300, steady_steps=20):
-    sim, cs, floor, blocks, weight, t_build = build(n_bricks, joints, h=h)
+def wall(n_bricks, joints="dry", h=1e-3, max_steps=300, steady_steps=20, coarse="none"):
+    sim, cs, floor, blocks, weight, t_build = build(n_bricks, joints, h=h, coarse=coarse)
 
     t1 = time.perf_counter()
     info = sim.step()  # first step: scene, detection, W_bb, Delassus, then a cold NLGS solve
@@ -151,10 +151,12 @@ if __name__ == "__main__":
     ap.add_argument("sizes", nargs="*", type=int, default=[100, 1000])
     ap.add_argument("--joints", choices=("dry", "fremond"), default="dry")
     ap.add_argument("--max-steps", type=int, default=300)
+    ap.add_argument("--coarse", choices=("none", "interfaces"), default="none",
+                    help="[contact] coarse: two-level NLGS (coarse correction per interface, dry joints)")
     ap.add_argument("--dynamic", type=int, default=0, metavar="STEPS",
                     help="instead: STEPS dynamic steps with benchmark 1's settings (h = 1e-4 s, theta = 0.505)")
     a = ap.parse_args()
-    print(f"joints: {a.joints}")
+    print(f"joints: {a.joints}, coarse: {a.coarse}")
     if a.dynamic:
         print(f"dynamic: h = 1e-4 s, theta = 0.505, {a.dynamic} steps from rest\n")
         table(a.sizes, lambda n: wall_dynamic(n, a.joints, a.dynamic),
@@ -167,7 +169,7 @@ if __name__ == "__main__":
                          f"{r['rss_mb']:.0f}"],
               [("time per step", "ms_per_step"), ("sweeps per step", "sweeps_per_step")])
     else:
-        table(a.sizes, lambda n: wall(n, a.joints, max_steps=a.max_steps),
+        table(a.sizes, lambda n: wall(n, a.joints, max_steps=a.max_steps, coarse=a.coarse),
               ["bricks", "contacts", "setup [s]", "steps to equilibrium",
                "time to equilibrium [s] (sweeps; steps at the sweep limit)", "ms/step at equilibrium", "sweeps/step",
                "ms/sweep", "NLGS µs/update", "split ms/step (local, nlgs, correction)", "floor reaction / weight",
