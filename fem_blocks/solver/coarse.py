@@ -29,6 +29,8 @@ than before that correction, the corrections stop for the rest of that solve.
 """
 from __future__ import annotations
 
+import weakref
+
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
@@ -41,8 +43,8 @@ FACTOR_MUMPS = 3000  # coarse unknowns: from here on MUMPS Cholesky (linalg.Fact
 
 
 def interface_groups(body_a, body_b, nb: int | None = None):
-    """Interface id per contact: one per unordered pair of bodies (ids 0..ng-1 in order of first appearance of
-    the sorted pair keys). Returns (group (nc,) int64, ng)."""
+    """Interface id per contact: one per unordered pair of bodies (ids 0..ng-1 in increasing order of the pair
+    (min body, max body)). Returns (group (nc,) int64, ng)."""
     a = np.asarray(body_a, dtype=np.int64)
     b = np.asarray(body_b, dtype=np.int64)
     if a.shape != b.shape or a.ndim != 1:
@@ -59,8 +61,9 @@ def interface_groups(body_a, body_b, nb: int | None = None):
 class InterfaceCoarse:
     """Coarse space of the interfaces (2D): group id, position and tangent of each contact (see module docstring).
 
-    `every`: a correction after every `every` sweeps. The factor of W_c is cached (key: the Delassus arrays'
-    identity and the sticking set)."""
+    `every`: a correction after every `every` sweeps. The factor of W_c is kept while the Delassus arrays are the
+    same object and the sticking set differs from the factored one in at most `refactor` (a fraction) of the
+    contacts. Counters: n_factor, n_correct, n_off (solves where the safeguard stopped the corrections)."""
 
     def __init__(self, group, point, t, every: int = 10, refactor: float = 0.02):
         group = np.ascontiguousarray(group, dtype=np.int64)
@@ -85,6 +88,7 @@ class InterfaceCoarse:
         self.s = np.einsum("ij,ij->i", point, tg)  # position along the interface's tangent
         self.c = np.einsum("ij,ij->i", t, tg)      # tangential direction relative to the interface's
         self.refactor = float(refactor)
+        self.guard = 1.0  # safeguard factor (see correct)
         self._lu = None
         self._basis = None
         self._active_f = None
@@ -142,7 +146,7 @@ class InterfaceCoarse:
             self._lu = spla.splu(Wc.tocsc())
         self._basis = P
         self._active_f = active.copy()
-        self._W_f = W.blocks  # the Delassus arrays factored (identity, kept alive)
+        self._W_f = weakref.ref(W.blocks)  # the Delassus arrays factored (identity; not kept alive)
         self.n_factor += 1
 
     def _release(self):
@@ -168,13 +172,13 @@ class InterfaceCoarse:
         _matvec_q(W.indptr, W.indices, W.blocks, r, q, u)
         from .nlgs import natural_map_2d
         f = natural_map_2d(r, u, mu)
-        if self._last is not None and f > self._last:
+        if self._last is not None and f > self.guard * self._last:
             self._off = True
             self.n_off += 1
             return False
         if not active.any():
             return False
-        if (self._lu is None or self._W_f is not W.blocks
+        if (self._lu is None or self._W_f() is not W.blocks
                 or np.count_nonzero(active != self._active_f) > self.refactor * active.size):
             self._factor(W, active)
         act = active & self._active_f
