@@ -136,3 +136,14 @@ def test_cohesive_law_rejected():
     sim = Simulation([DeformableBody(bt, (0.0, 0.0)), floor], h=1e-3, theta=1.0, contact=cs, velocity_reset=True)
     with pytest.raises(InputError, match="interfaces.j.law.*contact.coarse"):
         sim.step()
+
+
+def test_case_file_key(tmp_path):
+    """[contact] coarse / coarse_every reach ContactOptions through the case file."""
+    from fem_blocks.case import load_case
+    src = open(__file__.replace("test_coarse.py", "bad_cases/122_contact_coarse_newton.toml")).read()
+    f = tmp_path / "c.toml"
+    f.write_text(src.replace('solver = "newton"', "coarse_every = 7"))
+    case = load_case(str(f))
+    opts = ContactOptions(**case.contact)
+    assert (opts.coarse, opts.coarse_every) == ("interfaces", 7)

@@ -88,7 +88,6 @@ class InterfaceCoarse:
         self.s = np.einsum("ij,ij->i", point, tg)  # position along the interface's tangent
         self.c = np.einsum("ij,ij->i", t, tg)      # tangential direction relative to the interface's
         self.refactor = float(refactor)
-        self.guard = 1.0  # safeguard factor (see correct)
         self._lu = None
         self._basis = None
         self._active_f = None
@@ -172,7 +171,7 @@ class InterfaceCoarse:
         _matvec_q(W.indptr, W.indices, W.blocks, r, q, u)
         from .nlgs import natural_map_2d
         f = natural_map_2d(r, u, mu)
-        if self._last is not None and f > self.guard * self._last:
+        if self._last is not None and f > self._last:
             self._off = True
             self.n_off += 1
             return False
