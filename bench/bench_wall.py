@@ -9,14 +9,18 @@ Reported per wall:
 * setup: building the bodies (meshing and factoring each block type once, placing instances) + the first
   step's scene, detection, boundary Delassus blocks W_bb and Delassus assembly (not the first solve);
 * the transient: steps to equilibrium (floor reaction = weight within 1e-3 and at most 2 sweeps per step over
-  5 consecutive steps; cap `--max-steps`), its wall time and sweeps;
+  5 consecutive steps; cap `--max-steps`), the step from which the floor reaction stays within 1e-3 of the weight
+  until the end of the transient, its wall time and sweeps (`--trace CSV`: one row per transient step);
 * the cost of a step at equilibrium (mean over 20 steps after it): ms/step, sweeps/step, NLGS µs per contact
   update and the split (local quantities, NLGS, velocity correction);
 * peak RSS, the floor reaction / weight at the end.
 With several sizes it fits the exponent a of cost ∝ contacts^a (least squares in log–log) for the time per step at
 equilibrium, the time per sweep and the time to equilibrium.
 
+`--coarse interfaces`: two-level NLGS ([contact] coarse, solver/coarse.py; dry joints).
+
 Usage: .venv/bin/python bench/bench_wall.py [n_bricks ...] [--joints dry|fremond] [--max-steps N]
+[--coarse none|interfaces] [--trace CSV]
 (default sizes 100 1000; 10000 takes several minutes and about 1 GB).
 """
 import argparse
@@ -37,7 +41,7 @@ from fem_blocks.meshing import mesh_rectangle  # noqa: E402
 FREMOND = dict(c_N=0.5e10, c_T=0.3e10, w=18.0, mu=0.7)
 
 
-def build(n_bricks, joints="dry", h=1e-3, theta=1.0, velocity_reset=True):
+def build(n_bricks, joints="dry", h=1e-3, theta=1.0, velocity_reset=True, coarse="none"):
     """The wall, its floor, the contact step and the simulation; returns (sim, cs, floor, blocks, weight, t_build)."""
     per = max(2, int(round(np.sqrt(n_bricks * 0.25 / 0.5))))  # about twice as wide as high (in bricks)
     courses = max(1, int(round(n_bricks / per)))
@@ -55,7 +59,7 @@ def build(n_bricks, joints="dry", h=1e-3, theta=1.0, velocity_reset=True):
     joint = (InterfaceSpec("j", ("b", "b"), mu=0.7) if joints == "dry" else
              InterfaceSpec("j", ("b", "b"), law="fremond", params=dict(FREMOND)))
     cs = ContactStep([joint, InterfaceSpec("f", ("b", "g"), mu=0.7)],
-                     ["b"] * len(bodies) + ["g"], ContactOptions(tol=1e-4, max_sweeps=1000))
+                     ["b"] * len(bodies) + ["g"], ContactOptions(tol=1e-4, max_sweeps=1000, coarse=coarse))
     sim = Simulation(bodies + [floor], h=h, theta=theta, contact=cs, velocity_reset=velocity_reset)
     t_build = time.perf_counter() - t0
     weight = sum(1800.0 * b.length * b.height * 0.12 for b in blocks) * 9.81
@@ -86,22 +90,30 @@ def wall_dynamic(n_bricks, joints="dry", steps=200):
                 floor_reaction_over_weight=floor.reaction[1] / weight, rss_mb=rss)
 
 
-def wall(n_bricks, joints="dry", h=1e-3, max_steps=300, steady_steps=20):
-    sim, cs, floor, blocks, weight, t_build = build(n_bricks, joints, h=h)
+def wall(n_bricks, joints="dry", h=1e-3, max_steps=300, steady_steps=20, coarse="none", trace=None):
+    sim, cs, floor, blocks, weight, t_build = build(n_bricks, joints, h=h, coarse=coarse)
 
     t1 = time.perf_counter()
     info = sim.step()  # first step: scene, detection, W_bb, Delassus, then a cold NLGS solve
     t_setup = t_build + cs.timers["detection"]  # the detection timer includes W_bb and the Delassus assembly
     sweeps, quiet, steps = info.contact["sweeps"], 0, 1
     limit_steps = int(not info.contact.get("converged", True))
+    rows = [(1, info.contact["sweeps"], floor.reaction[1] / weight, time.perf_counter() - t1)]
     while steps < max_steps and quiet < 5:
+        c = time.perf_counter()
         info = sim.step()
         steps += 1
         sweeps += info.contact["sweeps"]
         limit_steps += int(not info.contact.get("converged", True))
+        rows.append((steps, info.contact["sweeps"], floor.reaction[1] / weight, time.perf_counter() - c))
         ok = abs(floor.reaction[1] / weight - 1.0) < 1e-3 and info.contact["sweeps"] <= 2
         quiet = quiet + 1 if ok else 0
     t_eq = time.perf_counter() - t1
+    out = [k for k, _, rw, _ in rows if abs(rw - 1.0) >= 1e-3]
+    within = 1 if not out else (out[-1] + 1 if out[-1] < steps else None)  # reaction within 1e-3 from this step on
+    if trace:
+        with open(trace, "a") as f:
+            f.writelines(f"{n_bricks},{cs.opts.coarse},{k},{s},{rw:.7f},{dt:.4f}\n" for k, s, rw, dt in rows)
     for k in cs.timers:
         cs.timers[k] = 0.0
     s_sweeps = 0
@@ -113,7 +125,7 @@ def wall(n_bricks, joints="dry", h=1e-3, max_steps=300, steady_steps=20):
     nc = info.contact["contacts"]
     rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     tm = {k: v / steady_steps * 1e3 for k, v in cs.timers.items()}
-    return dict(bricks=len(blocks), contacts=nc, setup_s=t_setup, eq_steps=steps if quiet >= 5 else None,
+    return dict(bricks=len(blocks), contacts=nc, setup_s=t_setup, eq_steps=steps if quiet >= 5 else None, within=within,
                 steps=steps, eq_s=t_eq, eq_sweeps=sweeps, limit_steps=limit_steps, ms_per_step=dt * 1e3,
                 sweeps_per_step=s_sweeps / steady_steps,
                 us_per_update=cs.timers["nlgs"] / max(s_sweeps * nc, 1) * 1e6,
@@ -151,10 +163,14 @@ if __name__ == "__main__":
     ap.add_argument("sizes", nargs="*", type=int, default=[100, 1000])
     ap.add_argument("--joints", choices=("dry", "fremond"), default="dry")
     ap.add_argument("--max-steps", type=int, default=300)
+    ap.add_argument("--trace", metavar="CSV", help="append one row per transient step: bricks, coarse, step, sweeps, "
+                    "floor reaction / weight, step time [s]")
+    ap.add_argument("--coarse", choices=("none", "interfaces"), default="none",
+                    help="[contact] coarse: two-level NLGS (coarse correction per interface, dry joints)")
     ap.add_argument("--dynamic", type=int, default=0, metavar="STEPS",
                     help="instead: STEPS dynamic steps with benchmark 1's settings (h = 1e-4 s, theta = 0.505)")
     a = ap.parse_args()
-    print(f"joints: {a.joints}")
+    print(f"joints: {a.joints}, coarse: {a.coarse}")
     if a.dynamic:
         print(f"dynamic: h = 1e-4 s, theta = 0.505, {a.dynamic} steps from rest\n")
         table(a.sizes, lambda n: wall_dynamic(n, a.joints, a.dynamic),
@@ -167,13 +183,14 @@ if __name__ == "__main__":
                          f"{r['rss_mb']:.0f}"],
               [("time per step", "ms_per_step"), ("sweeps per step", "sweeps_per_step")])
     else:
-        table(a.sizes, lambda n: wall(n, a.joints, max_steps=a.max_steps),
-              ["bricks", "contacts", "setup [s]", "steps to equilibrium",
+        table(a.sizes, lambda n: wall(n, a.joints, max_steps=a.max_steps, coarse=a.coarse, trace=a.trace),
+              ["bricks", "contacts", "setup [s]", "steps to equilibrium", "reaction within 1e-3 from step",
                "time to equilibrium [s] (sweeps; steps at the sweep limit)", "ms/step at equilibrium", "sweeps/step",
                "ms/sweep", "NLGS µs/update", "split ms/step (local, nlgs, correction)", "floor reaction / weight",
                "peak RSS [MB]"],
               lambda r: [f"{r['bricks']}", f"{r['contacts']}", f"{r['setup_s']:.2f}",
                          f"{r['eq_steps']}" if r["eq_steps"] is not None else f"not reached in {r['steps']}",
+                         f"{r['within']}" if r["within"] is not None else "-",
                          f"{r['eq_s']:.1f} ({r['eq_sweeps']}; {r['limit_steps']})", f"{r['ms_per_step']:.1f}",
                          f"{r['sweeps_per_step']:.1f}", f"{r['ms_per_sweep']:.2f}", f"{r['us_per_update']:.3f}",
                          split_text(r), f"{r['floor_reaction_over_weight']:.6f}", f"{r['rss_mb']:.0f}"],

@@ -671,7 +671,9 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
                        solver=ct.string("solver", "nlgs", choices=("nlgs", "newton")),
                        criterion=ct.string("criterion", "change", choices=("change", "residual")),
                        check_every=ct.integer("check_every", 10, lo=1),
-                       fallback=ct.string("fallback", "none", choices=("none", "newton")))
+                       fallback=ct.string("fallback", "none", choices=("none", "newton")),
+                       coarse=ct.string("coarse", "none", choices=("none", "interfaces")),
+                       coarse_every=ct.integer("coarse_every", 10, lo=1))
         from .contact.step import ContactOptions
         try:  # the options' cross-field rules (e.g. fallback = 'newton' needs nlgs + residual), before any meshing
             ContactOptions(**contact)

@@ -93,6 +93,8 @@ class ContactOptions:
     solver: str = "nlgs"        # "nlgs" | "newton" (global semismooth Newton, NLGS start and fallback; 2D Coulomb)
     check_every: int = 10
     fallback: str = "none"      # "newton": NLGS hands over to the global Newton when it stagnates (Coulomb contacts)
+    coarse: str = "none"        # "interfaces": two-level NLGS, coarse correction per interface (solver/coarse.py)
+    coarse_every: int = 10      # sweeps between two coarse corrections
 
     def __post_init__(self):
         if self.geometry not in ("frozen", "updated"):
@@ -112,6 +114,12 @@ class ContactOptions:
         if self.fallback == "newton" and (self.solver != "nlgs" or self.criterion != "residual"):
             raise InputError("contact.fallback = 'newton': expected solver = 'nlgs' and criterion = 'residual' "
                              "(stagnation is measured on the residual)")
+        if self.coarse not in ("none", "interfaces"):
+            raise InputError(f"contact.coarse = {self.coarse!r}: expected 'none' or 'interfaces'")
+        check_range("contact.coarse_every", self.coarse_every, 1, expected="coarse_every >= 1")
+        if self.coarse != "none" and (self.solver != "nlgs" or self.fallback != "none"):
+            raise InputError(f"contact.coarse = {self.coarse!r}: expected solver = 'nlgs' and fallback = 'none' (the "
+                             "coarse correction is a step of the Gauss-Seidel solver)")
         if self.on_nonconvergence not in ("warn", "fail", "refine"):
             raise InputError(f"contact.on_nonconvergence = {self.on_nonconvergence!r}: expected 'warn', 'fail' or "
                              "'refine' (refine: handled by the runner, warn here)")
@@ -200,6 +208,11 @@ class ContactStep:
         self.mu = self.par[:, 0].copy()
         from ..laws import P_FC
         self.cohesive = bool(np.any(self.law != 0) or np.any(self.par[:, P_FC] > 0))  # caps: cohesive kernels
+        if self.opts.coarse != "none" and self.cohesive:
+            bad = next(itf for itf in self.interfaces if itf.law_code != 0 or itf.law_par[P_FC] > 0)
+            raise InputError(f"interfaces.{bad.name}.law = {bad.law!r}: contact.coarse = {self.opts.coarse!r} handles "
+                             "the Coulomb law without crushing cap only; expected contact.coarse = 'none'")
+        self._coarse = None  # built at the next solve from the new contact set
         if self.dim == 3 and self.cohesive and self.opts.solver == "newton":
             bad = next(itf for itf in self.interfaces if itf.law_code != 0 or itf.law_par[P_FC] > 0)
             raise InputError(f"interfaces.{bad.name}.law = {bad.law!r}: the 3D Newton solver handles the Coulomb law "
@@ -287,6 +300,9 @@ class ContactStep:
         self._det, self._kin = (det, kin) if self.dim == 2 else (det3, kin3)
         self._cs_cls = det.ContactSet if self.dim == 2 else det3.ContactSet3D
         self._g_cls = kin.GBlocks if self.dim == 2 else kin3.GBlocks3D
+        if self.dim == 3 and self.opts.coarse != "none":
+            raise InputError(f"contact.coarse = {self.opts.coarse!r}: the interface coarse space is 2D only; expected "
+                             "'none' in 3D")
         if self.dim == 3 and self.opts.solver == "newton":
             from ..solver import newton
             if not hasattr(newton, "alart_curnier_3d"):
@@ -405,11 +421,17 @@ class ContactStep:
                 res = solve_newton(self.Wdel, q.ravel(), self.mu, r0=self.P.ravel(), tol=self.opts.tol,
                                    max_sweeps_total=self.opts.max_sweeps)
             else:
+                coarse = None
+                if self.opts.coarse == "interfaces":
+                    if self._coarse is None:
+                        from ..solver.coarse import InterfaceCoarse
+                        self._coarse = InterfaceCoarse.from_contacts(cs, self.opts.coarse_every)
+                    coarse = self._coarse
                 res = nlgs.solve_block_csr(self.Wdel, q.ravel(), self.mu, r0=self.P.ravel(), tol=self.opts.tol,
                                            max_sweeps=self.opts.max_sweeps, omega=self.opts.omega,
                                            order=self.opts.order, seed=self.opts.seed + self.steps,
                                            criterion=self.opts.criterion, check_every=self.opts.check_every,
-                                           fallback=self.opts.fallback)
+                                           fallback=self.opts.fallback, coarse=coarse)
             from ..laws import NSTATE, S_UN, S_UT
             vs = res.u.reshape(-1, d)
             self.state[:, S_UN] += h * ((1 - th) * vi[:, 0] + th * (vs[:, 0] - gbar / (h * th)))

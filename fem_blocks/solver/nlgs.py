@@ -418,9 +418,13 @@ def _check(bcsr: BlockCSR, q, mu, tol, max_sweeps, omega, order, check_every):
 def solve_block_csr(W: BlockCSR, q, mu, r0=None, tol: float = 1e-8, max_sweeps: int = 10000,
                     omega: float = 1.0, order: str = "given", seed: int = 0, criterion: str = "change",
                     check_every: int = 1, fallback: str = "none", stall_sweeps: int = 200,
-                    stall_factor: float = 0.5, newton_max_iter: int = 200) -> NLGSResult:
+                    stall_factor: float = 0.5, newton_max_iter: int = 200, coarse=None) -> NLGSResult:
     """NLGS on block-CSR arrays (2x2 or 3x3 blocks). criterion "change": stop when ‖Δr‖/‖r‖ <= tol over a
     sweep; "residual": stop when the FCLIB residual ‖F‖/‖q‖ <= tol (checked every `check_every` sweeps).
+
+    coarse (2D, fallback "none"): a coarse space (solver/coarse.py, e.g. `InterfaceCoarse`); after every
+    `coarse.every` sweeps that did not converge, its Galerkin correction on the sticking contacts (two-level NLGS).
+    The stopping test is unchanged; `sweeps` counts the Gauss–Seidel sweeps only.
 
     fallback "newton" (criterion "residual" only): Gauss–Seidel runs in windows of `stall_sweeps` sweeps; when a
     window does not reduce the residual below `stall_factor` times its value at the window's start (stagnation:
@@ -441,9 +445,15 @@ def solve_block_csr(W: BlockCSR, q, mu, r0=None, tol: float = 1e-8, max_sweeps: 
             raise InputError(f"stall_factor = {stall_factor!r}: expected 0 < stall_factor < 1")
         if int(newton_max_iter) != newton_max_iter or newton_max_iter < 1:
             raise InputError(f"newton_max_iter = {newton_max_iter!r}: expected an integer >= 1")
+        if coarse is not None:
+            raise InputError("coarse: not available with fallback = 'newton'")
         return _solve_with_newton_fallback(W, q, mu, r0, tol, max_sweeps, omega, order, seed, check_every,
                                            int(stall_sweeps), float(stall_factor), int(newton_max_iter))
     q, mu = _check(W, q, mu, tol, max_sweeps, omega, order, check_every)
+    if coarse is not None and W.dim != 2:
+        raise InputError(f"coarse: the interface coarse space is 2D only (W has {W.dim}x{W.dim} blocks)")
+    if coarse is not None and coarse.group.shape[0] != W.n:
+        raise InputError(f"coarse: built for {coarse.group.shape[0]} contacts, W has {W.n}")
     n, d = W.n, W.dim
     r = np.zeros(d * n) if r0 is None else np.array(r0, dtype=np.float64).ravel()
     if r.size != d * n:
@@ -454,9 +464,23 @@ def solve_block_csr(W: BlockCSR, q, mu, r0=None, tol: float = 1e-8, max_sweeps: 
     if n == 0:
         return NLGSResult(r, q.copy(), 0, True, 0.0, 0.0, 0.0, "no contact")
     cases = np.zeros(6, dtype=np.int64)
-    sweeps, change, converged = _run(W.indptr, W.indices, W.blocks, W.diag_pos, q, mu, r, ORDERS[order],
-                                     float(omega), float(tol), int(max_sweeps), int(seed),
-                                     criterion == "residual", int(check_every), qnorm, cases)
+    if coarse is None:
+        sweeps, change, converged = _run(W.indptr, W.indices, W.blocks, W.diag_pos, q, mu, r, ORDERS[order],
+                                         float(omega), float(tol), int(max_sweeps), int(seed),
+                                         criterion == "residual", int(check_every), qnorm, cases)
+    else:  # two-level: chunks of `every` sweeps, a coarse correction between chunks
+        sweeps, chunk = 0, 0
+        coarse.start()
+        while True:
+            n_s, change, converged = _run(W.indptr, W.indices, W.blocks, W.diag_pos, q, mu, r, ORDERS[order],
+                                          float(omega), float(tol), min(coarse.every, int(max_sweeps) - sweeps),
+                                          int(seed) + chunk, criterion == "residual", int(check_every), qnorm,
+                                          cases)
+            sweeps += n_s
+            chunk += 1
+            if converged or sweeps >= max_sweeps:
+                break
+            coarse.correct(W, q, mu, r)
     u = np.empty_like(q)
     matvec_bcsr(W.indptr, W.indices, W.blocks, r, u)
     u += q
