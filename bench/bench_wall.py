@@ -41,7 +41,7 @@ from fem_blocks.meshing import mesh_rectangle  # noqa: E402
 FREMOND = dict(c_N=0.5e10, c_T=0.3e10, w=18.0, mu=0.7)
 
 
-def build(n_bricks, joints="dry", h=1e-3, theta=1.0, velocity_reset=True, coarse="none"):
+def build(n_bricks, joints="dry", h=1e-3, theta=1.0, velocity_reset=True, coarse="none", max_sweeps=1000):
     """The wall, its floor, the contact step and the simulation; returns (sim, cs, floor, blocks, weight, t_build)."""
     per = max(2, int(round(np.sqrt(n_bricks * 0.25 / 0.5))))  # about twice as wide as high (in bricks)
     courses = max(1, int(round(n_bricks / per)))
@@ -59,7 +59,7 @@ def build(n_bricks, joints="dry", h=1e-3, theta=1.0, velocity_reset=True, coarse
     joint = (InterfaceSpec("j", ("b", "b"), mu=0.7) if joints == "dry" else
              InterfaceSpec("j", ("b", "b"), law="fremond", params=dict(FREMOND)))
     cs = ContactStep([joint, InterfaceSpec("f", ("b", "g"), mu=0.7)],
-                     ["b"] * len(bodies) + ["g"], ContactOptions(tol=1e-4, max_sweeps=1000, coarse=coarse))
+                     ["b"] * len(bodies) + ["g"], ContactOptions(tol=1e-4, max_sweeps=max_sweeps, coarse=coarse))
     sim = Simulation(bodies + [floor], h=h, theta=theta, contact=cs, velocity_reset=velocity_reset)
     t_build = time.perf_counter() - t0
     weight = sum(1800.0 * b.length * b.height * 0.12 for b in blocks) * 9.81
@@ -90,8 +90,9 @@ def wall_dynamic(n_bricks, joints="dry", steps=200):
                 floor_reaction_over_weight=floor.reaction[1] / weight, rss_mb=rss)
 
 
-def wall(n_bricks, joints="dry", h=1e-3, max_steps=300, steady_steps=20, coarse="none", trace=None):
-    sim, cs, floor, blocks, weight, t_build = build(n_bricks, joints, h=h, coarse=coarse)
+def wall(n_bricks, joints="dry", h=1e-3, max_steps=300, steady_steps=20, coarse="none", trace=None,
+         max_sweeps=1000):
+    sim, cs, floor, blocks, weight, t_build = build(n_bricks, joints, h=h, coarse=coarse, max_sweeps=max_sweeps)
 
     t1 = time.perf_counter()
     info = sim.step()  # first step: scene, detection, W_bb, Delassus, then a cold NLGS solve
@@ -167,10 +168,12 @@ if __name__ == "__main__":
                     "floor reaction / weight, step time [s]")
     ap.add_argument("--coarse", choices=("none", "interfaces"), default="none",
                     help="[contact] coarse: two-level NLGS (coarse correction per interface, dry joints)")
+    ap.add_argument("--h", type=float, default=1e-3, help="time step of the quasi-static steps [s] (default 1e-3)")
+    ap.add_argument("--max-sweeps", type=int, default=1000, help="NLGS sweep cap per step (default 1000)")
     ap.add_argument("--dynamic", type=int, default=0, metavar="STEPS",
                     help="instead: STEPS dynamic steps with benchmark 1's settings (h = 1e-4 s, theta = 0.505)")
     a = ap.parse_args()
-    print(f"joints: {a.joints}, coarse: {a.coarse}")
+    print(f"joints: {a.joints}, coarse: {a.coarse}" + ("" if a.dynamic else f", h = {a.h:g} s, sweep cap {a.max_sweeps}"))
     if a.dynamic:
         print(f"dynamic: h = 1e-4 s, theta = 0.505, {a.dynamic} steps from rest\n")
         table(a.sizes, lambda n: wall_dynamic(n, a.joints, a.dynamic),
@@ -183,7 +186,8 @@ if __name__ == "__main__":
                          f"{r['rss_mb']:.0f}"],
               [("time per step", "ms_per_step"), ("sweeps per step", "sweeps_per_step")])
     else:
-        table(a.sizes, lambda n: wall(n, a.joints, max_steps=a.max_steps, coarse=a.coarse, trace=a.trace),
+        table(a.sizes, lambda n: wall(n, a.joints, h=a.h, max_steps=a.max_steps, coarse=a.coarse, trace=a.trace,
+                                             max_sweeps=a.max_sweeps),
               ["bricks", "contacts", "setup [s]", "steps to equilibrium", "reaction within 1e-3 from step",
                "time to equilibrium [s] (sweeps; steps at the sweep limit)", "ms/step at equilibrium", "sweeps/step",
                "ms/sweep", "NLGS µs/update", "split ms/step (local, nlgs, correction)", "floor reaction / weight",
