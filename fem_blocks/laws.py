@@ -24,6 +24,8 @@ contact's tributary area A), with u = (u_N, u_T) the displacement jump since the
   initiation criterion (σ/f_t)² + (τ/c)² = 1); linear softening D = λ_f(λ-1)/(λ(λ_f-1)) or exponential
   D = 1 - exp(-(λ-1)/λ_e)/λ, with λ_f (λ_e) interpolated between modes I and II by the mode ratio
   m = (u_T/δ_II)²/λ² so that pure modes dissipate G_I and G_II. Dissipation Y ΔD with Y = ½(k_n⟨u_N⟩₊² + k_s u_T²).
+  Optional viscous regularisation (`damage_viscosity` η > 0): Ḋ = (D_s(u) - D)/η with D_s the rate-independent value,
+  backward Euler D = (D_n + (h/η) D_s)/(1 + h/η) (`viscous_damage`); η = 0 is the rate-independent law.
 
 Compressive cap (any law, optional `f_c` [Pa]): r̃_N <= f_c A (elastic–perfectly plastic crushing). At the cap
 the joint closes further; the closure u_p <= 0 (state S_UP) shifts the contact surface (Signorini on g - g0 - u_p,
