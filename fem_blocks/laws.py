@@ -24,6 +24,8 @@ contact's tributary area A), with u = (u_N, u_T) the displacement jump since the
   initiation criterion (σ/f_t)² + (τ/c)² = 1); linear softening D = λ_f(λ-1)/(λ(λ_f-1)) or exponential
   D = 1 - exp(-(λ-1)/λ_e)/λ, with λ_f (λ_e) interpolated between modes I and II by the mode ratio
   m = (u_T/δ_II)²/λ² so that pure modes dissipate G_I and G_II. Dissipation Y ΔD with Y = ½(k_n⟨u_N⟩₊² + k_s u_T²).
+  Optional viscous regularisation (`damage_viscosity` η > 0): Ḋ = (D_s(u) - D)/η with D_s the rate-independent value,
+  backward Euler D = (D_n + (h/η) D_s)/(1 + h/η) (`viscous_damage`); η = 0 is the rate-independent law.
 
 Compressive cap (any law, optional `f_c` [Pa]): r̃_N <= f_c A (elastic–perfectly plastic crushing). At the cap
 the joint closes further; the closure u_p <= 0 (state S_UP) shifts the contact surface (Signorini on g - g0 - u_p,
@@ -45,8 +47,9 @@ COULOMB, ELASTIC, BRITTLE, DUGDALE, FREMOND, MIXED = 0, 1, 2, 3, 4, 5
 LAW_NAMES = {"coulomb": COULOMB, "elastic": ELASTIC, "brittle": BRITTLE, "dugdale": DUGDALE,
              "fremond": FREMOND, "mixed": MIXED}
 # parameter columns (per unit area)
-P_MU, P_CN, P_CT, P_RC, P_SC, P_LC, P_W, P_B, P_P, P_MUR, P_MUKIND, P_FT, P_C, P_GI, P_GII, P_SOFT, P_FC = range(17)
-NPAR = 17
+P_MU, P_CN, P_CT, P_RC, P_SC, P_LC, P_W, P_B, P_P, P_MUR, P_MUKIND, P_FT, P_C, P_GI, P_GII, P_SOFT, P_FC, P_ETA = \
+    range(18)
+NPAR = 18
 # state columns; 3D (u = (u_N, u_T, u_S)) appends the second tangential jump S_US, the 2D columns stay in place
 S_BETA, S_UN, S_UT, S_DISS, S_HIST, S_BROKEN, S_UP = range(7)
 NSTATE = 7
@@ -58,7 +61,7 @@ LAW_KEYS = {
     "elastic": {"mu", "c_N", "c_T", "f_c"},
     "brittle": {"mu", "variant", "c_N", "c_T", "r_c", "s_c", "l_c", "f_c"},
     "fremond": {"mu", "mu_r", "friction", "c_N", "c_T", "w", "b", "p", "f_c"},
-    "mixed": {"k_n", "k_s", "f_t", "c", "G_I", "G_II", "tan_phi", "softening", "f_c"},
+    "mixed": {"k_n", "k_s", "f_t", "c", "G_I", "G_II", "tan_phi", "softening", "f_c", "damage_viscosity"},
 }
 
 
@@ -135,6 +138,10 @@ def law_parameters(law: str, params: dict, name: str) -> tuple[int, np.ndarray]:
     if soft not in ("linear", "exponential"):
         raise InputError(f"{name}.softening = {soft!r}: expected 'linear' or 'exponential'")
     p[P_SOFT] = 0.0 if soft == "linear" else 1.0
+    p[P_ETA] = get("damage_viscosity", 0.0, expected="finite damage viscosity eta >= 0 [s] (0: rate-independent)")
+    if not np.isfinite(p[P_ETA]):
+        raise InputError(f"{name}.damage_viscosity = {params['damage_viscosity']!r}: expected finite damage viscosity "
+                         f"eta >= 0 [s] (0: rate-independent)")
     eI = p[P_FT] ** 2 / (2 * p[P_CN])
     eII = p[P_C] ** 2 / (2 * p[P_CT])
     if p[P_GI] <= eI:
@@ -205,6 +212,21 @@ def _mixed_damage(par, D0, uN, uT):
 
 
 @njit(cache=True)
+def viscous_damage(par, D0, Ds, gN, gT, h):
+    """Viscous regularisation of the mixed-mode damage (Duvaut–Lions / overstress type, `damage_viscosity` η > 0):
+    Ḋ = (D_s(u) - D)/η with D_s = max(D_committed, D(λ(u))) the rate-independent damage of the current jump,
+    backward Euler over the step h from the committed D0: D = (D0 + a D_s)/(1 + a), a = h/η, i.e.
+    D = D0 + w (D_s - D0) with w = a/(1 + a) in [0, 1) (monotone: D >= D0 since D_s >= D0), and the consistent
+    tangent ∂D/∂u = w ∂D_s/∂u. η = 0 returns (D_s, gN, gT) unchanged (rate-independent law, bitwise).
+    Under a held jump (D_s fixed) D_n = D_s - (D_s - D0)(1 + a)^(-n)."""
+    eta = par[P_ETA]
+    if eta == 0.0:
+        return Ds, gN, gT
+    w = h / (eta + h)  # a/(1 + a), a = h/eta
+    return D0 + w * (Ds - D0), w * gN, w * gT
+
+
+@njit(cache=True)
 def mixed_damage_gradient(par, D0, uN, uT):
     """Damage of the mixed-mode law implied by the jump (uN, uT), D = max(D0, D(λ, m)) as in `internal_update`,
     and its derivative (∂D/∂u_N, ∂D/∂u_T) on the active piece (0 where D = D0, λ <= 1 or D = 1), for the
@@ -271,7 +293,8 @@ def internal_update(law, par, st, uN, uT, h):
     if law == FREMOND:
         un = max(uN, 0.0)
         return _fremond_beta(par, st[S_BETA], par[P_CN] * un * un + par[P_CT] * uT * uT, h)
-    return _mixed_damage(par, st[S_BETA], uN, uT)
+    D0 = st[S_BETA]
+    return viscous_damage(par, D0, _mixed_damage(par, D0, uN, uT), 0.0, 0.0, h)[0]
 
 
 @njit(cache=True)

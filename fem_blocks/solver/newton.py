@@ -61,7 +61,7 @@ from numba import njit
 
 from ..errors import InputError
 from ..laws import MIXED, P_CN, P_CT, P_FC, S_BETA, S_BROKEN, compression_stiffness, linear_part, \
-    mixed_damage_gradient
+    mixed_damage_gradient, viscous_damage
 from ..linalg import lu_solve
 from . import nlgs
 from .nlgs import BlockCSR, NLGSResult
@@ -166,6 +166,7 @@ def _cohesive_terms(law, par, st, x, ueff, v, area, h, theta, S, c, mue, cmp, ca
             if law[a] == MIXED and st[a, S_BROKEN] == 0.0:
                 uT = ueff[a, 1] + h * theta * v[2 * a + 1]
                 D, gN, gT = mixed_damage_gradient(par[a], st[a, S_BETA], uN, uT)
+                D, gN, gT = viscous_damage(par[a], st[a, S_BETA], D, gN, gT, h)  # identity if damage_viscosity = 0
                 x[a] = D
                 f = -h * area[a] * h * theta
                 if tension:

@@ -638,7 +638,8 @@ def _local_cohesive(w00, w01, w10, w11, v0, v1, law, par, st, x, ue0, ue1, area,
 @njit(cache=True)
 def _update_internal(law, par, st, ueff, v, h, theta, x):
     """x_α from the jumps u = u_eff + hθ v of a converged NLGS (d = ueff.shape[1] = 2 or 3; in 3D the laws see
-    ‖u_T‖ of the tangential 2-vector); returns the largest change."""
+    ‖u_T‖ of the tangential 2-vector; the step h enters the rate-dependent laws: Frémond's b, the mixed-mode
+    `damage_viscosity`); returns the largest change."""
     dmax = 0.0
     dim = ueff.shape[1]
     for a in range(law.shape[0]):
