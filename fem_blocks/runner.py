@@ -234,12 +234,13 @@ def _restore(sim: Simulation, model: Model, d: dict) -> None:
         model.contact.restore_state(sim, d)
 
 
-def _step(sim: Simulation, model: Model, run: dict, policy: str, max_level: int, write_row) -> tuple:
+def _step(sim: Simulation, model: Model, run: dict, policy: str, max_level: int, make_row, write_row) -> tuple:
     """One nominal step h; with policy "refine", a step whose contact solve did not converge is redone as 2, 4, ...
-    2^max_level sub-steps (sub-step rows go to the history with their h). Returns (info, refinement level)."""
+    2^max_level sub-steps (sub-step rows go to the history with their h and the state at the end of each sub-step;
+    `make_row(info, h)` builds a row from the current state, `write_row(row)` writes it). Returns (info, level)."""
     if policy != "refine" or model.contact is None:
         info = sim.step()
-        write_row(info, sim.h)
+        write_row(make_row(info, sim.h))
         return info, 0
     snap = _snapshot(sim, model, run)
     h, th, t0 = sim.h, sim.theta, sim.time
@@ -252,18 +253,18 @@ def _step(sim: Simulation, model: Model, run: dict, policy: str, max_level: int,
         rows = []
         for _ in range(2 ** level):
             info = sim.step()
-            rows.append((info, sim.h))
+            rows.append(make_row(info, sim.h))  # now: the bodies' state at the end of this sub-step
             if not info.contact.get("converged", True) and level < max_level:
                 break
         else:
             break
     if level:
         sim.set_step(h, th)
-        for info_, hh in rows:
-            write_row(info_, hh)
+        for row in rows:
+            write_row(row)
         sim.time = t0 + h  # the nominal time grid (sub-steps may differ from it by rounding)
     else:
-        write_row(info, h)
+        write_row(make_row(info, h))
     return info, level
 
 
@@ -352,8 +353,8 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
         write_summary(os.path.join(out_dir, "summary.json"), summary)
         return summary
 
-    def write_row(inf, hh):
-        hist.write(history_row(model, inf, run["stage"], sim, hh))
+    def make_row(inf, hh):
+        return history_row(model, inf, run["stage"], sim, hh)
 
     stopped_run = None
     try:
@@ -380,7 +381,7 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
                 while k < n_steps:
                     k += 1
                     good = _snapshot(sim, model, run)  # last good state, checkpointed if this step fails
-                    info, level = _step(sim, model, run, policy, max_level, write_row)
+                    info, level = _step(sim, model, run, policy, max_level, make_row, hist.write)
                     run["k"] = k
                     c = info.contact
                     if c:

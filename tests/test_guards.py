@@ -104,3 +104,6 @@ def test_nonconvergence_policy_refine_halves_the_step(tmp_path):
     assert len(hs) == 16 and s["contact"]["refined_steps"] == 4
     assert h["time"][-1] == pytest.approx(0.004, abs=1e-15)
     assert np.allclose(h["time"][4::4], [0.001, 0.002, 0.003, 0.004], rtol=0, atol=1e-15)
+    # each sub-step row carries the state at the end of its sub-step, not the end of the nominal step
+    ry = h["foundation.Ry"][1:].reshape(4, 4)
+    assert np.all(np.abs(np.diff(ry, axis=1)).max(axis=1) > 1e-3)
