@@ -7,7 +7,7 @@ from fem_blocks.bodies import Driver, RigidBody
 from fem_blocks.contact.step import ContactOptions, ContactStep, InterfaceSpec
 from fem_blocks.dynamics import Simulation
 from fem_blocks.errors import InputError
-from fem_blocks.laws import S_DISS, S_UN, S_UP, law_parameters
+from fem_blocks.laws import P_FC, S_DISS, S_UN, S_UP, law_parameters
 
 L, T, H_BLK, RHO = 0.2, 0.1, 0.1, 2000.0
 A = L * T          # one contact point at mid-edge carries the whole edge: tributary area L x T
@@ -82,4 +82,4 @@ def test_cap_parameter_validated():
         law_parameters("coulomb", dict(mu=0.5, f_c=-1.0), "interfaces.j")
     code, p = law_parameters("mixed", dict(k_n=1e11, k_s=5e10, f_t=2e5, c=3e5, G_I=10.0, G_II=50.0, tan_phi=0.6,
                                            f_c=1e7), "interfaces.j")
-    assert p[-1] == 1e7
+    assert p[P_FC] == 1e7
