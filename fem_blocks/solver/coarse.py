@@ -44,6 +44,7 @@ import scipy.sparse.linalg as spla
 from numba import njit
 
 from ..errors import InputError
+from .nlgs import clip_to_cone_2d, matvec_bcsr, natural_map_2d
 
 M2 = 3  # coarse unknowns per interface in 2D
 FACTOR_MUMPS = 3000  # coarse unknowns: from here on MUMPS Cholesky (linalg.Factor), below SuperLU
@@ -175,8 +176,8 @@ class InterfaceCoarse:
             return False
         active = _sticking(r, mu)
         u = np.empty_like(q)
-        _matvec_q(W.indptr, W.indices, W.blocks, r, q, u)
-        from .nlgs import natural_map_2d
+        matvec_bcsr(W.indptr, W.indices, W.blocks, r, u)
+        u += q
         f = natural_map_2d(r, u, mu)
         if self._last is not None and f > self._last:
             self._off = True
@@ -274,21 +275,6 @@ def _galerkin(indptr, indices, blocks, group, P, active, order, gstart, ng):
 
 
 @njit(cache=True)
-def _matvec_q(indptr, indices, blocks, r, q, u):
-    """u = W r + q (block-CSR, 2 x 2 blocks)."""
-    n = indptr.shape[0] - 1
-    for a in range(n):
-        v0 = q[2 * a]
-        v1 = q[2 * a + 1]
-        for k in range(indptr[a], indptr[a + 1]):
-            b = indices[k]
-            v0 += blocks[k, 0, 0] * r[2 * b] + blocks[k, 0, 1] * r[2 * b + 1]
-            v1 += blocks[k, 1, 0] * r[2 * b] + blocks[k, 1, 1] * r[2 * b + 1]
-        u[2 * a] = v0
-        u[2 * a + 1] = v1
-
-
-@njit(cache=True)
 def _restrict(q, u, group, P, active, ng):
     """Coarse right-hand side Pᵀ(-(u)_A) (ng * M2,) for u = W r + q."""
     m = P.shape[2]
@@ -315,14 +301,6 @@ def _prolong(r, y, group, P, active, mu):
         for j in range(m):
             d0 += P[a, 0, j] * y[g * m + j]
             d1 += P[a, 1, j] * y[g * m + j]
-        rn = r[2 * a] + d0
-        rt = r[2 * a + 1] + d1
-        if rn < 0.0:
-            rn = 0.0
-        lim = mu[a] * rn
-        if rt > lim:
-            rt = lim
-        elif rt < -lim:
-            rt = -lim
+        rn, rt = clip_to_cone_2d(r[2 * a] + d0, r[2 * a + 1] + d1, mu[a])
         r[2 * a] = rn
         r[2 * a + 1] = rt

@@ -176,6 +176,20 @@ def _local_free(indptr, indices, blocks, q, r, a):
     return v0, v1
 
 
+@njit(cache=True, inline="always")
+def clip_to_cone_2d(rn, rt, mu):
+    """(r_N, r_T) brought back into the 2D Coulomb cone after a relaxed or corrected update: r_N <- max(r_N, 0),
+    then r_T clipped to [-μ r_N, μ r_N]."""
+    if rn < 0.0:
+        rn = 0.0
+    lim = mu * rn
+    if rt > lim:
+        rt = lim
+    elif rt < -lim:
+        rt = -lim
+    return rn, rt
+
+
 @njit(cache=True)
 def _sweep(indptr, indices, blocks, diag_pos, q, mu, r, order, omega):
     dr2 = 0.0
@@ -191,13 +205,7 @@ def _sweep(indptr, indices, blocks, diag_pos, q, mu, r, order, omega):
         if omega != 1.0:
             rn = omega * rn + (1.0 - omega) * r[2 * a]
             rt = omega * rt + (1.0 - omega) * r[2 * a + 1]
-            if rn < 0.0:
-                rn = 0.0
-            lim = mu[a] * rn
-            if rt > lim:
-                rt = lim
-            elif rt < -lim:
-                rt = -lim
+            rn, rt = clip_to_cone_2d(rn, rt, mu[a])
         e0 = rn - r[2 * a]
         e1 = rt - r[2 * a + 1]
         dr2 += e0 * e0 + e1 * e1
