@@ -315,7 +315,7 @@ LAW_PARAM_UNITS = {"c_N": "stiffness", "c_T": "stiffness", "k_n": "stiffness", "
                    "r_c": "stress", "s_c": "stress", "f_t": "stress", "c": "stress", "f_c": "stress", "l_c": "length",
                    "w": "energy", "G_I": "energy", "G_II": "energy", "b": "viscosity", "p": None, "mu_r": None,
                    "tan_phi": None, "variant": None, "friction": None, "softening": None,
-                   "damage_viscosity": "time"}
+                   "damage_viscosity": "time", "G_fc": "energy"}
 DERIVED = {"stiffness": lambda U: U["stress"] / U["length"], "energy": lambda U: U["force"] / U["length"],
            "viscosity": lambda U: U["force"] / U["length"] * U["time"]}
 

@@ -30,6 +30,8 @@ contact's tributary area A), with u = (u_N, u_T) the displacement jump since the
 Compressive cap (any law, optional `f_c` [Pa]): r̃_N <= f_c A (elastic–perfectly plastic crushing). At the cap
 the joint closes further; the closure u_p <= 0 (state S_UP) shifts the contact surface (Signorini on g - g0 - u_p,
 so unloading does not spring back), the laws see the elastic jump u - u_p, and f_c A |Δu_p| is dissipated.
+With a compressive fracture energy `G_fc` [J/m²] the cap softens exponentially with the committed closure:
+f_c(u_p) = f_c exp(-f_c |u_p| / G_fc) (∫ f_c(u_p) d|u_p| = G_fc), floored at CAP_FLOOR f_c (`cap_stress`).
 
 Compression: Signorini is always kept on r̃. For coulomb, brittle and fremond it is rigid (g - g0 >= 0); the
 elastic and mixed laws have a compliant joint in compression (stiffness c_N, k_n): g̃ + r̃_N/(k A) >= 0 ⊥
@@ -47,9 +49,9 @@ COULOMB, ELASTIC, BRITTLE, DUGDALE, FREMOND, MIXED = 0, 1, 2, 3, 4, 5
 LAW_NAMES = {"coulomb": COULOMB, "elastic": ELASTIC, "brittle": BRITTLE, "dugdale": DUGDALE,
              "fremond": FREMOND, "mixed": MIXED}
 # parameter columns (per unit area)
-P_MU, P_CN, P_CT, P_RC, P_SC, P_LC, P_W, P_B, P_P, P_MUR, P_MUKIND, P_FT, P_C, P_GI, P_GII, P_SOFT, P_FC, P_ETA = \
-    range(18)
-NPAR = 18
+P_MU, P_CN, P_CT, P_RC, P_SC, P_LC, P_W, P_B, P_P, P_MUR, P_MUKIND, P_FT, P_C, P_GI, P_GII, P_SOFT, P_FC, P_ETA, \
+    P_GFC = range(19)
+NPAR = 19
 # state columns; 3D (u = (u_N, u_T, u_S)) appends the second tangential jump S_US, the 2D columns stay in place
 S_BETA, S_UN, S_UT, S_DISS, S_HIST, S_BROKEN, S_UP = range(7)
 NSTATE = 7
@@ -57,11 +59,11 @@ S_US = 7
 NSTATE3 = 8
 
 LAW_KEYS = {
-    "coulomb": {"mu", "f_c"},
-    "elastic": {"mu", "c_N", "c_T", "f_c"},
-    "brittle": {"mu", "variant", "c_N", "c_T", "r_c", "s_c", "l_c", "f_c"},
-    "fremond": {"mu", "mu_r", "friction", "c_N", "c_T", "w", "b", "p", "f_c"},
-    "mixed": {"k_n", "k_s", "f_t", "c", "G_I", "G_II", "tan_phi", "softening", "f_c", "damage_viscosity"},
+    "coulomb": {"mu", "f_c", "G_fc"},
+    "elastic": {"mu", "c_N", "c_T", "f_c", "G_fc"},
+    "brittle": {"mu", "variant", "c_N", "c_T", "r_c", "s_c", "l_c", "f_c", "G_fc"},
+    "fremond": {"mu", "mu_r", "friction", "c_N", "c_T", "w", "b", "p", "f_c", "G_fc"},
+    "mixed": {"k_n", "k_s", "f_t", "c", "G_I", "G_II", "tan_phi", "softening", "f_c", "G_fc", "damage_viscosity"},
 }
 
 
@@ -85,6 +87,14 @@ def law_parameters(law: str, params: dict, name: str) -> tuple[int, np.ndarray]:
     p[P_FC] = get("f_c", 0.0, lo_open=False, expected="compressive strength f_c > 0 [Pa] (omit: no cap)")
     if "f_c" in params and p[P_FC] <= 0.0:
         raise InputError(f"{name}.f_c = {params['f_c']!r}: expected compressive strength f_c > 0 [Pa] (omit: no cap)")
+    if "G_fc" in params:
+        if "f_c" not in params:
+            raise InputError(f"{name}.G_fc: needs the compressive strength f_c [Pa] (G_fc softens the cap f_c)")
+        p[P_GFC] = get("G_fc", None, lo_open=True, expected="compressive fracture energy G_fc > 0 [J/m^2] "
+                                                              "(omit: perfectly plastic cap)")
+        if not np.isfinite(p[P_GFC]):
+            raise InputError(f"{name}.G_fc = {params['G_fc']!r}: expected finite compressive fracture energy "
+                             f"G_fc > 0 [J/m^2] (omit: perfectly plastic cap)")
     if law != "mixed":
         p[P_MU] = get("mu", None if law == "coulomb" else 0.0, expected="mu >= 0")
     if law == "coulomb":
@@ -163,6 +173,20 @@ def initial_state(law: np.ndarray, dim: int = 2) -> np.ndarray:
 
 
 # ----------------------------------------------------------------------------- compiled law evaluation
+CAP_FLOOR = 1e-6  # a softened cap never drops below CAP_FLOOR f_c (a zero cap would read as "no cap")
+
+
+@njit(cache=True)
+def cap_stress(par, st):
+    """Current compressive strength of the cap [Pa] (0: no cap): f_c, or with a compressive fracture energy
+    G_fc > 0 the exponential softening f_c max(exp(-f_c |u_p| / G_fc), CAP_FLOOR) of the committed plastic
+    closure u_p = st[S_UP] <= 0 (explicit in the step: the cap of a step is that of the committed state)."""
+    fc = par[P_FC]
+    if fc <= 0.0 or par[P_GFC] <= 0.0:
+        return fc
+    return fc * max(np.exp(-fc * abs(st[S_UP]) / par[P_GFC]), CAP_FLOOR)
+
+
 @njit(cache=True)
 def _fremond_beta(par, beta0, Y, h):
     w = par[P_W]
@@ -393,7 +417,7 @@ def commit3(law, par, st, x, uN, uT, uS, area):
 def commit_step(law, par, st, trial, ueff, P, v, area, h, theta):
     """End of a converged cohesive step, any dimension d = ueff.shape[1] (2: state rows NSTATE, 3: NSTATE3).
     P (impulses) and v (shifted velocities, u = u_eff + hθ v) are flat, d entries per contact. At the cap
-    (P̃_N = P_N + hA(k_N u_N + f_N) >= h f_c A) the closure is plastic: Δu_p = min(0, hθ(v_N + cmp P̃_N)) (cmp the
+    (P̃_N = P_N + hA(k_N u_N + f_N) >= h f_c A, f_c = cap_stress at the committed state) the closure is plastic: Δu_p = min(0, hθ(v_N + cmp P̃_N)) (cmp the
     compliance 1/(h²θ k A) of compliant joints in compression); the laws see the elastic jump u_N - Δu_p, then
     u_p += Δu_p and f_c A |Δu_p| is dissipated. Called by ContactStep (step.py) at the end of every cohesive step."""
     d = ueff.shape[1]
@@ -401,7 +425,8 @@ def commit_step(law, par, st, trial, ueff, P, v, area, h, theta):
         uN = ueff[a, 0] + h * theta * v[d * a]
         uT = ueff[a, 1] + h * theta * v[d * a + 1]
         dup = 0.0
-        capv = h * par[a, P_FC] * area[a]
+        fc = cap_stress(par[a], st[a])
+        capv = h * fc * area[a]
         if capv > 0.0:
             tension = uN > 1e-15
             kN, kT, fN, fT, m = linear_part(law[a], par[a], st[a], trial[a], tension)
@@ -419,4 +444,4 @@ def commit_step(law, par, st, trial, ueff, P, v, area, h, theta):
             commit3(law[a], par[a], st[a], trial[a], uN - dup, uT, ueff[a, 2] + h * theta * v[d * a + 2], area[a])
         if dup != 0.0:
             st[a, S_UP] += dup
-            st[a, S_DISS] += par[a, P_FC] * area[a] * abs(dup)
+            st[a, S_DISS] += fc * area[a] * abs(dup)

@@ -7,7 +7,7 @@ from fem_blocks.bodies import Driver, RigidBody
 from fem_blocks.contact.step import ContactOptions, ContactStep, InterfaceSpec
 from fem_blocks.dynamics import Simulation
 from fem_blocks.errors import InputError
-from fem_blocks.laws import P_FC, S_DISS, S_UN, S_UP, law_parameters
+from fem_blocks.laws import P_FC, P_GFC, S_DISS, S_UN, S_UP, law_parameters
 
 L, T, H_BLK, RHO = 0.2, 0.1, 0.1, 2000.0
 A = L * T          # one contact point at mid-edge carries the whole edge: tributary area L x T
@@ -83,3 +83,59 @@ def test_cap_parameter_validated():
     code, p = law_parameters("mixed", dict(k_n=1e11, k_s=5e10, f_t=2e5, c=3e5, G_I=10.0, G_II=50.0, tan_phi=0.6,
                                            f_c=1e7), "interfaces.j")
     assert p[P_FC] == 1e7
+
+
+# ----------------------------------------------------------------------------- softening cap (G_fc)
+@pytest.mark.parametrize("solver", ["nlgs", "newton"])
+def test_softening_cap_follows_the_exponential_law(solver):
+    """Cap with a compressive fracture energy G_fc: the cap of each step is f_c exp(-f_c |u_p| / G_fc) at the
+    committed closure (explicit), so under a constant force F > f_c A the rigid block follows the recurrence
+    q_{k+1} = q_k - h² (F - f_k A)/m, f_k = f_c exp(-f_c |q_k| / G_fc), and the dissipation is Σ f_k A |Δq_k|."""
+    G = 2.0 * FC  # J/m^2: one e-fold of the cap per 2 m of closure (the rigid block closes ~1 m per step here)
+    blk, cs, sim = pressed("coulomb", dict(mu=0.5, G_fc=G), solver)
+    h, F = sim.h, 3 * FC * A
+    q, diss = 0.0, 0.0
+    for _ in range(8):
+        f = FC * np.exp(-FC * abs(q) / G)
+        dq = -h * h * (F - f * A) / M
+        sim.step()
+        assert cs.r[0, 0] == pytest.approx(f * A, rel=1e-10)
+        q += dq
+        diss += f * A * abs(dq)
+        assert blk.q[1] == pytest.approx(q, rel=1e-9)
+        assert cs.state[0, S_UP] == pytest.approx(q, rel=1e-9)
+        assert cs.state[0, S_DISS] == pytest.approx(diss, rel=1e-9)
+    assert cs.r[0, 0] < 0.2 * FC * A  # softened well below the initial cap
+
+
+def test_softening_cap_dissipates_G_fc():
+    """Closing the joint in steps of δ G_fc/f_c dissipates A Σ f_c e^{-kδ} δ G_fc/f_c = A G_fc δ(1 - e^{-nδ})/(1 - e^{-δ})
+    (the explicit cap is a left Riemann sum of ∫ f_c e^{-f_c u/G_fc} du = G_fc): → A G_fc as δ → 0, n δ → ∞. Here
+    the kernel commit_step is driven directly with the closure increments (rigid joint: Δu_p = the closure)."""
+    from fem_blocks.laws import commit_step, initial_state, COULOMB
+    G, area, h, theta = 5000.0, 0.01, 1.0, 1.0
+    code, p = law_parameters("coulomb", dict(mu=0.6, f_c=FC, G_fc=G), "j")
+    law, par = np.array([code]), p[None, :].copy()
+    st = initial_state(law)
+    delta, n = 0.01, 1000                              # n δ = 10: e^{-10} stays above CAP_FLOOR
+    du = delta * G / FC
+    for _ in range(n):
+        fc = FC * np.exp(-FC * abs(st[0, S_UP]) / G)
+        P = np.array([h * fc * area, 0.0])             # at the cap
+        v = np.array([-du / (h * theta), 0.0])         # closes by du in the step
+        commit_step(law, par, st, np.zeros(1), np.zeros((1, 2)), P, v, np.array([area]), h, theta)
+    exact = area * G * delta * (1 - np.exp(-n * delta)) / (1 - np.exp(-delta))
+    assert st[0, S_DISS] == pytest.approx(exact, rel=1e-12)
+    assert st[0, S_DISS] == pytest.approx(area * G, rel=6e-3)   # δ/2 = 0.5 % above G_fc A (explicit cap)
+    assert st[0, S_UP] == pytest.approx(-n * du, rel=1e-12)
+
+
+def test_cap_fracture_energy_validated():
+    for bad, msg in ((dict(G_fc=0.0), "G_fc"), (dict(G_fc=-5.0), "G_fc"), (dict(G_fc=float("inf")), "G_fc")):
+        with pytest.raises(InputError, match=msg):
+            law_parameters("coulomb", dict(mu=0.5, f_c=1e7, **bad), "interfaces.j")
+    with pytest.raises(InputError, match="needs the compressive strength f_c"):
+        law_parameters("mixed", dict(k_n=1e11, k_s=5e10, f_t=2e5, c=3e5, G_I=10.0, G_II=50.0, tan_phi=0.6,
+                                     G_fc=5000.0), "interfaces.j")
+    code, p = law_parameters("fremond", dict(mu=0.7, c_N=5e9, c_T=3e9, w=18.0, f_c=1e7, G_fc=5000.0), "j")
+    assert p[P_FC] == 1e7 and p[P_GFC] == 5000.0

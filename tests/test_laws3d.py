@@ -402,6 +402,24 @@ def test_friction_at_the_cap_bounded_and_along_the_force():
     assert np.linalg.norm(j.jump()[1:]) == pytest.approx(3 * j.h * vT, rel=1e-10)
 
 
+def test_softening_cap_follows_the_exponential_law():
+    """G_fc: the cap of each step is f_c exp(-f_c |u_p| / G_fc) at the committed closure (as in 2D, test_cap.py)."""
+    G = 2.0 * FC
+    j, M = pressed("coulomb", dict(mu=0.5, G_fc=G))
+    F = 3 * FC * A
+    q, diss = 0.0, 0.0
+    for _ in range(6):
+        f = FC * np.exp(-FC * abs(q) / G)
+        dq = -j.h ** 2 * (F - f * A) / M
+        j.step()
+        q += dq
+        diss += f * A * abs(dq)
+        assert j.P[0, 0] / j.h == pytest.approx(f * A, rel=1e-10)
+        assert j.q[2] == pytest.approx(q, rel=1e-9)
+        assert j.st[0, S_UP] == pytest.approx(q, rel=1e-9)
+        assert j.st[0, S_DISS] == pytest.approx(diss, rel=1e-9)
+
+
 def test_cap_on_a_compliant_joint():
     cN = 1e12
     j, M = pressed("elastic", dict(c_N=cN, c_T=cN, mu=0.5))
@@ -435,6 +453,7 @@ EMBED = [
     ("brittle", dict(variant="dugdale", r_c=2e4, l_c=2e-4, mu=0.5)),
     ("fremond", dict(c_N=1e8, c_T=5e7, w=2.0, mu=0.5)),
     ("fremond", dict(c_N=1e8, c_T=5e7, w=2.0, b=0.05, friction="damage", mu_r=0.6, f_c=2.9e5)),
+    ("coulomb", dict(mu=0.5, f_c=2.9e5, G_fc=5.0)),
     ("mixed", dict(k_n=1e8, k_s=5e7, f_t=2e4, c=3e4, G_I=10.0, G_II=20.0, tan_phi=0.6)),
 ]
 

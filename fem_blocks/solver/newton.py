@@ -60,7 +60,7 @@ import scipy.sparse as sp
 from numba import njit
 
 from ..errors import InputError
-from ..laws import MIXED, P_CN, P_CT, P_FC, S_BETA, S_BROKEN, compression_stiffness, linear_part, \
+from ..laws import MIXED, P_CN, P_CT, S_BETA, S_BROKEN, cap_stress, compression_stiffness, linear_part, \
     mixed_damage_gradient, viscous_damage
 from ..linalg import lu_solve
 from . import nlgs
@@ -180,7 +180,8 @@ def _cohesive_terms(law, par, st, x, ueff, v, area, h, theta, S, c, mue, cmp, ca
         c[a, 0] = h * area[a] * (kN * ueff[a, 0] + fN)
         c[a, 1] = h * area[a] * (kT * ueff[a, 1] + fT)
         mue[a] = m
-        capv[a] = h * par[a, P_FC] * area[a] if par[a, P_FC] > 0.0 else np.inf
+        fc = cap_stress(par[a], st[a])
+        capv[a] = h * fc * area[a] if fc > 0.0 else np.inf
         cmp[a] = 0.0
         if law[a] != 0:
             kc = compression_stiffness(law[a], par[a]) * area[a]

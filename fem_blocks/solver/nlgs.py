@@ -577,7 +577,7 @@ def fclib_residual(W, q, mu, r, dim: int = 2) -> tuple[float, float]:
 # P̃ = P + P_adh satisfies Signorini–Coulomb with the exact local operator
 #   v = W' P̃ + q',  W' = A⁻¹ W_αα,  q' = A⁻¹ (v_loc - h W_αα (K u_eff + f)),  A = I + h² θ W_αα K.
 from ..laws import compression_stiffness as _kcomp, internal_update as _internal_update, linear_part as _linear_part  # noqa: E402,E501
-from ..laws import P_FC  # noqa: E402
+from ..laws import cap_stress as _cap_stress  # noqa: E402
 
 
 @njit(cache=True)
@@ -630,7 +630,7 @@ def _local_cohesive(w00, w01, w10, w11, v0, v1, law, par, st, x, ue0, ue1, area,
             if kc > 0.0:
                 cmp = 1.0 / (h * h * theta * kc)  # compliant Signorini: v_N + cmp P_N >= 0
         pn, pt, case = local_2d(m00 + cmp, m01, m10, m11, q0, q1, mue)
-        pn, pt = _cap(pn, pt, m10, m11, q1, mue, h * par[P_FC] * area)
+        pn, pt = _cap(pn, pt, m10, m11, q1, mue, h * _cap_stress(par, st) * area)
         vn = m00 * pn + m01 * pt + q0
         vtt = m10 * pn + m11 * pt + q1
         uN = ue0 + h * theta * vn
@@ -677,7 +677,7 @@ def _sweep_cohesive(indptr, indices, blocks, diag_pos, q, mu, r, order, omega, l
         w00, w01, w10, w11 = blocks[d, 0, 0], blocks[d, 0, 1], blocks[d, 1, 0], blocks[d, 1, 1]
         if law[a] == 0:
             rn, rt, case = local_2d(w00, w01, w10, w11, v0, v1, mu[a])
-            rn, rt = _cap(rn, rt, w10, w11, v1, mu[a], h * par[a, P_FC] * area[a])
+            rn, rt = _cap(rn, rt, w10, w11, v1, mu[a], h * _cap_stress(par[a], st[a]) * area[a])
         else:
             rn, rt = _local_cohesive(w00, w01, w10, w11, v0, v1, law[a], par[a], st[a], trial[a], ueff[a, 0],
                                      ueff[a, 1], area[a], h, theta)
@@ -817,7 +817,7 @@ def _local_cohesive3(blocks, dk, v0, v1, v2, law, par, st, x, ue, area, h, theta
         s2 = o2 + h * kT * (ue[2] + h * theta * vc2)
         p0, p1, p2, case = local_3d(wl, 0, q0, q1, q2, mue, s0, s1, s2, J)
         wl[0, 0, 0] = w00
-        p0, p1, p2 = _cap3(wl, 0, p0, p1, p2, q1, q2, mue, h * par[P_FC] * area)
+        p0, p1, p2 = _cap3(wl, 0, p0, p1, p2, q1, q2, mue, h * _cap_stress(par, st) * area)
         uN = ue[0] + h * theta * (wl[0, 0, 0] * p0 + wl[0, 0, 1] * p1 + wl[0, 0, 2] * p2 + q0)
         uT = ue[1] + h * theta * (wl[0, 1, 0] * p0 + wl[0, 1, 1] * p1 + wl[0, 1, 2] * p2 + q1)
         uS = ue[2] + h * theta * (wl[0, 2, 0] * p0 + wl[0, 2, 1] * p1 + wl[0, 2, 2] * p2 + q2)
@@ -850,7 +850,7 @@ def _sweep_cohesive3(indptr, indices, blocks, diag_pos, q, mu, r, order, omega, 
             d = 1
         if law[a] == 0:
             x0, x1, x2, case = local_3d(wa, d, v0, v1, v2, mu[a], o0, o1, o2, J)
-            x0, x1, x2 = _cap3(wa, d, x0, x1, x2, v1, v2, mu[a], h * par[a, P_FC] * area[a])
+            x0, x1, x2 = _cap3(wa, d, x0, x1, x2, v1, v2, mu[a], h * _cap_stress(par[a], st[a]) * area[a])
         else:
             x0, x1, x2, case = _local_cohesive3(wa, d, v0, v1, v2, law[a], par[a], st[a], trial[a], ueff[a],
                                                 area[a], h, theta, o0, o1, o2, wl, J)
@@ -891,7 +891,7 @@ def _natural_map_cohesive3(indptr, indices, blocks, q, mu, r, law, par, st, tria
                 kc = _kcomp(law[a], par[a]) * area[a]
                 if kc > 0.0:
                     v0 += p0 / (h * h * theta * kc)
-        capP = h * par[a, P_FC] * area[a]
+        capP = h * _cap_stress(par[a], st[a]) * area[a]
         if capP > 0.0:
             y0 = min(max(p0 - v0, 0.0), capP)
             x1 = p1 - v1
@@ -955,7 +955,7 @@ def natural_map_cohesive(indptr, indices, blocks, q, mu, r, law, par, st, trial,
             kc = _kcomp(law[a], par[a]) * area[a]
             if kc > 0.0:
                 v0 += p0 / (h * h * theta * kc)
-        capP = h * par[a, P_FC] * area[a]
+        capP = h * _cap_stress(par[a], st[a]) * area[a]
         if capP > 0.0:  # capped cone: Alart–Curnier residual (rho = 1), zero exactly at the solutions
             y0 = min(max(p0 - v0, 0.0), capP)
             lim = m * y0
