@@ -120,6 +120,22 @@ REASONS = {
 }
 
 
+def kernel_reading(rows):
+    """One line against the speed issue's kernel targets (≤ 0.1 µs per 2D contact update, ≤ 0.5 µs per 3D one):
+    the range of the timed rows per dimension, and Siconos' NSGS figures where SUMMARY.json has them."""
+    parts = []
+    for d, target in ((2, 0.1), (3, 0.5)):
+        us = [r["us"] for r in rows if r["dim"] == d and r["us"] is not None]
+        sic = [r["sic_us"] for r in rows if r["dim"] == d and r["sic_us"] is not None]
+        if not us:
+            continue
+        verdict = "met" if max(us) <= target else "**not met**"
+        parts.append(f"{d}D {min(us):.3f}–{max(us):.3f} µs per contact update over {len(us)} timed runs (target "
+                     f"≤ {target} µs: {verdict}" + (f"; Siconos NSGS {min(sic):.2f}–{max(sic):.2f} µs on the problems "
+                     "where it ran ≥ 100 iterations" if sic else "") + ")")
+    return "Kernel cost: " + "; ".join(parts) + "."
+
+
 def markdown(rows, skipped, cap):
     out = [HEADING, "",
            "`bench/bench_kernel.py` (writes this section): every FCLIB Coulomb problem of `../shared/data/fclib` "
@@ -145,6 +161,7 @@ def markdown(rows, skipped, cap):
         out.append(f"| {r['problem']} | {r['kind']} | {r['dim']} | {r['contacts']} | {r['nnzb']} | {sw} | "
                    f"{r['residual']:.2e} | {r['rel_max']:.1e} | {r['t_solve']:.3f} | "
                    f"{'—' if r['us'] is None else format(r['us'], '.3f')} | {sic} | {sus} |")
+    out += ["", kernel_reading(rows)]
     ok = sorted({r["problem"] for r in rows if r["converged"]})
     bad = [r for r in rows if not r["converged"]]
     out += ["", f"Reach ‖F‖/‖q‖ ≤ 1e-8 ({len(ok)} of {len({r['problem'] for r in rows})} problems, in at least one "
