@@ -28,6 +28,18 @@ N_THETA = 48
 
 
 @njit(cache=True, inline="always")
+def _proj_cone2(x0, x1, mu):
+    """Projection of x on the 2D Coulomb cone K = {|x_T| <= mu x_N}."""
+    ax1 = abs(x1)
+    if ax1 <= mu * x0:
+        return x0, x1
+    if mu * ax1 <= -x0:
+        return 0.0, 0.0
+    c = (x0 + mu * ax1) / (1.0 + mu * mu)
+    return c, c * mu * (1.0 if x1 > 0.0 else -1.0)
+
+
+@njit(cache=True, inline="always")
 def _proj_cone3(x0, x1, x2, mu):
     """Projection of x on the Coulomb cone K = {‖x_T‖ <= mu x_N}."""
     nt = np.sqrt(x1 * x1 + x2 * x2)

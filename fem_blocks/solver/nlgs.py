@@ -28,7 +28,7 @@ import scipy.sparse as sp
 from numba import njit
 
 from ..errors import InputError
-from .local import _proj_cone3, _solve3, local_3d
+from .local import _proj_cone2, _proj_cone3, _solve3, local_3d
 
 ORDERS = {"given": 0, "reversed": 1, "shuffled": 2}
 
@@ -89,17 +89,7 @@ def local_residual_2d(w00, w01, w10, w11, q0, q1, mu, rn, rt):
     """‖F‖ of the local natural map F = r - P_K(r - (v + [mu|v_T|, 0])), v = w r + q (2D)."""
     v0 = w00 * rn + w01 * rt + q0
     v1 = w10 * rn + w11 * rt + q1
-    x0 = rn - (v0 + mu * abs(v1))
-    x1 = rt - v1
-    ax1 = abs(x1)
-    if ax1 <= mu * x0:
-        p0, p1 = x0, x1
-    elif mu * ax1 <= -x0:
-        p0, p1 = 0.0, 0.0
-    else:
-        c = (x0 + mu * ax1) / (1.0 + mu * mu)
-        p0 = c
-        p1 = c * mu * (1.0 if x1 > 0.0 else -1.0)
+    p0, p1 = _proj_cone2(rn - (v0 + mu * abs(v1)), rt - v1, mu)
     return np.sqrt((rn - p0) ** 2 + (rt - p1) ** 2)
 
 
@@ -239,17 +229,7 @@ def natural_map_2d(r, u, mu):
     s = 0.0
     for a in range(n):
         m = mu[a]
-        x0 = r[2 * a] - (u[2 * a] + m * abs(u[2 * a + 1]))
-        x1 = r[2 * a + 1] - u[2 * a + 1]
-        ax1 = abs(x1)
-        if ax1 <= m * x0:
-            p0, p1 = x0, x1
-        elif m * ax1 <= -x0:
-            p0, p1 = 0.0, 0.0
-        else:
-            c = (x0 + m * ax1) / (1.0 + m * m)
-            p0 = c
-            p1 = c * m * (1.0 if x1 > 0.0 else -1.0)
+        p0, p1 = _proj_cone2(r[2 * a] - (u[2 * a] + m * abs(u[2 * a + 1])), r[2 * a + 1] - u[2 * a + 1], m)
         f0 = r[2 * a] - p0
         f1 = r[2 * a + 1] - p1
         s += f0 * f0 + f1 * f1
@@ -964,17 +944,7 @@ def natural_map_cohesive(indptr, indices, blocks, q, mu, r, law, par, st, trial,
             f1 = p1 - y1
             s += f0 * f0 + f1 * f1
             continue
-        x0 = p0 - (v0 + m * abs(v1))
-        x1 = p1 - v1
-        ax1 = abs(x1)
-        if ax1 <= m * x0:
-            y0, y1 = x0, x1
-        elif m * ax1 <= -x0:
-            y0, y1 = 0.0, 0.0
-        else:
-            cc = (x0 + m * ax1) / (1.0 + m * m)
-            y0 = cc
-            y1 = cc * m * (1.0 if x1 > 0.0 else -1.0)
+        y0, y1 = _proj_cone2(p0 - (v0 + m * abs(v1)), p1 - v1, m)
         f0 = p0 - y0
         f1 = p1 - y1
         s += f0 * f0 + f1 * f1
