@@ -200,9 +200,15 @@ def cut_opening(blocks, opening, brick_length, joint, expanded, name):
 
 def stack_prism(n_bricks: int, brick_length: float, brick_height: float, joint: float = 0.0,
                 expanded: bool = False, name: str = "prism") -> list:
-    """Stack-bonded prism (or couplet n=2, triplet n=3): one brick per course."""
+    """Stack-bonded prism (or couplet n=2, triplet n=3): one brick per course.
+
+    A stack-bonded prism has bed joints only (no head joints), so expanded bricks are enlarged in height
+    only: blocks L x (H + t_j) at y = k (H + t_j); with thick joints, blocks L x H with a gap t_j."""
     n = int(check_range(f"{name}.bricks", n_bricks, 1, expected="bricks >= 1"))
-    return courses([[1.0]] * n, brick_length, brick_height, joint, expanded, name=name)
+    blocks = courses([[1.0]] * n, brick_length, brick_height, joint, expanded, name=name)
+    if expanded:  # courses() enlarges a block by t_j in length too (it carries half a head joint at each end)
+        blocks = [Block(brick_length, b.height, b.x, b.y, b.course, b.group) for b in blocks]
+    return blocks
 
 
 def foundation(layout_blocks, depth: float, overhang: float, joint: float = 0.0, name="foundation") -> RigidPart:

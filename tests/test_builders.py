@@ -67,6 +67,10 @@ def test_prism_and_rigid_parts():
     f = B.foundation(blocks, 0.1, 0.05, joint=0.01)
     beam = B.top_beam(blocks, 0.1, 0.05, joint=0.01)
     assert f.vertices[:, 1].max() == pytest.approx(-0.01) and beam.vertices[:, 1].min() == pytest.approx(0.30)
+    # expanded: bed joints only (stack bond), so the blocks are L x (H + t_j), not (L + t_j) wide
+    ex = B.stack_prism(3, 0.2, 0.05, 0.01, expanded=True)
+    got = np.array([(b.x, b.y, b.length, b.height) for b in ex])
+    assert np.allclose(got, [(0, 0, 0.2, 0.06), (0, 0.06, 0.2, 0.06), (0, 0.12, 0.2, 0.06)], rtol=0, atol=1e-15)
 
 
 def test_arch_voussoirs():

@@ -384,12 +384,33 @@ def test_vtu_dtypes_and_empty_grid(tmp_path):
     assert m.point_data["f32"].dtype == np.float32 and np.array_equal(m.point_data["f32"], f32)
     assert m.point_data["i32"].dtype == np.int32 and np.array_equal(m.point_data["i32"], [7, -8])
     assert np.array_equal(m.point_data["u16"], [1, 2]) and m.cells[0].type == "line"
-    # zero contacts: a valid empty grid (meshio 5.0 cannot read cell-less grids, so decode it directly)
-    write_vtu(tmp_path / "e.vtu", np.zeros((0, 2)), [("vertex", np.arange(0))], point_data={"r_N": np.zeros(0)})
+    # zero contacts: no point, one empty polygon cell (meshio 5.0 raises IndexError on a cell-less grid)
+    write_vtu(tmp_path / "e.vtu", np.zeros((0, 2)), [("vertex", np.arange(0))], point_data={"r_N": np.zeros(0)},
+              cell_data={"c": np.zeros(0)})
     root, arr = _decode_arrays(tmp_path / "e.vtu")
     piece = root.find("UnstructuredGrid/Piece")
-    assert piece.get("NumberOfPoints") == "0" and piece.get("NumberOfCells") == "0"
-    assert all(nbytes == 0 for _, nbytes, _ in arr.values()) and set(arr) >= {"Points", "types", "r_N"}
+    assert piece.get("NumberOfPoints") == "0" and piece.get("NumberOfCells") == "1"
+    assert arr["Points"][1] == 0 and arr["r_N"][1] == 0 and set(arr) >= {"Points", "types", "r_N"}
+    m = meshio.read(tmp_path / "e.vtu")
+    assert len(m.points) == 0 and m.point_data["r_N"].shape == (0,)
+    assert [(c.type, c.data.size) for c in m.cells] == [("polygon", 0)]
+    g = _vtk_read(tmp_path / "e.vtu")
+    assert (g.GetNumberOfPoints(), g.GetNumberOfCells()) == (0, 1) and g.GetPointData().HasArray("r_N")
+
+
+def _vtk_read(path):
+    """VTK's own XML reader (python3-vtk9, installed by scripts/setup.sh): fails the test on any reader error."""
+    import vtk
+    r = vtk.vtkXMLUnstructuredGridReader()
+    r.SetFileName(str(path))
+    obs = vtk.vtkFileOutputWindow()  # keep VTK's messages off the terminal; errors are read below
+    obs.SetFileName("/dev/null")
+    vtk.vtkOutputWindow.SetInstance(obs)
+    r.Update()
+    assert r.GetErrorCode() == 0, f"VTK could not read {path}"
+    g = r.GetOutput()
+    assert g is not None and g.GetNumberOfPoints() >= 0
+    return g
 
 
 def test_crack_width_is_opening_and_slip_and_sets_line_widths():

@@ -7,7 +7,8 @@ Readable by ParaView and by `meshio.read`.
 Cells are given as a list of blocks `(name, connectivity)`; VTK cell `k` is the k-th cell counted over the
 blocks in the given order, and `offsets[k]` = sum of the node counts of cells 0..k (VTK XML 1.0 convention).
 Names: vertex (k,) or (k,1), line (k,2), triangle (k,3), quad (k,4), tetra (k,4), hexahedron (k,8),
-polygon (ragged list of index arrays, each of at least 3 nodes -> VTK_POLYGON).
+polygon (ragged list of index arrays, each of at least 3 nodes -> VTK_POLYGON). A grid with no cell (a contact
+frame with no contact point) is written with one empty VTK_POLYGON (0 nodes), so that meshio 5 reads it too.
 
 Data: point_data / cell_data map a name to an array of shape (n,) or (n, k); 2-vectors (n, 2) are padded with a
 zero third component so ParaView shows them as vectors (glyphs, "Warp By Vector"); every other k is kept
@@ -145,6 +146,12 @@ def write_vtu(path, points, cells, point_data=None, cell_data=None, field_data=N
     ncells = len(types)
     pd = {k: _prepare_field("point_data", k, v, n) for k, v in (point_data or {}).items()}
     cd = {k: _prepare_field("cell_data", k, v, ncells) for k, v in (cell_data or {}).items()}
+    if ncells == 0:
+        # A grid with no cell (e.g. a contact frame with no contact point) is valid VTK, but meshio 5 cannot
+        # read it (IndexError on the empty `types`): write one empty polygon cell (0 nodes) instead, which VTK's
+        # reader and meshio both read as a grid with no points; cell data get one zero row for it.
+        offsets, types, ncells = np.zeros(1, dtype=np.int64), np.full(1, VTK_TYPES["polygon"], dtype=np.uint8), 1
+        cd = {k: np.zeros((1,) + a.shape[1:], dtype=a.dtype) for k, a in cd.items()}
     fd = {}
     for k, v in (field_data or {}).items():
         if not isinstance(k, str) or not k:
