@@ -264,3 +264,64 @@ def test_velocity_global_is_R_u():
     c, s = math.cos(ang), math.sin(ang)
     expected = np.column_stack([c * U[:, 0] - s * U[:, 1], s * U[:, 0] + c * U[:, 1]])
     np.testing.assert_allclose(b.velocity_global(), expected, rtol=0, atol=1e-14)
+
+
+def test_bed_and_head_interfaces_split_by_joint_orientation():
+    """Two interfaces on one group pair, orientation "bed" and "head": every contact point on a horizontal joint
+    (y on a course line) gets the bed interface, every point on a vertical joint the head interface — decided here
+    from where the point lies, not from the detection's normals."""
+    L, H = 0.2, 0.05
+    bt_full = BlockType(mesh_rectangle(L, H, 0.05), Material(E=1e9, nu=0.2, rho=2000.0, thickness=0.1))
+    bt_half = BlockType(mesh_rectangle(L / 2, H, 0.05), Material(E=1e9, nu=0.2, rho=2000.0, thickness=0.1))
+    blocks = [DeformableBody(bt_full, (0.0, 0.0)), DeformableBody(bt_full, (L, 0.0)),
+              DeformableBody(bt_half, (0.0, H)), DeformableBody(bt_full, (L / 2, H)),
+              DeformableBody(bt_half, (1.5 * L, H))]
+    floor = RigidBody([[-0.1, -0.1], [0.5, -0.1], [0.5, 0.0], [-0.1, 0.0]], thickness=0.1,
+                      drivers={k: ("velocity", 0.0) for k in ("x", "y", "rz")})
+    itfs = [InterfaceSpec("bed", ("b", "b"), mu=0.6, orientation="bed", placement="positions"),
+            InterfaceSpec("head", ("b", "b"), mu=0.1, orientation="head", placement="positions"),
+            InterfaceSpec("base", ("b", "f"), mu=0.6, placement="positions")]
+    cs = ContactStep(itfs, ["b"] * 5 + ["f"], ContactOptions(tol=1e-10, max_sweeps=2000))
+    sim = Simulation(blocks + [floor], h=1e-3, theta=1.0, velocity_reset=True, contact=cs)
+    sim.step()
+    c = cs.cs
+    pt, itf = np.asarray(c.point), np.asarray(c.interface)
+    on_course_line = np.isclose(pt[:, 1], H, atol=1e-9)
+    on_floor = np.isclose(pt[:, 1], 0.0, atol=1e-9)
+    on_head_line = np.isclose(pt[:, 0], L, atol=1e-9) | np.isclose(pt[:, 0], L / 2, atol=1e-9) | \
+        np.isclose(pt[:, 0], 1.5 * L, atol=1e-9)
+    assert on_course_line.sum() > 0 and (on_head_line & ~on_course_line).sum() > 0
+    assert np.all(itf[on_floor] == 2)
+    assert np.all(itf[on_course_line & ~on_head_line] == 0)  # bed joint between the courses
+    assert np.all(itf[on_head_line & ~on_course_line & ~on_floor] == 1)  # head joints inside a course
+    assert len(itf) == on_floor.sum() + (on_course_line & ~on_head_line).sum() + \
+        (on_head_line & ~on_course_line & ~on_floor).sum()
+
+
+@pytest.mark.parametrize("angle, comp", [(90.0, "y"), (270.0, "y"), (90.0, "x"), (180.0, "x")])
+def test_single_component_clamp_on_a_rotated_block(angle, comp):
+    """A clamp of one global component on a block rotated by a multiple of 90°: the clamped nodes keep that global
+    component at zero while the other one moves (gravity along the clamped direction, Poisson along the other)."""
+    from fem_blocks.bodies import Clamp
+    lx, ly = 0.2, 0.1
+    bt = BlockType(mesh_rectangle(lx, ly, 0.05), Material(E=1e7, nu=0.3, rho=2000.0, thickness=0.1))
+    a = math.radians(angle)
+    R = np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
+    corners = np.array([[0, 0], [lx, 0], [lx, ly], [0, ly]]) @ R.T
+    x0, y0 = corners.min(axis=0)
+    x1, y1 = corners.max(axis=0)
+    eps = 1e-9
+    box = (x0 - eps, x1 + eps, y0 - eps, y0 + eps) if comp == "y" else (x0 - eps, x0 + eps, y0 - eps, y1 + eps)
+    body = DeformableBody(bt, (0.0, 0.0), angle=a, clamps=[Clamp(box=box, components=comp)])
+    g = (0.0, -9.81) if comp == "y" else (-9.81, 0.0)
+    sim = Simulation([body], h=1e-3, theta=1.0, gravity=g)
+    X = body.reference_points
+    sel = (X[:, 0] >= box[0]) & (X[:, 0] <= box[1]) & (X[:, 1] >= box[2]) & (X[:, 1] <= box[3])
+    assert sel.sum() >= 2
+    for _ in range(20):
+        sim.step()
+    d = body.displacement_global()
+    k = 1 if comp == "y" else 0
+    assert np.abs(d[sel, k]).max() <= 1e-15  # clamped global component
+    assert np.abs(d[sel, 1 - k]).max() > 1e-9  # the other one is free (Poisson effect)
+    assert np.abs(d[~sel, k]).max() > 1e-7  # the block deforms under its weight toward the clamp
