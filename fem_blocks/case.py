@@ -26,9 +26,9 @@ NUMBER = (int, float)
 
 # unit systems: factor to SI per physical dimension
 UNIT_SYSTEMS = {
-    "SI": dict(length=1.0, force=1.0, stress=1.0, density=1.0, time=1.0, mass=1.0),
-    # mm, N, MPa, s -> mass unit tonne (N s^2/mm), density t/mm^3
-    "mm-N-MPa": dict(length=1e-3, force=1.0, stress=1e6, density=1e12, time=1.0, mass=1e3),
+    "SI": dict(length=1.0, force=1.0, stress=1.0, density=1.0, time=1.0, mass=1.0, moment=1.0),
+    # mm, N, MPa, s -> mass unit tonne (N s^2/mm), density t/mm^3, moment N mm
+    "mm-N-MPa": dict(length=1e-3, force=1.0, stress=1e6, density=1e12, time=1.0, mass=1e3, moment=1e-3),
 }
 
 
@@ -853,7 +853,7 @@ def _parse_rigid(t: Table, U: dict, rname: str, vertices, D: int = 2) -> RigidSp
                 raise _dof_error(ft, dof, D)
             if dof in drivers:
                 raise ft.error(dof, "this dof is driven; a driven dof cannot also carry a force")
-            forces[dof] = ft.history(dof, "force" if dof[0] != "r" else None)
+            forces[dof] = ft.history(dof, "force" if dof[0] != "r" else "moment")  # a moment on a rotation dof
         ft.done()
     if rho is not None and mass is not None:
         raise t.error("mass", "given together with rho: give rho [kg/m^3] (mass and inertia from the polygon) or "

@@ -67,10 +67,6 @@ class _Group:
         self.clamped = op.clamped
         self.traction_bodies = [j for j, b in enumerate(members) if bodies[b].tractions]
 
-    def rebind(self, bodies):
-        for j, b in enumerate(self.members):
-            bodies[b].q, bodies[b].u = self.Q[:, j], self.U[:, j]
-
 
 class Simulation:
     """Time integration of a set of bodies (and, through `contact`, their interfaces).
@@ -294,10 +290,3 @@ class Simulation:
         kin, ela, pot = self.energies()
         return StepInfo(self.step_count, self.time, kin, ela, pot, self.external_work,
                         self.max_velocity(), cinfo or {})
-
-    def group_of(self, body_index: int):
-        for gr in self.groups:
-            j = np.flatnonzero(gr.members == body_index)
-            if j.size:
-                return gr, int(j[0])
-        raise KeyError(body_index)

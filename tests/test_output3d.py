@@ -10,7 +10,7 @@ from fem_blocks.bodies import BlockType3D, DeformableBody3D, Material, RigidBody
 from fem_blocks.builders3d import dome
 from fem_blocks.contact.detection3d import ContactSet3D
 from fem_blocks.errors import InputError
-from fem_blocks.laws import MIXED, NSTATE, S_BETA, S_DISS, S_UN, S_UP, S_UT
+from fem_blocks.laws import BRITTLE, COULOMB, DUGDALE, ELASTIC, FREMOND, MIXED, NSTATE, S_BETA, S_DISS, S_UN, S_UP, S_UT
 from fem_blocks.meshing import mesh_box, mesh_hexahedron
 from fem_blocks.output.contacts import ContactsWriter3D
 from fem_blocks.output.figures import write_blocks_3d
@@ -143,7 +143,11 @@ def test_contacts3d_vtu_round_trip(tmp_path):
     for k, v in (("normal", cs.n), ("t", cs.t), ("s", cs.s), ("gap", cs.gap - cs.g0), ("area", cs.area)):
         assert np.array_equal(pd[k], v), k
     assert np.array_equal(pd["status"], status) and np.array_equal(pd["interface"], cs.interface)
-    dmg = np.where(law == MIXED, state[:, S_BETA], np.where(law >= 2, 1 - state[:, S_BETA], 0.0))
+    # damage per law as docs/laws.md defines it, contact by contact: 0 for dry (coulomb) and elastic joints, 1 - β
+    # (adhesion intensity) for brittle, Dugdale and Frémond–Cangémi joints, the damage variable D for mixed-mode
+    by_law = {COULOMB: lambda st: 0.0, ELASTIC: lambda st: 0.0, BRITTLE: lambda st: 1.0 - st[S_BETA],
+              DUGDALE: lambda st: 1.0 - st[S_BETA], FREMOND: lambda st: 1.0 - st[S_BETA], MIXED: lambda st: st[S_BETA]}
+    dmg = np.array([by_law[int(law[k])](state[k]) for k in range(nc)])
     assert np.array_equal(pd["damage"], dmg) and np.array_equal(pd["law"], law)
     for k, c in (("opening", S_UN), ("slip", S_UT), ("dissipated", S_DISS), ("crushing", S_UP)):
         assert np.array_equal(pd[k], state[:, c]), k

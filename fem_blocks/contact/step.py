@@ -14,8 +14,8 @@ geometry). Then u_{i+1} = u_free + W H P (one batched solve per block type).
 Geometry: "frozen" (small displacements; detection, frames, G and W_del once in the reference
 configuration; gaps follow the displacement jumps gt = gt_ref + (G q)_N) or "updated" (re-detection
 from the current configuration every `redetect_every` steps, reactions carried over by contact key;
-in 3D the steps in between keep the pairs and recompute points, frames, gaps and G by
-detection3d.update_geometry).
+the steps in between keep the pairs and recompute points, frames, gaps and G from the current positions by
+detection.update_geometry (2D) / detection3d.update_geometry (3D)).
 
 Dimension d = sim.dim: the same step in 2D (detection, kinematics, delassus: local (n, t)) and 3D
 (detection3d, kinematics3d: local (n, t, s), 3x3 Delassus blocks); impulses P (nc, d), law state
@@ -254,9 +254,9 @@ class ContactStep:
             if ref:  # frozen geometry: reference gaps; "as_built" joints are closed in the initial configuration
                 self.gap_ref = self.cs.gap - self.cs.g0
                 self.gap_ref[self._as_built()[self.cs.interface]] = 0.0
-        elif updated and self.dim == 3 and len(self.cs.gap):
-            self.cs = det3.update_geometry(self.cs, s.positions(), s.bfaces)  # same pairs, current frames and gaps
-        if redetect or (updated and self.dim == 3):
+        elif updated and len(self.cs.gap):  # between re-detections: same pairs, current points, frames and gaps
+            self.cs = self._det.update_geometry(self.cs, s.positions(), s.bedges if self.dim == 2 else s.bfaces)
+        if redetect or updated:
             centers = s.centers(reference=redetect and first and not updated)
             self.G = self._kin.build_G(self.cs, s.kind, s.rot, centers, s.bnode_index_flat, s.bnode_offset)
             self.mark_W_dirty()
