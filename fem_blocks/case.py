@@ -11,6 +11,7 @@ which case values are converted to SI at load.
 """
 from __future__ import annotations
 
+import difflib
 import hashlib
 import math
 import os
@@ -49,6 +50,26 @@ class Table:
     def error(self, k: str, msg: str) -> InputError:
         return InputError(f"{self.source}: {self.key(k)}: {msg}")
 
+    def missing(self, k: str, expected: str) -> InputError:
+        """The error for a required key `k` that is absent: "KEY: missing; EXPECTED", or, when the table holds an
+        unknown key close to `k` (a misspelling, difflib), an error naming that key and suggesting `k`."""
+        close = self.misspelt(k)
+        if close is not None:
+            return InputError(f"{self.source}: {self.key(close)}: unknown key {close!r} — did you mean {k!r}? "
+                              f"({self.key(k)} is required: {expected})")
+        return self.error(k, f"missing; {expected}")
+
+    def misspelt(self, k: str) -> str | None:
+        """An unread key of this table that looks like a misspelling of `k` (same letters up to case, or a
+        difflib similarity >= 0.75), or None."""
+        others = [x for x in self.data if isinstance(x, str) and x != k and x not in self.used]
+        for x in others:
+            if x.lower() == k.lower():
+                return x
+        low = {x.lower(): x for x in others}
+        close = difflib.get_close_matches(k.lower(), list(low), n=1, cutoff=0.75)
+        return low[close[0]] if close else None
+
     def has(self, k: str) -> bool:
         return k in self.data
 
@@ -62,7 +83,7 @@ class Table:
         self.used.add(k)
         if k not in self.data:
             if required or default is _REQUIRED:
-                raise self.error(k, "missing; expected " + _range_text(lo, hi, lo_open, hi_open, integer))
+                raise self.missing(k, "expected " + _range_text(lo, hi, lo_open, hi_open, integer))
             return default
         v = self.data[k]
         if isinstance(v, bool) or not isinstance(v, NUMBER) or (isinstance(v, float) and not math.isfinite(v)):
@@ -81,7 +102,7 @@ class Table:
         self.used.add(k)
         if k not in self.data:
             if required:
-                raise self.error(k, "missing" + (f"; expected one of {list(choices)}" if choices else ""))
+                raise self.missing(k, f"expected one of {list(choices)}" if choices else "expected a string")
             return default
         v = self.data[k]
         if not isinstance(v, str):
@@ -102,7 +123,7 @@ class Table:
         self.used.add(k)
         if k not in self.data:
             if required:
-                raise self.error(k, f"missing; expected a list of {n} numbers")
+                raise self.missing(k, f"expected a list of {n} numbers")
             return default
         v = self.data[k]
         if (not isinstance(v, list) or len(v) != n
@@ -121,7 +142,7 @@ class Table:
         count = f"{'exactly' if exact else 'at least'} {min_count}"
         if k not in self.data:
             if required:
-                raise self.error(k, f"missing; expected a list of {count} {xyz} points")
+                raise self.missing(k, f"expected a list of {count} {xyz} points")
             return None
         v = self.data[k]
         ok = isinstance(v, list) and (len(v) == min_count if exact else len(v) >= min_count) and all(
@@ -145,7 +166,7 @@ class Table:
         self.used.add(k)
         if k not in self.data:
             if required:
-                raise self.error(k, "missing; expected a number or {times = [...], values = [...]}")
+                raise self.missing(k, "expected a number or {times = [...], values = [...]}")
             return default
         v = self.data[k]
         f = self.units[dim] if dim else 1.0
@@ -171,7 +192,7 @@ class Table:
         self.used.add(k)
         if k not in self.data:
             if required:
-                raise self.error(k, "missing table")
+                raise self.missing(k, "expected a table")
             return None
         return Table(self.data[k], self.key(k), self.source, self.units)
 
@@ -181,7 +202,7 @@ class Table:
         v = self.data.get(k)
         if v is None:
             if required or min_count:
-                raise self.error(k, f"missing; expected at least {max(1, min_count)} [[{k}]] entries")
+                raise self.missing(k, f"expected at least {max(1, min_count)} [[{k}]] entries")
             return []
         if not isinstance(v, list) or not all(isinstance(x, dict) for x in v):
             raise self.error(k, f"expected an array of tables [[{k}]]")
@@ -203,8 +224,13 @@ class Table:
     def done(self):
         unknown = sorted(set(self.data) - self.used)
         if unknown:
-            raise self.error(unknown[0], "unknown key" + (f"; expected one of {sorted(self.used)}"
-                                                           if self.used else ""))
+            k = unknown[0]
+            low = {x.lower(): x for x in self.used}
+            close = [x for x in self.used if x.lower() == k.lower()] or \
+                [low[c] for c in difflib.get_close_matches(k.lower(), list(low), n=1, cutoff=0.75)]
+            hint = f"; did you mean {close[0]!r}?" if close else ""
+            raise self.error(k, "unknown key" + hint + (f" (expected one of {sorted(self.used)})" if self.used
+                                                        else ""))
 
 
 _REQUIRED = object()
@@ -690,6 +716,8 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
             raise t.error("name", f"= {iname!r}: duplicate interface name")
         seen_if.add(iname)
         between = t.raw("between")
+        if between is None:
+            raise t.missing("between", "two body group names, e.g. [\"bricks\", \"bricks\"]")
         if (not isinstance(between, list) or len(between) != 2 or not all(isinstance(g, str) for g in between)):
             raise t.error("between", "expected two body group names, e.g. [\"bricks\", \"bricks\"]")
         for g in between:
@@ -862,7 +890,7 @@ def _parse_rigid(t: Table, U: dict, rname: str, vertices, D: int = 2) -> RigidSp
         raise t.error("inertia", "given together with rho (the inertia then comes from the polygon): give it with "
                                  "mass instead")
     if rho is None and mass is None and not (len(drivers) == len(dofs_of(D))):
-        raise t.error("rho", "missing; give rho [kg/m^3] or mass [kg] (only a body with all "
+        raise t.missing("rho", "give rho [kg/m^3] or mass [kg] (only a body with all "
                              f"{'three' if D == 2 else 'six'} dofs driven may omit both)")
     return RigidSpec(name=rname, vertices=vertices, rho=rho, mass=mass, inertia=inertia,
                      thickness=t.number("thickness", 1.0, lo=0, lo_open=True, dim="length") if D == 2 else 1.0,
@@ -901,6 +929,8 @@ def _parse_wall(w: Table, U: dict, materials, block_types, blocks, rigid, names)
                                         w.boolean("half_bricks", True), openings=ops, name=name)
         elif kind == "courses":
             rows = w.raw("rows")
+            if rows is None:
+                raise w.missing("rows", "a list of courses, e.g. [[0.5, 1, 1, 0.5], [1, 1, 1]]")
             if not isinstance(rows, list) or not rows:
                 raise w.error("rows", "expected a list of courses, e.g. [[0.5, 1, 1, 0.5], [1, 1, 1]]")
             rows = [[({"gap": float(it["gap"]) * U["length"]} if isinstance(it, dict) and "gap" in it else it)
