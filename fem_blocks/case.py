@@ -386,6 +386,10 @@ class Case:
     checks: dict = field(default_factory=lambda: dict(max_penetration=None, max_energy_growth=10.0))
     variant: str = ""  # "" or "quick x2" (reduced-resolution variant, part of the fingerprint)
     dimension: int = 2
+    warnings: list = field(default_factory=list)  # one line each, "FILE: KEY ...": printed at the start of a run,
+    #                                                in summary.json "warnings" and by `fem-blocks check`
+    notes: list = field(default_factory=list)     # what was built where it may differ from the file (openings)
+    allow_no_interface: list = field(default_factory=list)  # group pairs (sorted tuples) meant to have no interface
 
     @property
     def dofs(self) -> tuple:
@@ -447,6 +451,40 @@ def _plausible(t, key, v_si, lo, hi, unit, units):
                            "rho in t/mm^3, e.g. 2.5e-9 for 2500 kg/m^3)")
 
 
+# plausible ranges (SI) of what masonry models hold; outside them a value is most likely in the other unit system
+PLAUSIBLE = dict(E=(1e8, 1e12, "stress", "Pa", "MPa"), rho=(100.0, 2e4, "density", "kg/m^3", "t/mm^3"),
+                 length=(1e-3, 20.0, "length", "m", "mm"))
+
+
+def _warn_implausible(warnings: list, t, key, v_si, what: str, units: str, label: str | None = None):
+    """Append a warning (not an error) when v_si [SI] is outside the plausible range PLAUSIBLE[what] of a masonry
+    model: E = 10000 meant in MPa in an SI file, or brick lengths in mm in an SI file, and the reverse."""
+    lo, hi, dim, si_unit, mm_unit = PLAUSIBLE[what]
+    if lo <= v_si <= hi:
+        return
+    f = UNIT_SYSTEMS[units][dim]
+    unit = si_unit if units == "SI" else mm_unit
+    shown = f" = {t.data[key]!r}" if label is None else f" ({label})"
+    warnings.append(f"{t.source}: {t.key(key)}{shown}: implausible for a masonry model (expected {lo / f:g} "
+                    f"to {hi / f:g} {unit} with units = {units!r}); check the units of this value "
+                    f"(units = 'SI': lengths in m, E in Pa, rho in kg/m^3; 'mm-N-MPa': mm, MPa, t/mm^3)")
+
+
+def _warn_extent(warnings: list, t, key, points, units: str):
+    """Plausibility of a block's size from its points (polygon vertices, hexahedron corners): its smallest and
+    largest extent along the axes must lie in PLAUSIBLE['length']."""
+    if points is None:
+        return
+    P = np.asarray(points, dtype=float)
+    ext = P.max(axis=0) - P.min(axis=0)
+    f = UNIT_SYSTEMS[units]["length"]
+    for v in (float(ext.min()), float(ext.max())):
+        before = len(warnings)
+        _warn_implausible(warnings, t, key, v, "length", units, label=f"block extent {v / f:g}")
+        if len(warnings) > before:
+            return
+
+
 def fingerprint(case: Case) -> str:
     """SHA-256 of what determines a run: the case file's bytes, the mesh files it names and the variant
     (--quick). A resumed run compares it with the checkpoint's."""
@@ -496,6 +534,8 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
     gravity = ((0.0, -9.81) if D == 2 else (0.0, 0.0, -9.81)) if gravity is None else \
         tuple(g * U["length"] / U["time"] ** 2 for g in gravity)
 
+    warnings: list = []  # plausibility and "what was built" warnings, one line each
+    notes: list = []
     materials = {}
     for mname, t in root.named_tables("materials").items():
         t.dimension_keys(D, dict(thickness=2, plane=2))
@@ -510,12 +550,18 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
             alpha=ray[0], beta=ray[1])
         _plausible(t, "rho", materials[mname].rho, 1.0, 1e5, "kg/m^3", units)
         _plausible(t, "E", materials[mname].E, 1e3, 1e13, "Pa", units)
+        _warn_implausible(warnings, t, "E", materials[mname].E, "E", units)
+        _warn_implausible(warnings, t, "rho", materials[mname].rho, "rho", units)
+        if "thickness" in t.data:
+            _warn_implausible(warnings, t, "thickness", materials[mname].thickness, "length", units)
         t.done()
 
     block_types = {}
     for tname, t in root.named_tables("block_types").items():
         if D == 3:
             block_types[tname] = _parse_block_type_3d(t, tname, materials, base)
+            _warn_extent(warnings, t, "size" if "size" in t.data else "corners", type_corners(block_types[tname]),
+                         units)
             t.done()
             continue
         _check_geometry_dimension(t, D)
@@ -533,8 +579,11 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
         if geom == "rectangle":
             bt.lx = t.number("lx", lo=0, lo_open=True, dim="length", required=True)
             bt.ly = t.number("ly", lo=0, lo_open=True, dim="length", required=True)
+            for k in ("lx", "ly"):
+                _warn_implausible(warnings, t, k, getattr(bt, k), "length", units)
         elif geom == "polygon":
             bt.vertices = t.points("vertices")
+            _warn_extent(warnings, t, "vertices", bt.vertices, units)
         else:
             bt.file = _mesh_file(t, base)
         t.done()
@@ -589,12 +638,14 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
         else:
             verts = _solid_corners(t)
         r = _parse_rigid(t, U, rname, verts, D)
+        if r.rho is not None:
+            _warn_implausible(warnings, t, "rho", r.rho, "rho", units)
         r.group = t.string("group", "rigid")
         rigid.append(r)
         t.done()
     wall = root.table("wall")
     if wall is not None:
-        _parse_wall(wall, U, materials, block_types, blocks, rigid, names)
+        _parse_wall(wall, U, materials, block_types, blocks, rigid, names, warnings, notes, units)
         wall.done()
     arch = root.table("arch")
     if arch is not None:
@@ -603,7 +654,10 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
     for key, parse in (("wall3d", _parse_wall3d), ("dome", _parse_dome)):
         tb = root.table(key)
         if tb is not None:
-            parse(tb, U, materials, block_types, blocks, rigid, names)
+            if key == "wall3d":
+                parse(tb, U, materials, block_types, blocks, rigid, names, warnings, units)
+            else:
+                parse(tb, U, materials, block_types, blocks, rigid, names)
             tb.done()
     if not blocks and not rigid:
         raise root.error("blocks", "missing; expected at least one [[blocks]] or [[rigid_bodies]] entry")
@@ -755,6 +809,19 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
             orientation=t.string("orientation", "any", choices=("any", "bed", "head", "crack")),
             reference=t.string("reference", "nominal", choices=("nominal", "as_built"))))
         t.done()
+    allow_pairs = []
+    allow = root.raw("allow_no_interface")
+    if allow is not None:
+        if not (isinstance(allow, list) and all(isinstance(p, list) and len(p) == 2 and all(isinstance(g, str)
+                                                                                        for g in p) for p in allow)):
+            raise root.error("allow_no_interface", f"= {allow!r}: expected a list of group pairs, e.g. "
+                                                   "[[\"bricks\", \"beam\"]]")
+        for p in allow:
+            for g in p:
+                if g not in all_groups:
+                    raise root.error("allow_no_interface", f"group {g!r} has no body; expected groups among "
+                                                           f"{sorted(all_groups)}")
+            allow_pairs.append(tuple(sorted(p)))
     pairs = {}
     for itf in interfaces:
         pairs.setdefault(tuple(sorted(itf.groups)), []).append(itf)
@@ -845,7 +912,8 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
                              f"'frozen' (joints closed as built are a small-displacement model)")
     return Case(source=source, name=name, units=units, gravity=gravity, materials=materials,
                 block_types=block_types, blocks=blocks, rigid_bodies=rigid, stages=stages, output=output,
-                contact=contact, interfaces=interfaces, checks=checks, dimension=D)
+                contact=contact, interfaces=interfaces, checks=checks, dimension=D, warnings=warnings, notes=notes,
+                allow_no_interface=allow_pairs)
 
 
 def _parse_rigid(t: Table, U: dict, rname: str, vertices, D: int = 2) -> RigidSpec:
@@ -900,7 +968,8 @@ def _parse_rigid(t: Table, U: dict, rname: str, vertices, D: int = 2) -> RigidSp
 FIXED = {k: ("velocity", 0.0) for k in ("x", "y", "rz")}
 
 
-def _parse_wall(w: Table, U: dict, materials, block_types, blocks, rigid, names):
+def _parse_wall(w: Table, U: dict, materials, block_types, blocks, rigid, names, warnings=None, notes=None,
+                units: str = "SI"):
     """[wall]: a masonry wall built by `builders`, its block types, optional rigid foundation and top beam."""
     from . import builders
     kind = w.string("type", "running_bond", choices=("running_bond", "courses", "prism"))
@@ -909,6 +978,9 @@ def _parse_wall(w: Table, U: dict, materials, block_types, blocks, rigid, names)
         raise w.error("material", f"= {mat!r}: expected one of the [materials] {sorted(materials)}")
     L = w.number("brick_length", required=True, lo=0, lo_open=True, dim="length")
     H = w.number("brick_height", required=True, lo=0, lo_open=True, dim="length")
+    if warnings is not None:
+        for k, v in (("brick_length", L), ("brick_height", H)):
+            _warn_implausible(warnings, w, k, v, "length", units)
     joint = w.number("joint", 0.0, lo=0, dim="length")
     expanded = w.boolean("expanded", False)
     size = w.number("mesh_size", required=True, lo=0, lo_open=True, dim="length")
@@ -927,6 +999,10 @@ def _parse_wall(w: Table, U: dict, materials, block_types, blocks, rigid, names)
             lay = builders.running_bond(w.integer("courses", required=True, lo=1, hi=2000),
                                         w.integer("bricks_per_course", required=True, lo=1, hi=2000), L, H, joint, expanded,
                                         w.boolean("half_bricks", True), openings=ops, name=name)
+            if notes is not None:
+                for i, op in enumerate(ops):
+                    _opening_report(w, i, op, builders.opening_extent(lay, op, joint, expanded), U, units,
+                                    notes, warnings)
         elif kind == "courses":
             rows = w.raw("rows")
             if rows is None:
@@ -1006,6 +1082,31 @@ def _parse_wall(w: Table, U: dict, materials, block_types, blocks, rigid, names)
         names.add("beam")
         rigid.append(r)
         bt.done()
+
+
+OPENING_TOL = 1e-3  # [m]: a built opening that differs from the asked one by more than this is reported
+
+
+def _opening_report(w: Table, i: int, op, ext: dict, U: dict, units: str, notes: list, warnings: list):
+    """One line saying what opening i became (builders.opening_extent), in the file's length unit: a note always
+    (`fem-blocks check`), a warning too when the clear opening differs from the asked one by more than
+    OPENING_TOL or its jambs are toothed."""
+    f = U["length"]
+    unit = "m" if units == "SI" else "mm"
+    aw, ah = ext["asked"]
+    cx0, cy0, cx1, cy1 = ext["clear"]
+    toothed = ext["width_max"] - ext["width_min"] > OPENING_TOL
+    c0, c1 = ext["courses"]
+    text = (f"{w.source}: {w.key('openings')}[{i}] = {[round(v / f, 9) for v in op]}: asked {aw / f:.4g} x "
+            f"{ah / f:.4g} {unit}, built {(cx1 - cx0) / f:.4g} x {ext['height'] / f:.4g} {unit} (clear opening "
+            f"[{cx0 / f:.4g}, {cy0 / f:.4g}, {cx1 / f:.4g}, {cy1 / f:.4g}] between brick faces; courses {c0} to {c1} "
+            "cut" + (f"; toothed jambs: course widths {ext['width_min'] / f:.4g} to {ext['width_max'] / f:.4g} {unit}"
+                     if toothed else "") + ")")
+    notes.append(text)
+    g2 = 2 * ext["gap"]  # bricks are cut a joint away from the asked sides: clear = asked + 2 joints when it fits
+    if toothed or abs(cx1 - cx0 - aw - g2) > OPENING_TOL or abs(ext["height"] - ah - g2) > OPENING_TOL:
+        warnings.append(text + "; openings snap to whole courses and bricks (pieces < brick_length/4 dropped): "
+                               "give its sides on brick faces to build it as asked")
 
 
 def quick(case: Case, factor: float = 2.0) -> Case:
@@ -1236,7 +1337,7 @@ def _add_layout_blocks(lay, prefix: str, mat: str, res: dict, block_types, block
                                 angle=0.0, group=group, R=np.array(b.R)))
 
 
-def _parse_wall3d(w: Table, U: dict, materials, block_types, blocks, rigid, names):
+def _parse_wall3d(w: Table, U: dict, materials, block_types, blocks, rigid, names, warnings=None, U_name="SI"):
     """[wall3d]: running-bond wall of bricks (builders3d.running_bond_wall), its block types, optional rigid
     foundation (fixed) and top beam (rigid body with drivers/forces) in the wall's frame."""
     from . import builders3d
@@ -1245,6 +1346,9 @@ def _parse_wall3d(w: Table, U: dict, materials, block_types, blocks, rigid, name
     L = w.number("brick_length", required=True, lo=0, lo_open=True, dim="length")
     H = w.number("brick_height", required=True, lo=0, lo_open=True, dim="length")
     W = w.number("brick_width", required=True, lo=0, lo_open=True, dim="length")
+    if warnings is not None:
+        for k, v in (("brick_length", L), ("brick_height", H), ("brick_width", W)):
+            _warn_implausible(warnings, w, k, v, "length", U_name)
     joint = w.number("joint", 0.0, lo=0, dim="length")
     origin = w.vector("position", 3, (0.0, 0.0, 0.0), dim="length")
     angle = math.radians(w.number("angle", 0.0))

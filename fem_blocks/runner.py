@@ -292,6 +292,10 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
     st0 = case.stages[0]
     sim = Simulation(model.bodies, h=st0.h, theta=st0.theta, gravity=model.gravity,
                      velocity_reset=st0.velocity_reset, contact=model.contact)
+    from .model import groups_without_interface
+    start_warnings = list(case.warnings) + groups_without_interface(case, model, sim)
+    for w in start_warnings:  # one line each; also in summary.json "warnings"
+        print(f"fem-blocks: warning: {w}", file=sys.stderr)
     import json
     run = dict(stage=0, k=0, stage_done=False, peak_force=0.0, e0=None, frames=0, case_hash=fp,
                cstats=dict(steps=0, sweeps=0, max_sweeps=0, unconverged=0, max_residual=0.0, max_change=0.0,
@@ -349,6 +353,7 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
     def finish(status: str) -> dict:
         summary = _summary(case, model, sim, info, run, t_start, t_setup, pv, pc, status)
         summary["energy_created_ratio_max"] = guards.max_ratio
+        summary["warnings"] = start_warnings + [w for s in run["stages_done"] for w in s.get("warnings", [])]
         summary.update(_figures(case, sim, model, out_dir))
         write_summary(os.path.join(out_dir, "summary.json"), summary)
         return summary

@@ -1,0 +1,162 @@
+"""Issue #18 item 10: silent changes to what the user asked for become one-line warnings.
+
+Every expectation is computed by hand from the geometry (running-bond layout, joint, cut rule) or from the
+stated plausible ranges (docs/case-files.md "Warnings"), never from the code under test.
+"""
+import json
+import os
+
+import pytest
+
+from fem_blocks import builders
+from fem_blocks.case import parse_case
+from fem_blocks.errors import InputError
+
+
+def _material(units="SI", E=5e9, rho=1800.0):
+    return {"m": {"E": E, "nu": 0.2, "rho": rho}}
+
+
+def _case(units="SI", E=5e9, rho=1800.0, lx=1.0, ly=0.2, wall=None, extra=None):
+    d = {"units": units, "materials": _material(units, E, rho), "stages": [{"h": 0.001, "duration": 0.002}]}
+    if wall is not None:
+        d["wall"] = dict(material="m", mesh_size=0.05 if units == "SI" else 50.0, **wall)
+    else:
+        d["block_types"] = {"t": {"geometry": "rectangle", "lx": lx, "ly": ly, "mesh_size": lx / 2, "material": "m"}}
+        d["blocks"] = [{"type": "t"}]
+    d.update(extra or {})
+    return parse_case(d, "case.toml")
+
+
+def _warned(case, key):
+    return [w for w in case.warnings if f"case.toml: {key}" in w]
+
+
+# ----------------------------------------------------------------------------- unit plausibility
+@pytest.mark.parametrize("units, E, rho, lx, bad", [
+    ("SI", 1e4, 1800.0, 1.0, "materials.m.E"),            # E meant in MPa in an SI file: 1e4 Pa
+    ("mm-N-MPa", 10.0, 1.8e-9, 1000.0, "materials.m.E"),  # 10 MPa = 1e7 Pa: below 1e8 Pa
+    ("SI", 5e9, 2.5, 1.0, "materials.m.rho"),             # rho meant in t/m^3: 2.5 kg/m^3 < 100
+    ("SI", 5e9, 1800.0, 200.0, "block_types.t.lx"),       # lengths in mm in an SI file: a 200 m block
+    ("mm-N-MPa", 5000.0, 1.8e-9, 0.5, "block_types.t.lx"),  # lengths in m in a mm file: 0.5 mm < 1 mm
+])
+def test_implausible_values_warn_in_both_unit_systems(units, E, rho, lx, bad):
+    case = _case(units, E, rho, lx=lx, ly=lx / 5)
+    hits = _warned(case, bad)
+    assert len(hits) == 1, case.warnings
+    assert f"units = {units!r}" in hits[0] and "\n" not in hits[0]
+
+
+@pytest.mark.parametrize("units, E, rho, lx", [("SI", 5e9, 1800.0, 1.0), ("mm-N-MPa", 5000.0, 1.8e-9, 1000.0),
+                                               ("SI", 1e8, 100.0, 1e-3 * 5), ("SI", 1e12, 2e4, 20.0)])
+def test_plausible_values_do_not_warn(units, E, rho, lx):
+    assert _case(units, E, rho, lx=lx, ly=lx / 5).warnings == []
+
+
+def test_wall_brick_length_in_mm_in_si_file_warns():
+    case = _case(wall=dict(brick_length=200.0, brick_height=0.1, courses=1, bricks_per_course=1))
+    assert len(_warned(case, "wall.brick_length")) == 1
+    assert _warned(case, "wall.brick_height") == []
+
+
+def test_reverse_mistake_still_an_error():
+    with pytest.raises(InputError, match="materials.m.E"):
+        _case("mm-N-MPa", E=5e9, rho=1.8e-9, lx=1000.0)  # E in Pa in a mm-N-MPa file: 5e15 Pa
+
+
+# ----------------------------------------------------------------------------- openings
+# running bond, L = 0.2, H = 0.1, t = 0.01: course c at y = 0.11 c; even courses full bricks at x = 0.21 k,
+# odd courses a half brick (L - t)/2 = 0.095 then full bricks at 0.105 + 0.21 k. Cut rule: a brick meeting the
+# opening keeps the parts a joint (0.01) away from its sides, pieces < L/4 = 0.05 are dropped.
+WALL = dict(brick_length=0.2, brick_height=0.1, joint=0.01, courses=8, bricks_per_course=6)
+
+
+def test_opening_extent_by_hand():
+    op = (0.5, 0.2, 0.78, 0.51)
+    blocks = builders.running_bond(8, 6, 0.2, 0.1, 0.01, openings=[op])
+    ext = builders.opening_extent(blocks, op, 0.01)
+    # courses 1..4 meet y in (0.2, 0.51): clear height from 0.11 - 0.01 to 0.44 + 0.1 + 0.01
+    assert ext["courses"] == (1, 4)
+    assert ext["height"] == pytest.approx(0.45, abs=1e-12)
+    # even course: left piece [0.42, 0.49] (0.07 >= 0.05 kept); brick [0.63, 0.83] leaves 0.04 on the right:
+    # dropped, so the next face is the brick at 0.84 -> width 0.35. Odd course: pieces end at 0.49 and start
+    # at 0.79 -> width 0.30 (the clear rectangle)
+    assert ext["width_min"] == pytest.approx(0.30, abs=1e-12)
+    assert ext["width_max"] == pytest.approx(0.35, abs=1e-12)
+    assert ext["clear"] == pytest.approx((0.49, 0.10, 0.79, 0.55), abs=1e-12)
+
+
+def test_snapped_opening_warns_with_built_size():
+    case = _case(wall=dict(WALL, openings=[[0.5, 0.2, 0.78, 0.51]]))
+    hits = _warned(case, "wall.openings[0]")
+    assert len(hits) == 1, case.warnings
+    assert "asked 0.28 x 0.31 m, built 0.3 x 0.45 m" in hits[0]
+    assert "toothed jambs: course widths 0.3 to 0.35 m" in hits[0]
+    assert len(case.notes) == 1 and case.notes[0] in hits[0]
+
+
+def test_opening_on_brick_faces_is_not_a_warning():
+    # sides on the faces of the bricks of courses 2..4 (x 0.42 and 0.83; y 0.22 and 0.54): built as asked,
+    # the clear opening between the remaining faces is a joint larger on each side
+    case = _case(wall=dict(WALL, openings=[[0.42, 0.22, 0.83, 0.54]]))
+    assert case.warnings == []
+    assert len(case.notes) == 1 and "built 0.43 x 0.34 m" in case.notes[0]
+
+
+def test_opening_in_mm_file_reported_in_mm():
+    wall = dict(brick_length=200.0, brick_height=100.0, joint=10.0, courses=8, bricks_per_course=6,
+                openings=[[500.0, 200.0, 780.0, 510.0]])
+    case = _case("mm-N-MPa", E=5000.0, rho=1.8e-9, wall=wall)
+    hits = _warned(case, "wall.openings[0]")
+    assert len(hits) == 1 and "asked 280 x 310 mm, built 300 x 450 mm" in hits[0], case.warnings
+
+
+# ----------------------------------------------------------------------------- allow_no_interface
+def test_allow_no_interface_validated():
+    wall = dict(brick_length=0.2, brick_height=0.1, courses=1, bricks_per_course=1)
+    case = _case(wall=wall, extra={"allow_no_interface": [["bricks", "bricks"]]})
+    assert case.allow_no_interface == [("bricks", "bricks")]
+    with pytest.raises(InputError, match="allow_no_interface: group 'beam' has no body"):
+        _case(wall=wall, extra={"allow_no_interface": [["bricks", "beam"]]})
+    with pytest.raises(InputError, match="allow_no_interface: = .*expected a list of group pairs"):
+        _case(wall=wall, extra={"allow_no_interface": ["bricks", "beam"]})
+
+
+# ----------------------------------------------------------------------------- groups in contact, no interface
+def _beam_wall(interfaces, extra=None, joint=0.0):
+    wall = dict(brick_length=0.2, brick_height=0.1, joint=joint, courses=2, bricks_per_course=2, mesh_size=0.1,
+                foundation={"depth": 0.1}, beam={"depth": 0.1, "rho": 2000.0})
+    d = {"materials": {"m": {"E": 1e9, "nu": 0.2, "rho": 2000.0, "thickness": 0.1}},
+         "wall": dict(material="m", **wall), "stages": [{"h": 0.001, "duration": 0.002}],
+         "interfaces": [{"between": list(p), "mu": 0.5, "g0": joint} for p in interfaces]}
+    d.update(extra or {})
+    return parse_case(d, "case.toml")
+
+
+def _contact_warnings(case):
+    from fem_blocks.dynamics import Simulation
+    from fem_blocks.model import build_model, groups_without_interface
+    model = build_model(case)
+    sim = Simulation(model.bodies, h=0.001, gravity=model.gravity, contact=model.contact)
+    return groups_without_interface(case, model, sim)
+
+
+def test_beam_touching_wall_without_interface_warns():
+    # 2 courses of a running bond: the top course (half, full, half brick) touches the beam: 3 body pairs
+    w = _contact_warnings(_beam_wall([("bricks", "bricks"), ("bricks", "foundation")]))
+    assert len(w) == 1, w
+    assert w[0].startswith("case.toml: groups 'beam' and 'bricks': 3 pair(s) of bodies in contact")
+    assert 'allow_no_interface = [["beam", "bricks"]]' in w[0]
+
+
+def test_thick_joint_gap_within_search_distance_warns():
+    # beam a joint (10 mm) above the wall; the search distance is the largest g0 + alert (10 mm + 1 mm)
+    w = _contact_warnings(_beam_wall([("bricks", "bricks"), ("bricks", "foundation")], joint=0.01), )
+    assert len(w) == 1 and "gap 0.01 m" in w[0], w
+
+
+def test_no_warning_with_interface_or_allowed():
+    full = [("bricks", "bricks"), ("bricks", "foundation"), ("bricks", "beam")]
+    assert _contact_warnings(_beam_wall(full)) == []
+    allowed = _beam_wall(full[:2], extra={"allow_no_interface": [["bricks", "beam"]]})
+    assert _contact_warnings(allowed) == []
