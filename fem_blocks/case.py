@@ -390,6 +390,8 @@ class Case:
     #                                                in summary.json "warnings" and by `fem-blocks check`
     notes: list = field(default_factory=list)     # what was built where it may differ from the file (openings)
     allow_no_interface: list = field(default_factory=list)  # group pairs (sorted tuples) meant to have no interface
+    history_times: str = "absolute"  # stage driver/force history times: "absolute" (run time) or "stage" (from the
+    #                                  stage's actual start)
 
     @property
     def dofs(self) -> tuple:
@@ -809,6 +811,7 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
             orientation=t.string("orientation", "any", choices=("any", "bed", "head", "crack")),
             reference=t.string("reference", "nominal", choices=("nominal", "as_built"))))
         t.done()
+    history_times = root.string("history_times", "absolute", choices=("absolute", "stage"))
     allow_pairs = []
     allow = root.raw("allow_no_interface")
     if allow is not None:
@@ -910,10 +913,86 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
         if itf.reference == "as_built" and contact and contact.get("geometry") != "frozen":
             raise InputError(f"{source}: interfaces.{itf.name}.reference = 'as_built': expected contact.geometry = "
                              f"'frozen' (joints closed as built are a small-displacement model)")
-    return Case(source=source, name=name, units=units, gravity=gravity, materials=materials,
+    case = Case(source=source, name=name, units=units, gravity=gravity, materials=materials,
                 block_types=block_types, blocks=blocks, rigid_bodies=rigid, stages=stages, output=output,
                 contact=contact, interfaces=interfaces, checks=checks, dimension=D, warnings=warnings, notes=notes,
-                allow_no_interface=allow_pairs)
+                allow_no_interface=allow_pairs, history_times=history_times)
+    case.warnings += stage_history_warnings(case)
+    return case
+
+
+# ----------------------------------------------------------------------------- stage times and histories
+def nominal_stage_times(case: Case) -> list:
+    """(t_start, t_end) [s] of each stage when every stage runs its full duration (a stage that stops early at
+    equilibrium, a target displacement or after the peak makes the later stages start earlier)."""
+    out, t = [], 0.0
+    for st in case.stages:
+        out.append((t, t + st.duration))
+        t += st.duration
+    return out
+
+
+def active_histories(case: Case, si: int) -> dict:
+    """Driver and force histories in force during stage `si` (stages accumulate in order, as the runner applies
+    them): (body, dof) -> (label, kind, history, stage) with kind "displacement", "velocity" or "force", stage the
+    index of the stage that set it (-1: the body's own [rigid_bodies] drivers/forces, times from the run start)."""
+    act = {}
+    for r in case.rigid_bodies:
+        for dof, (kind, hist) in r.drivers.items():
+            act[(r.name, dof)] = (f"rigid_bodies.{r.name}.drivers.{dof}", kind, hist, -1)
+        for dof, hist in r.forces.items():
+            act[(r.name, dof)] = (f"rigid_bodies.{r.name}.forces.{dof}", "force", hist, -1)
+    for i, st in enumerate(case.stages[:si + 1]):
+        for body, dofs in st.drivers.items():
+            for dof, spec in dofs.items():
+                if spec is None:
+                    act.pop((body, dof), None)
+                else:
+                    act[(body, dof)] = (f"stages[{i}].drivers.{body}.{dof}", spec[0], spec[1], i)
+        for body, dofs in st.forces.items():
+            for dof, hist in dofs.items():
+                act[(body, dof)] = (f"stages[{i}].forces.{body}.{dof}", "force", hist, i)
+    return act
+
+
+def ended_histories(case: Case, si: int) -> list:
+    """The histories in force in stage `si` that stop applying when it ends (replaced or freed by the next stage,
+    or the run ends): [(label, kind, history, stage, dof)], only those given as {times, values}."""
+    act = active_histories(case, si)
+    nxt = active_histories(case, si + 1) if si + 1 < len(case.stages) else {}
+    return [(lab, kind, h, s, key[1]) for key, (lab, kind, h, s) in act.items()
+            if isinstance(h, dict) and (key not in nxt or nxt[key][0] != lab)]
+
+
+def history_value(hist, t: float) -> float:
+    """A {times, values} history at time t (piecewise linear, constant outside), as bodies.History."""
+    return float(np.interp(t, hist["times"], hist["values"]))
+
+
+def _unit_of(kind: str, dof: str) -> str:
+    rot = dof.startswith("r")
+    return {"displacement": "rad" if rot else "m", "velocity": "rad/s" if rot else "m/s",
+            "force": "N m" if rot else "N"}[kind]
+
+
+def stage_history_warnings(case: Case) -> list:
+    """Histories that a stage cuts short even when every stage runs its full duration: their last time lies past
+    the (nominal) end of the stage after which they no longer apply."""
+    out = []
+    times = nominal_stage_times(case)
+    for si, st in enumerate(case.stages):
+        t1 = times[si][1]
+        for lab, kind, h, s, dof in ended_histories(case, si):
+            off = times[s][0] if (case.history_times == "stage" and s >= 0) else 0.0
+            end = h["times"][-1] + off
+            if end > t1 + 1e-9 * max(1.0, end):
+                u = _unit_of(kind, dof)
+                out.append(f"{case.source}: {lab}: the history runs to t = {end:.6g} s but stops applying when stage "
+                           f"{st.name!r} ends at t = {t1:.6g} s (the sum of the stage durations): "
+                           f"{history_value(h, t1 - off):.4g} of {h['values'][-1]:.4g} {u} applied; lengthen the "
+                           f"stage or shorten the history (history_times = {case.history_times!r})")
+    return out
+
 
 
 def _parse_rigid(t: Table, U: dict, rname: str, vertices, D: int = 2) -> RigidSpec:

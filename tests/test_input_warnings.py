@@ -160,3 +160,77 @@ def test_no_warning_with_interface_or_allowed():
     assert _contact_warnings(_beam_wall(full)) == []
     allowed = _beam_wall(full[:2], extra={"allow_no_interface": [["bricks", "beam"]]})
     assert _contact_warnings(allowed) == []
+
+
+# ----------------------------------------------------------------------------- stage times
+# A fixed rigid block: stage "settle" (10 ms) stops at equilibrium after its 2 minimum steps (t = 2 ms), so
+# "push" runs from 2 ms to 12 ms while its displacement history (absolute times) ramps 0 -> 60 mm over
+# [10 ms, 20 ms]: at 12 ms it has applied 60 mm x (12 - 10)/(20 - 10) = 12 mm.
+STAGES = """name = "stage_times"
+{top}
+[[rigid_bodies]]
+name = "block"
+vertices = [[0.0, 0.0], [1.0, 0.0], [1.0, 0.5], [0.0, 0.5]]
+[rigid_bodies.drivers]
+x = {{kind = "velocity", history = 0.0}}
+y = {{kind = "velocity", history = 0.0}}
+rz = {{kind = "velocity", history = 0.0}}
+
+[output]
+paraview = false
+
+[[stages]]
+name = "settle"
+duration = 0.01
+h = 0.001
+[stages.stop_at_equilibrium]
+min_steps = 2
+
+[[stages]]
+name = "push"
+duration = 0.01
+h = 0.001
+[stages.drivers.block.x]
+kind = "displacement"
+history = {{times = {times}, values = [0.0, 0.06]}}
+"""
+
+
+def _run_stages(tmp_path, capsys, top="", times="[0.01, 0.02]"):
+    from fem_blocks.cli import main
+    from fem_blocks.output.history import read_history
+    path = tmp_path / "stages.toml"
+    path.write_text(STAGES.format(top=top, times=times))
+    rc = main(["run", str(path), "--out", str(tmp_path / "out"), "--quiet"])
+    err = capsys.readouterr().err
+    assert rc == 0, err
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    ux = read_history(str(tmp_path / "out" / "history.csv"))["block.ux"][-1]
+    return err, summary, ux
+
+
+def test_stage_ending_before_its_history_warns(tmp_path, capsys):
+    err, summary, ux = _run_stages(tmp_path, capsys)
+    assert ux == pytest.approx(0.012, abs=1e-12)
+    lines = [ln for ln in err.splitlines() if ln.startswith("fem-blocks: warning:")]
+    assert len(lines) == 1, err
+    assert "stages[1].drivers.block.x: stage 'push' ended at t = 0.012 s" in lines[0]
+    assert "0.012 of 0.06 m applied" in lines[0] and "stage 'settle' stopped early" in lines[0]
+    assert summary["warnings"] == [lines[0][len("fem-blocks: warning: "):]]
+    assert summary["stages"][1]["warnings"] == summary["warnings"]
+
+
+def test_stage_relative_history_times_apply_the_whole_history(tmp_path, capsys):
+    err, summary, ux = _run_stages(tmp_path, capsys, top='history_times = "stage"', times="[0.0, 0.01]")
+    assert ux == pytest.approx(0.06, abs=1e-12)  # a displacement driver applies its history's value exactly
+    assert "warning" not in err and summary["warnings"] == []
+
+
+def test_history_longer_than_the_stages_warns_at_parse():
+    # nominal times: push from 10 ms to 20 ms; the history runs to 30 ms: at 20 ms 60 mm x 10/20 = 30 mm
+    import tomllib
+    case = parse_case(tomllib.loads(STAGES.format(top="", times="[0.01, 0.03]")), "case.toml")
+    assert len(case.warnings) == 1, case.warnings
+    w = case.warnings[0]
+    assert w.startswith("case.toml: stages[1].drivers.block.x: the history runs to t = 0.03 s") and \
+        "ends at t = 0.02 s" in w and "0.03 of 0.06 m applied" in w
