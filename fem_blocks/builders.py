@@ -182,6 +182,7 @@ def cut_opening(blocks, opening, brick_length, joint, expanded, name):
         raise InputError(f"{name} = {list(opening)}: opening outside the wall [{wx0:g}, {wx1:g}] x [{wy0:g}, {wy1:g}]")
     gap = 0.0 if expanded else joint
     min_piece = 0.25 * brick_length
+    tol = 1e-9 * brick_length  # a piece of exactly a quarter brick is kept on both sides (rounding of x0 - b.x)
     out = []
     for b in blocks:
         if b.y >= oy1 or b.y + b.height <= oy0 or b.x >= ox1 or b.x + b.length <= ox0:
@@ -189,9 +190,9 @@ def cut_opening(blocks, opening, brick_length, joint, expanded, name):
             continue
         left = ox0 - b.x - (gap if b.x < ox0 else 0.0)
         right = b.x + b.length - ox1 - (gap if b.x + b.length > ox1 else 0.0)
-        if b.x < ox0 and left >= min_piece:
+        if b.x < ox0 and left >= min_piece - tol:
             out.append(Block(left, b.height, b.x, b.y, b.course, b.group))
-        if b.x + b.length > ox1 and right >= min_piece:
+        if b.x + b.length > ox1 and right >= min_piece - tol:
             out.append(Block(right, b.height, b.x + b.length - right, b.y, b.course, b.group))
     if len(out) == 0:
         raise InputError(f"{name}: the opening removes every block")

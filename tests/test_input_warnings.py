@@ -234,3 +234,75 @@ def test_history_longer_than_the_stages_warns_at_parse():
     w = case.warnings[0]
     assert w.startswith("case.toml: stages[1].drivers.block.x: the history runs to t = 0.03 s") and \
         "ends at t = 0.02 s" in w and "0.03 of 0.06 m applied" in w
+
+
+def test_quarter_brick_pieces_kept_on_both_sides():
+    # demos/wall_settlement.toml: L = 0.2, H = 0.05, no joint, 12 courses of 6 bricks, window [0.45, 0.2, 0.75, 0.4].
+    # Courses 4..7 meet it. Even courses: bricks [0.4, 0.6] and [0.6, 0.8] leave pieces of exactly L/4 = 0.05 on
+    # both sides (kept: only pieces < L/4 are dropped). Odd courses: [0.3, 0.5] and [0.7, 0.9] leave 0.15, [0.5, 0.7]
+    # goes. The window is built as asked, with straight jambs; 6 x 6 + 6 x 7 - 2 = 76 blocks.
+    op = (0.45, 0.2, 0.75, 0.4)
+    blocks = builders.running_bond(12, 6, 0.2, 0.05, 0.0, openings=[op])
+    assert len(blocks) == 76
+    ext = builders.opening_extent(blocks, op, 0.0)
+    assert ext["width_min"] == pytest.approx(0.3, abs=1e-12) and ext["width_max"] == pytest.approx(0.3, abs=1e-12)
+    assert ext["clear"] == pytest.approx(op, abs=1e-12) and ext["courses"] == (4, 7)
+
+
+# ----------------------------------------------------------------------------- fem-blocks check
+def test_check_demo_prints_what_would_be_built(capsys):
+    from fem_blocks.cli import DEMO_DIR, main
+    path = os.path.join(DEMO_DIR, "wall_settlement.toml")
+    rc = main(["check", path])
+    out, err = capsys.readouterr()
+    assert rc == 0, err
+    lines = out.splitlines()
+    # 76 bricks (test above: full 0.2, half 0.1, pieces 0.05 and 0.15 m long) + foundation0 + foundation1
+    assert "bodies: 78 (76 deformable blocks of 4 block types, 2 rigid bodies)" in lines[1]
+    assert "groups: 'bricks' 76 deformable; 'foundation' 2 rigid" in lines
+    assert any(ln.startswith("interface 'joints': bricks / bricks, law coulomb, mu = 0.7") for ln in lines)
+    assert any(ln.startswith("opening: wall.openings[0] = [0.45, 0.2, 0.75, 0.4]: asked 0.3 x 0.2 m, built 0.3 x "
+                             "0.2 m") for ln in lines)
+    # nominal stage times: 0.3 s of gravity, then 0.8 s of settlement; the settlement history (absolute times)
+    assert any(ln.startswith("stage 0 'gravity': t = 0 to 0.3 s, h = 0.001 s, 300 steps") and "may stop early" in ln
+               for ln in lines)
+    assert any(ln.startswith("stage 1 'settlement': t = 0.3 to 1.1 s, h = 0.005 s, 160 steps") for ln in lines)
+    assert "  rigid_bodies.foundation1.drivers.y: displacement, times 0.3 to 0.8 s, values 0 to -0.005" in lines
+    assert lines[-1] == f"fem-blocks: {path}: valid, 0 warning(s)"
+    assert err == ""
+
+
+def test_check_prints_warnings_and_bad_file_exits_2(tmp_path, capsys):
+    from fem_blocks.cli import main
+    path = tmp_path / "beam.toml"
+    doc = """[materials.m]
+E = 1e9
+nu = 0.2
+rho = 2000.0
+[wall]
+material = "m"
+brick_length = 0.2
+brick_height = 0.1
+courses = 2
+bricks_per_course = 2
+mesh_size = 0.1
+[wall.beam]
+depth = 0.1
+rho = 2000.0
+[[interfaces]]
+between = ["bricks", "bricks"]
+mu = 0.5
+[[stages]]
+duration = 0.002
+h = 0.001
+"""
+    path.write_text(doc)
+    assert main(["check", str(path)]) == 0
+    out, err = capsys.readouterr()
+    assert err.count("\n") == 1 and err.startswith(f"fem-blocks: warning: {path}: groups 'beam' and 'bricks'")
+    assert out.splitlines()[-1] == f"fem-blocks: {path}: valid, 1 warning(s) (on stderr)"
+    path.write_text(doc.replace("brick_length", "brick_lenght"))
+    assert main(["check", str(path)]) == 2
+    out, err = capsys.readouterr()
+    assert out == "" and err == (f"fem-blocks: error: {path}: wall.brick_lenght: unknown key 'brick_lenght' — did "
+                                 "you mean 'brick_length'? (wall.brick_length is required: expected a number > 0)\n")
