@@ -657,7 +657,7 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
         tb = root.table(key)
         if tb is not None:
             if key == "wall3d":
-                parse(tb, U, materials, block_types, blocks, rigid, names, warnings, units)
+                parse(tb, U, materials, block_types, blocks, rigid, names, warnings, units, notes)
             else:
                 parse(tb, U, materials, block_types, blocks, rigid, names)
             tb.done()
@@ -1416,7 +1416,8 @@ def _add_layout_blocks(lay, prefix: str, mat: str, res: dict, block_types, block
                                 angle=0.0, group=group, R=np.array(b.R)))
 
 
-def _parse_wall3d(w: Table, U: dict, materials, block_types, blocks, rigid, names, warnings=None, U_name="SI"):
+def _parse_wall3d(w: Table, U: dict, materials, block_types, blocks, rigid, names, warnings=None, U_name="SI",
+                  notes=None):
     """[wall3d]: running-bond wall of bricks (builders3d.running_bond_wall), its block types, optional rigid
     foundation (fixed) and top beam (rigid body with drivers/forces) in the wall's frame."""
     from . import builders3d
@@ -1440,11 +1441,17 @@ def _parse_wall3d(w: Table, U: dict, materials, block_types, blocks, rigid, name
     res = _resolution_3d(w)
     group = w.string("group", "bricks")
     name = f"{w.source}: wall3d"
-    lay = builders3d.running_bond_wall(w.integer("courses", required=True, lo=1, hi=2000),
-                                       w.integer("bricks_per_course", required=True, lo=1, hi=2000), L, H, W, joint,
-                                       half_bricks=w.boolean("half_bricks", True), openings=ops, leaves=leaves,
+    nc = w.integer("courses", required=True, lo=1, hi=2000)
+    nb = w.integer("bricks_per_course", required=True, lo=1, hi=2000)
+    half = w.boolean("half_bricks", True)
+    lay = builders3d.running_bond_wall(nc, nb, L, H, W, joint, half_bricks=half, openings=ops, leaves=leaves,
                                        stagger_leaves=w.boolean("stagger_leaves", False), origin=origin,
                                        angle=angle, name=name)
+    if notes is not None and ops:  # openings as built, in the wall frame (x, z) of the first leaf
+        from . import builders
+        lay2 = builders.running_bond(nc, nb, L, H, joint, False, half, openings=ops, name=name)
+        for i, op in enumerate(ops):
+            _opening_report(w, i, op, builders.opening_extent(lay2, op, joint), U, U_name, notes, warnings)
     lay.check_no_overlap(name)
     _add_layout_blocks(lay, "brick", mat, res, block_types, blocks, names, group, w)
     R = builders3d.rot_z(angle)

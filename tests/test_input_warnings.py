@@ -306,3 +306,14 @@ h = 0.001
     out, err = capsys.readouterr()
     assert out == "" and err == (f"fem-blocks: error: {path}: wall.brick_lenght: unknown key 'brick_lenght' — did "
                                  "you mean 'brick_length'? (wall.brick_length is required: expected a number > 0)\n")
+
+
+def test_wall3d_opening_reported_like_2d():
+    # the same running bond in the wall frame (x along, z up) as test_opening_extent_by_hand
+    d = {"dimension": 3, "materials": {"m": {"E": 5e9, "nu": 0.2, "rho": 1800.0}},
+         "wall3d": dict(material="m", brick_length=0.2, brick_height=0.1, brick_width=0.1, joint=0.01, courses=8,
+                        bricks_per_course=6, divisions=[1, 1, 1], openings=[[0.5, 0.2, 0.78, 0.51]]),
+         "stages": [{"h": 0.001, "duration": 0.002}]}
+    case = parse_case(d, "case.toml")
+    hits = _warned(case, "wall3d.openings[0]")
+    assert len(hits) == 1 and "asked 0.28 x 0.31 m, built 0.3 x 0.45 m" in hits[0], case.warnings
