@@ -62,9 +62,9 @@ def _report(case: Case, model, per_interface: dict) -> list[str]:
     L.append(f"case {case.source}: {case.name!r}, dimension {case.dimension}, units {case.units!r} (reported in SI: "
              "m, s, N)" + (f", variant {case.variant}" if case.variant else ""))
     nd = sum(b.kind == 0 for b in model.bodies)
+    ndof = sum(b.type.ndof for b in model.bodies if b.kind == 0)
     L.append(f"bodies: {len(model.bodies)} ({nd} deformable blocks of {len(model.block_types)} block types, "
-             f"{len(model.bodies) - nd} rigid bodies), {sum(bt.ndof * sum(1 for b in model.bodies if b.kind == 0 and b.type is bt) for bt in model.block_types.values())} "
-             "deformable dofs")
+             f"{len(model.bodies) - nd} rigid bodies), {ndof} deformable dofs")
     kinds = {}
     for b, g in zip(model.bodies, model.groups):
         kinds.setdefault(g, Counter())["deformable" if b.kind == 0 else "rigid"] += 1
