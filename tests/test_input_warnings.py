@@ -317,3 +317,24 @@ def test_wall3d_opening_reported_like_2d():
     case = parse_case(d, "case.toml")
     hits = _warned(case, "wall3d.openings[0]")
     assert len(hits) == 1 and "asked 0.28 x 0.31 m, built 0.3 x 0.45 m" in hits[0], case.warnings
+
+
+def test_stage_relative_times_survive_resume_mid_stage(tmp_path, capsys):
+    # checkpoints at the stage ends and every 3 steps: steps 2 (end of "settle"), 3, 6, 9, 12 (end). Resuming from
+    # the one of step 9 (t = 9 ms, mid "push", which started at 2 ms) must shift the history by the stored 2 ms:
+    # ux(t) = 60 mm x (t - 2 ms)/10 ms as without the interruption: 48, 54, 60 mm at steps 10, 11, 12 (a history
+    # not shifted would reach its end value 60 mm at step 10)
+    import shutil
+    from fem_blocks.cli import main
+    from fem_blocks.output.history import read_history
+    path = tmp_path / "stages.toml"
+    path.write_text(STAGES.format(top='history_times = "stage"', times="[0.0, 0.01]")
+                    .replace("paraview = false", "paraview = false\ncheckpoint_every = 3"))
+    out = tmp_path / "out"
+    assert main(["run", str(path), "--out", str(out), "--quiet"]) == 0
+    shutil.copy(out / "checkpoint.prev.npz", out / "checkpoint.npz")
+    assert main(["run", str(path), "--out", str(out), "--quiet", "--resume"]) == 0
+    hist = read_history(str(out / "history.csv"))
+    assert list(hist["step"][-4:]) == [9, 10, 11, 12]
+    assert list(hist["block.ux"][-3:]) == pytest.approx([0.048, 0.054, 0.06], abs=1e-12)
+    assert "warning" not in capsys.readouterr().err
