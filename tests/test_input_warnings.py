@@ -338,3 +338,16 @@ def test_stage_relative_times_survive_resume_mid_stage(tmp_path, capsys):
     assert list(hist["step"][-4:]) == [9, 10, 11, 12]
     assert list(hist["block.ux"][-3:]) == pytest.approx([0.048, 0.054, 0.06], abs=1e-12)
     assert "warning" not in capsys.readouterr().err
+
+
+def test_3d_beam_touching_wall_without_interface_warns():
+    # 2 courses of 2 bricks: the top course (half, full, half) touches the beam: 3 body pairs
+    d = {"dimension": 3, "materials": {"m": {"E": 1e9, "nu": 0.2, "rho": 2000.0}},
+         "wall3d": dict(material="m", brick_length=0.2, brick_height=0.1, brick_width=0.1, courses=2,
+                        bricks_per_course=2, divisions=[1, 1, 1], foundation={"depth": 0.1},
+                        beam={"depth": 0.1, "rho": 2000.0}),
+         "interfaces": [{"between": ["bricks", "bricks"], "mu": 0.5},
+                        {"between": ["bricks", "foundation"], "mu": 0.5}],
+         "stages": [{"h": 0.001, "duration": 0.002}]}
+    w = _contact_warnings(parse_case(d, "case.toml"))
+    assert len(w) == 1 and w[0].startswith("case.toml: groups 'beam' and 'bricks': 3 pair(s) of bodies"), w
