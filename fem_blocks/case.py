@@ -994,7 +994,6 @@ def stage_history_warnings(case: Case) -> list:
     return out
 
 
-
 def _parse_rigid(t: Table, U: dict, rname: str, vertices, D: int = 2) -> RigidSpec:
     """Mass, thickness (2D), inertia, drivers and forces of a rigid body table (dofs of dimension D)."""
     rho = t.number("rho", lo=0, lo_open=True, dim="density")
