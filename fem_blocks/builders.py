@@ -182,6 +182,7 @@ def cut_opening(blocks, opening, brick_length, joint, expanded, name):
         raise InputError(f"{name} = {list(opening)}: opening outside the wall [{wx0:g}, {wx1:g}] x [{wy0:g}, {wy1:g}]")
     gap = 0.0 if expanded else joint
     min_piece = 0.25 * brick_length
+    tol = 1e-9 * brick_length  # a piece of exactly a quarter brick is kept on both sides (rounding of x0 - b.x)
     out = []
     for b in blocks:
         if b.y >= oy1 or b.y + b.height <= oy0 or b.x >= ox1 or b.x + b.length <= ox0:
@@ -189,13 +190,52 @@ def cut_opening(blocks, opening, brick_length, joint, expanded, name):
             continue
         left = ox0 - b.x - (gap if b.x < ox0 else 0.0)
         right = b.x + b.length - ox1 - (gap if b.x + b.length > ox1 else 0.0)
-        if b.x < ox0 and left >= min_piece:
+        if b.x < ox0 and left >= min_piece - tol:
             out.append(Block(left, b.height, b.x, b.y, b.course, b.group))
-        if b.x + b.length > ox1 and right >= min_piece:
+        if b.x + b.length > ox1 and right >= min_piece - tol:
             out.append(Block(right, b.height, b.x + b.length - right, b.y, b.course, b.group))
     if len(out) == 0:
         raise InputError(f"{name}: the opening removes every block")
     return out
+
+
+def opening_extent(blocks, opening, joint: float = 0.0, expanded: bool = False) -> dict:
+    """What an opening (x0, y0, x1, y1) [m] asked of `running_bond` became in the built wall `blocks`: the clear
+    space between the faces of the remaining blocks. Openings remove whole courses (every course whose height
+    range meets the opening) and cut bricks a joint away from the asked sides, dropping pieces shorter than a
+    quarter brick, so the built opening is usually larger than the asked one and its jambs may be toothed.
+
+    Returns dict(asked=(width, height), clear=(x0, y0, x1, y1) the largest rectangle of the clear space that
+    contains the asked opening (width = the narrowest course), height, width_min, width_max (course widths,
+    differing for toothed jambs), courses=(first, last) removed course indices, gap = the joint left between the
+    asked sides and the cut bricks: the joint, 0 for expanded bricks). An opening that fits the bond is built with
+    a clear opening of the asked size plus a joint on each side."""
+    ox0, oy0, ox1, oy1 = map(float, opening)
+    gap = 0.0 if expanded else joint
+    wx0 = min(b.x for b in blocks)
+    wx1 = max(b.x + b.length for b in blocks)
+    B = np.array([[b.x, b.y, b.x + b.length, b.y + b.height, b.course] for b in blocks], dtype=float)
+    eps = 1e-9 * max(1.0, float(np.ptp(B[:, :4])))
+    hit = (B[:, 1] < oy1 - eps) & (B[:, 3] > oy0 + eps)  # blocks of the courses the opening meets
+    courses = np.unique(B[hit, 4]).astype(int)
+    if courses.size == 0:
+        return dict(asked=(ox1 - ox0, oy1 - oy0), clear=(ox0, oy0, ox1, oy1), height=oy1 - oy0,
+                    width_min=ox1 - ox0, width_max=ox1 - ox0, courses=(-1, -1), gap=gap)
+    lefts, rights = [], []
+    for c in courses:
+        row = B[B[:, 4] == c]
+        left = row[row[:, 2] <= ox0 + eps, 2]
+        right = row[row[:, 0] >= ox1 - eps, 0]
+        lefts.append(left.max() if left.size else wx0)
+        rights.append(right.min() if right.size else wx1)
+    lefts, rights = np.array(lefts), np.array(rights)
+    rows = B[np.isin(B[:, 4], courses)]
+    y0 = float(rows[:, 1].min()) - gap
+    y1 = float(rows[:, 3].max()) + gap
+    clear = (float(lefts.max()), y0, float(rights.min()), y1)
+    widths = rights - lefts
+    return dict(asked=(ox1 - ox0, oy1 - oy0), clear=clear, height=y1 - y0, width_min=float(widths.min()),
+                width_max=float(widths.max()), courses=(int(courses.min()), int(courses.max())), gap=gap)
 
 
 def stack_prism(n_bricks: int, brick_length: float, brick_height: float, joint: float = 0.0,

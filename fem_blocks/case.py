@@ -11,6 +11,7 @@ which case values are converted to SI at load.
 """
 from __future__ import annotations
 
+import difflib
 import hashlib
 import math
 import os
@@ -49,6 +50,26 @@ class Table:
     def error(self, k: str, msg: str) -> InputError:
         return InputError(f"{self.source}: {self.key(k)}: {msg}")
 
+    def missing(self, k: str, expected: str) -> InputError:
+        """The error for a required key `k` that is absent: "KEY: missing; EXPECTED", or, when the table holds an
+        unknown key close to `k` (a misspelling, difflib), an error naming that key and suggesting `k`."""
+        close = self.misspelt(k)
+        if close is not None:
+            return InputError(f"{self.source}: {self.key(close)}: unknown key {close!r} — did you mean {k!r}? "
+                              f"({self.key(k)} is required: {expected})")
+        return self.error(k, f"missing; {expected}")
+
+    def misspelt(self, k: str) -> str | None:
+        """An unread key of this table that looks like a misspelling of `k` (same letters up to case, or a
+        difflib similarity >= 0.75), or None."""
+        others = [x for x in self.data if isinstance(x, str) and x != k and x not in self.used]
+        for x in others:
+            if x.lower() == k.lower():
+                return x
+        low = {x.lower(): x for x in others}
+        close = difflib.get_close_matches(k.lower(), list(low), n=1, cutoff=0.75)
+        return low[close[0]] if close else None
+
     def has(self, k: str) -> bool:
         return k in self.data
 
@@ -62,7 +83,7 @@ class Table:
         self.used.add(k)
         if k not in self.data:
             if required or default is _REQUIRED:
-                raise self.error(k, "missing; expected " + _range_text(lo, hi, lo_open, hi_open, integer))
+                raise self.missing(k, "expected " + _range_text(lo, hi, lo_open, hi_open, integer))
             return default
         v = self.data[k]
         if isinstance(v, bool) or not isinstance(v, NUMBER) or (isinstance(v, float) and not math.isfinite(v)):
@@ -81,7 +102,7 @@ class Table:
         self.used.add(k)
         if k not in self.data:
             if required:
-                raise self.error(k, "missing" + (f"; expected one of {list(choices)}" if choices else ""))
+                raise self.missing(k, f"expected one of {list(choices)}" if choices else "expected a string")
             return default
         v = self.data[k]
         if not isinstance(v, str):
@@ -102,7 +123,7 @@ class Table:
         self.used.add(k)
         if k not in self.data:
             if required:
-                raise self.error(k, f"missing; expected a list of {n} numbers")
+                raise self.missing(k, f"expected a list of {n} numbers")
             return default
         v = self.data[k]
         if (not isinstance(v, list) or len(v) != n
@@ -121,7 +142,7 @@ class Table:
         count = f"{'exactly' if exact else 'at least'} {min_count}"
         if k not in self.data:
             if required:
-                raise self.error(k, f"missing; expected a list of {count} {xyz} points")
+                raise self.missing(k, f"expected a list of {count} {xyz} points")
             return None
         v = self.data[k]
         ok = isinstance(v, list) and (len(v) == min_count if exact else len(v) >= min_count) and all(
@@ -145,7 +166,7 @@ class Table:
         self.used.add(k)
         if k not in self.data:
             if required:
-                raise self.error(k, "missing; expected a number or {times = [...], values = [...]}")
+                raise self.missing(k, "expected a number or {times = [...], values = [...]}")
             return default
         v = self.data[k]
         f = self.units[dim] if dim else 1.0
@@ -171,7 +192,7 @@ class Table:
         self.used.add(k)
         if k not in self.data:
             if required:
-                raise self.error(k, "missing table")
+                raise self.missing(k, "expected a table")
             return None
         return Table(self.data[k], self.key(k), self.source, self.units)
 
@@ -181,7 +202,7 @@ class Table:
         v = self.data.get(k)
         if v is None:
             if required or min_count:
-                raise self.error(k, f"missing; expected at least {max(1, min_count)} [[{k}]] entries")
+                raise self.missing(k, f"expected at least {max(1, min_count)} [[{k}]] entries")
             return []
         if not isinstance(v, list) or not all(isinstance(x, dict) for x in v):
             raise self.error(k, f"expected an array of tables [[{k}]]")
@@ -203,8 +224,13 @@ class Table:
     def done(self):
         unknown = sorted(set(self.data) - self.used)
         if unknown:
-            raise self.error(unknown[0], "unknown key" + (f"; expected one of {sorted(self.used)}"
-                                                           if self.used else ""))
+            k = unknown[0]
+            low = {x.lower(): x for x in self.used}
+            close = [x for x in self.used if x.lower() == k.lower()] or \
+                [low[c] for c in difflib.get_close_matches(k.lower(), list(low), n=1, cutoff=0.75)]
+            hint = f"; did you mean {close[0]!r}?" if close else ""
+            raise self.error(k, "unknown key" + hint + (f" (expected one of {sorted(self.used)})" if self.used
+                                                        else ""))
 
 
 _REQUIRED = object()
@@ -360,6 +386,12 @@ class Case:
     checks: dict = field(default_factory=lambda: dict(max_penetration=None, max_energy_growth=10.0))
     variant: str = ""  # "" or "quick x2" (reduced-resolution variant, part of the fingerprint)
     dimension: int = 2
+    warnings: list = field(default_factory=list)  # one line each, "FILE: KEY ...": printed at the start of a run,
+    #                                                in summary.json "warnings" and by `fem-blocks check`
+    notes: list = field(default_factory=list)     # what was built where it may differ from the file (openings)
+    allow_no_interface: list = field(default_factory=list)  # group pairs (sorted tuples) meant to have no interface
+    history_times: str = "absolute"  # stage driver/force history times: "absolute" (run time) or "stage" (from the
+    #                                  stage's actual start)
 
     @property
     def dofs(self) -> tuple:
@@ -421,6 +453,40 @@ def _plausible(t, key, v_si, lo, hi, unit, units):
                            "rho in t/mm^3, e.g. 2.5e-9 for 2500 kg/m^3)")
 
 
+# plausible ranges (SI) of what masonry models hold; outside them a value is most likely in the other unit system
+PLAUSIBLE = dict(E=(1e8, 1e12, "stress", "Pa", "MPa"), rho=(100.0, 2e4, "density", "kg/m^3", "t/mm^3"),
+                 length=(1e-3, 20.0, "length", "m", "mm"))
+
+
+def _warn_implausible(warnings: list, t, key, v_si, what: str, units: str, label: str | None = None):
+    """Append a warning (not an error) when v_si [SI] is outside the plausible range PLAUSIBLE[what] of a masonry
+    model: E = 10000 meant in MPa in an SI file, or brick lengths in mm in an SI file, and the reverse."""
+    lo, hi, dim, si_unit, mm_unit = PLAUSIBLE[what]
+    if lo <= v_si <= hi:
+        return
+    f = UNIT_SYSTEMS[units][dim]
+    unit = si_unit if units == "SI" else mm_unit
+    shown = f" = {t.data[key]!r}" if label is None else f" ({label})"
+    warnings.append(f"{t.source}: {t.key(key)}{shown}: implausible for a masonry model (expected {lo / f:g} "
+                    f"to {hi / f:g} {unit} with units = {units!r}); check the units of this value "
+                    f"(units = 'SI': lengths in m, E in Pa, rho in kg/m^3; 'mm-N-MPa': mm, MPa, t/mm^3)")
+
+
+def _warn_extent(warnings: list, t, key, points, units: str):
+    """Plausibility of a block's size from its points (polygon vertices, hexahedron corners): its smallest and
+    largest extent along the axes must lie in PLAUSIBLE['length']."""
+    if points is None:
+        return
+    P = np.asarray(points, dtype=float)
+    ext = P.max(axis=0) - P.min(axis=0)
+    f = UNIT_SYSTEMS[units]["length"]
+    for v in (float(ext.min()), float(ext.max())):
+        before = len(warnings)
+        _warn_implausible(warnings, t, key, v, "length", units, label=f"block extent {v / f:g}")
+        if len(warnings) > before:
+            return
+
+
 def fingerprint(case: Case) -> str:
     """SHA-256 of what determines a run: the case file's bytes, the mesh files it names and the variant
     (--quick). A resumed run compares it with the checkpoint's."""
@@ -470,6 +536,8 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
     gravity = ((0.0, -9.81) if D == 2 else (0.0, 0.0, -9.81)) if gravity is None else \
         tuple(g * U["length"] / U["time"] ** 2 for g in gravity)
 
+    warnings: list = []  # plausibility and "what was built" warnings, one line each
+    notes: list = []
     materials = {}
     for mname, t in root.named_tables("materials").items():
         t.dimension_keys(D, dict(thickness=2, plane=2))
@@ -484,12 +552,18 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
             alpha=ray[0], beta=ray[1])
         _plausible(t, "rho", materials[mname].rho, 1.0, 1e5, "kg/m^3", units)
         _plausible(t, "E", materials[mname].E, 1e3, 1e13, "Pa", units)
+        _warn_implausible(warnings, t, "E", materials[mname].E, "E", units)
+        _warn_implausible(warnings, t, "rho", materials[mname].rho, "rho", units)
+        if "thickness" in t.data:
+            _warn_implausible(warnings, t, "thickness", materials[mname].thickness, "length", units)
         t.done()
 
     block_types = {}
     for tname, t in root.named_tables("block_types").items():
         if D == 3:
             block_types[tname] = _parse_block_type_3d(t, tname, materials, base)
+            _warn_extent(warnings, t, "size" if "size" in t.data else "corners", type_corners(block_types[tname]),
+                         units)
             t.done()
             continue
         _check_geometry_dimension(t, D)
@@ -507,8 +581,11 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
         if geom == "rectangle":
             bt.lx = t.number("lx", lo=0, lo_open=True, dim="length", required=True)
             bt.ly = t.number("ly", lo=0, lo_open=True, dim="length", required=True)
+            for k in ("lx", "ly"):
+                _warn_implausible(warnings, t, k, getattr(bt, k), "length", units)
         elif geom == "polygon":
             bt.vertices = t.points("vertices")
+            _warn_extent(warnings, t, "vertices", bt.vertices, units)
         else:
             bt.file = _mesh_file(t, base)
         t.done()
@@ -563,12 +640,14 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
         else:
             verts = _solid_corners(t)
         r = _parse_rigid(t, U, rname, verts, D)
+        if r.rho is not None:
+            _warn_implausible(warnings, t, "rho", r.rho, "rho", units)
         r.group = t.string("group", "rigid")
         rigid.append(r)
         t.done()
     wall = root.table("wall")
     if wall is not None:
-        _parse_wall(wall, U, materials, block_types, blocks, rigid, names)
+        _parse_wall(wall, U, materials, block_types, blocks, rigid, names, warnings, notes, units)
         wall.done()
     arch = root.table("arch")
     if arch is not None:
@@ -577,7 +656,10 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
     for key, parse in (("wall3d", _parse_wall3d), ("dome", _parse_dome)):
         tb = root.table(key)
         if tb is not None:
-            parse(tb, U, materials, block_types, blocks, rigid, names)
+            if key == "wall3d":
+                parse(tb, U, materials, block_types, blocks, rigid, names, warnings, units, notes)
+            else:
+                parse(tb, U, materials, block_types, blocks, rigid, names)
             tb.done()
     if not blocks and not rigid:
         raise root.error("blocks", "missing; expected at least one [[blocks]] or [[rigid_bodies]] entry")
@@ -690,6 +772,8 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
             raise t.error("name", f"= {iname!r}: duplicate interface name")
         seen_if.add(iname)
         between = t.raw("between")
+        if between is None:
+            raise t.missing("between", "two body group names, e.g. [\"bricks\", \"bricks\"]")
         if (not isinstance(between, list) or len(between) != 2 or not all(isinstance(g, str) for g in between)):
             raise t.error("between", "expected two body group names, e.g. [\"bricks\", \"bricks\"]")
         for g in between:
@@ -727,6 +811,20 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
             orientation=t.string("orientation", "any", choices=("any", "bed", "head", "crack")),
             reference=t.string("reference", "nominal", choices=("nominal", "as_built"))))
         t.done()
+    history_times = root.string("history_times", "absolute", choices=("absolute", "stage"))
+    allow_pairs = []
+    allow = root.raw("allow_no_interface")
+    if allow is not None:
+        if not (isinstance(allow, list) and all(isinstance(p, list) and len(p) == 2 and all(isinstance(g, str)
+                                                                                        for g in p) for p in allow)):
+            raise root.error("allow_no_interface", f"= {allow!r}: expected a list of group pairs, e.g. "
+                                                   "[[\"bricks\", \"beam\"]]")
+        for p in allow:
+            for g in p:
+                if g not in all_groups:
+                    raise root.error("allow_no_interface", f"group {g!r} has no body; expected groups among "
+                                                           f"{sorted(all_groups)}")
+            allow_pairs.append(tuple(sorted(p)))
     pairs = {}
     for itf in interfaces:
         pairs.setdefault(tuple(sorted(itf.groups)), []).append(itf)
@@ -815,9 +913,85 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
         if itf.reference == "as_built" and contact and contact.get("geometry") != "frozen":
             raise InputError(f"{source}: interfaces.{itf.name}.reference = 'as_built': expected contact.geometry = "
                              f"'frozen' (joints closed as built are a small-displacement model)")
-    return Case(source=source, name=name, units=units, gravity=gravity, materials=materials,
+    case = Case(source=source, name=name, units=units, gravity=gravity, materials=materials,
                 block_types=block_types, blocks=blocks, rigid_bodies=rigid, stages=stages, output=output,
-                contact=contact, interfaces=interfaces, checks=checks, dimension=D)
+                contact=contact, interfaces=interfaces, checks=checks, dimension=D, warnings=warnings, notes=notes,
+                allow_no_interface=allow_pairs, history_times=history_times)
+    case.warnings += stage_history_warnings(case)
+    return case
+
+
+# ----------------------------------------------------------------------------- stage times and histories
+def nominal_stage_times(case: Case) -> list:
+    """(t_start, t_end) [s] of each stage when every stage runs its full duration (a stage that stops early at
+    equilibrium, a target displacement or after the peak makes the later stages start earlier)."""
+    out, t = [], 0.0
+    for st in case.stages:
+        out.append((t, t + st.duration))
+        t += st.duration
+    return out
+
+
+def active_histories(case: Case, si: int) -> dict:
+    """Driver and force histories in force during stage `si` (stages accumulate in order, as the runner applies
+    them): (body, dof) -> (label, kind, history, stage) with kind "displacement", "velocity" or "force", stage the
+    index of the stage that set it (-1: the body's own [rigid_bodies] drivers/forces, times from the run start)."""
+    act = {}
+    for r in case.rigid_bodies:
+        for dof, (kind, hist) in r.drivers.items():
+            act[(r.name, dof)] = (f"rigid_bodies.{r.name}.drivers.{dof}", kind, hist, -1)
+        for dof, hist in r.forces.items():
+            act[(r.name, dof)] = (f"rigid_bodies.{r.name}.forces.{dof}", "force", hist, -1)
+    for i, st in enumerate(case.stages[:si + 1]):
+        for body, dofs in st.drivers.items():
+            for dof, spec in dofs.items():
+                if spec is None:
+                    act.pop((body, dof), None)
+                else:
+                    act[(body, dof)] = (f"stages[{i}].drivers.{body}.{dof}", spec[0], spec[1], i)
+        for body, dofs in st.forces.items():
+            for dof, hist in dofs.items():
+                act[(body, dof)] = (f"stages[{i}].forces.{body}.{dof}", "force", hist, i)
+    return act
+
+
+def ended_histories(case: Case, si: int) -> list:
+    """The histories in force in stage `si` that stop applying when it ends (replaced or freed by the next stage,
+    or the run ends): [(label, kind, history, stage, dof)], only those given as {times, values}."""
+    act = active_histories(case, si)
+    nxt = active_histories(case, si + 1) if si + 1 < len(case.stages) else {}
+    return [(lab, kind, h, s, key[1]) for key, (lab, kind, h, s) in act.items()
+            if isinstance(h, dict) and (key not in nxt or nxt[key][0] != lab)]
+
+
+def history_value(hist, t: float) -> float:
+    """A {times, values} history at time t (piecewise linear, constant outside), as bodies.History."""
+    return float(np.interp(t, hist["times"], hist["values"]))
+
+
+def _unit_of(kind: str, dof: str) -> str:
+    rot = dof.startswith("r")
+    return {"displacement": "rad" if rot else "m", "velocity": "rad/s" if rot else "m/s",
+            "force": "N m" if rot else "N"}[kind]
+
+
+def stage_history_warnings(case: Case) -> list:
+    """Histories that a stage cuts short even when every stage runs its full duration: their last time lies past
+    the (nominal) end of the stage after which they no longer apply."""
+    out = []
+    times = nominal_stage_times(case)
+    for si, st in enumerate(case.stages):
+        t1 = times[si][1]
+        for lab, kind, h, s, dof in ended_histories(case, si):
+            off = times[s][0] if (case.history_times == "stage" and s >= 0) else 0.0
+            end = h["times"][-1] + off
+            if end > t1 + 1e-9 * max(1.0, end):
+                u = _unit_of(kind, dof)
+                out.append(f"{case.source}: {lab}: the history runs to t = {end:.6g} s but stops applying when stage "
+                           f"{st.name!r} ends at t = {t1:.6g} s (the sum of the stage durations): "
+                           f"{history_value(h, t1 - off):.4g} of {h['values'][-1]:.4g} {u} applied; lengthen the "
+                           f"stage or shorten the history (history_times = {case.history_times!r})")
+    return out
 
 
 def _parse_rigid(t: Table, U: dict, rname: str, vertices, D: int = 2) -> RigidSpec:
@@ -862,7 +1036,7 @@ def _parse_rigid(t: Table, U: dict, rname: str, vertices, D: int = 2) -> RigidSp
         raise t.error("inertia", "given together with rho (the inertia then comes from the polygon): give it with "
                                  "mass instead")
     if rho is None and mass is None and not (len(drivers) == len(dofs_of(D))):
-        raise t.error("rho", "missing; give rho [kg/m^3] or mass [kg] (only a body with all "
+        raise t.missing("rho", "give rho [kg/m^3] or mass [kg] (only a body with all "
                              f"{'three' if D == 2 else 'six'} dofs driven may omit both)")
     return RigidSpec(name=rname, vertices=vertices, rho=rho, mass=mass, inertia=inertia,
                      thickness=t.number("thickness", 1.0, lo=0, lo_open=True, dim="length") if D == 2 else 1.0,
@@ -872,7 +1046,8 @@ def _parse_rigid(t: Table, U: dict, rname: str, vertices, D: int = 2) -> RigidSp
 FIXED = {k: ("velocity", 0.0) for k in ("x", "y", "rz")}
 
 
-def _parse_wall(w: Table, U: dict, materials, block_types, blocks, rigid, names):
+def _parse_wall(w: Table, U: dict, materials, block_types, blocks, rigid, names, warnings=None, notes=None,
+                units: str = "SI"):
     """[wall]: a masonry wall built by `builders`, its block types, optional rigid foundation and top beam."""
     from . import builders
     kind = w.string("type", "running_bond", choices=("running_bond", "courses", "prism"))
@@ -881,6 +1056,9 @@ def _parse_wall(w: Table, U: dict, materials, block_types, blocks, rigid, names)
         raise w.error("material", f"= {mat!r}: expected one of the [materials] {sorted(materials)}")
     L = w.number("brick_length", required=True, lo=0, lo_open=True, dim="length")
     H = w.number("brick_height", required=True, lo=0, lo_open=True, dim="length")
+    if warnings is not None:
+        for k, v in (("brick_length", L), ("brick_height", H)):
+            _warn_implausible(warnings, w, k, v, "length", units)
     joint = w.number("joint", 0.0, lo=0, dim="length")
     expanded = w.boolean("expanded", False)
     size = w.number("mesh_size", required=True, lo=0, lo_open=True, dim="length")
@@ -899,8 +1077,14 @@ def _parse_wall(w: Table, U: dict, materials, block_types, blocks, rigid, names)
             lay = builders.running_bond(w.integer("courses", required=True, lo=1, hi=2000),
                                         w.integer("bricks_per_course", required=True, lo=1, hi=2000), L, H, joint, expanded,
                                         w.boolean("half_bricks", True), openings=ops, name=name)
+            if notes is not None:
+                for i, op in enumerate(ops):
+                    _opening_report(w, i, op, builders.opening_extent(lay, op, joint, expanded), U, units,
+                                    notes, warnings)
         elif kind == "courses":
             rows = w.raw("rows")
+            if rows is None:
+                raise w.missing("rows", "a list of courses, e.g. [[0.5, 1, 1, 0.5], [1, 1, 1]]")
             if not isinstance(rows, list) or not rows:
                 raise w.error("rows", "expected a list of courses, e.g. [[0.5, 1, 1, 0.5], [1, 1, 1]]")
             rows = [[({"gap": float(it["gap"]) * U["length"]} if isinstance(it, dict) and "gap" in it else it)
@@ -976,6 +1160,31 @@ def _parse_wall(w: Table, U: dict, materials, block_types, blocks, rigid, names)
         names.add("beam")
         rigid.append(r)
         bt.done()
+
+
+OPENING_TOL = 1e-3  # [m]: a built opening that differs from the asked one by more than this is reported
+
+
+def _opening_report(w: Table, i: int, op, ext: dict, U: dict, units: str, notes: list, warnings: list):
+    """One line saying what opening i became (builders.opening_extent), in the file's length unit: a note always
+    (`fem-blocks check`), a warning too when the clear opening differs from the asked one by more than
+    OPENING_TOL or its jambs are toothed."""
+    f = U["length"]
+    unit = "m" if units == "SI" else "mm"
+    aw, ah = ext["asked"]
+    cx0, cy0, cx1, cy1 = ext["clear"]
+    toothed = ext["width_max"] - ext["width_min"] > OPENING_TOL
+    c0, c1 = ext["courses"]
+    text = (f"{w.source}: {w.key('openings')}[{i}] = {[round(v / f, 9) for v in op]}: asked {aw / f:.4g} x "
+            f"{ah / f:.4g} {unit}, built {(cx1 - cx0) / f:.4g} x {ext['height'] / f:.4g} {unit} (clear opening "
+            f"[{cx0 / f:.4g}, {cy0 / f:.4g}, {cx1 / f:.4g}, {cy1 / f:.4g}] between brick faces; courses {c0} to {c1} "
+            "cut" + (f"; toothed jambs: course widths {ext['width_min'] / f:.4g} to {ext['width_max'] / f:.4g} {unit}"
+                     if toothed else "") + ")")
+    notes.append(text)
+    g2 = 2 * ext["gap"]  # bricks are cut a joint away from the asked sides: clear = asked + 2 joints when it fits
+    if toothed or abs(cx1 - cx0 - aw - g2) > OPENING_TOL or abs(ext["height"] - ah - g2) > OPENING_TOL:
+        warnings.append(text + "; openings snap to whole courses and bricks (pieces < brick_length/4 dropped): "
+                               "give its sides on brick faces to build it as asked")
 
 
 def quick(case: Case, factor: float = 2.0) -> Case:
@@ -1206,7 +1415,8 @@ def _add_layout_blocks(lay, prefix: str, mat: str, res: dict, block_types, block
                                 angle=0.0, group=group, R=np.array(b.R)))
 
 
-def _parse_wall3d(w: Table, U: dict, materials, block_types, blocks, rigid, names):
+def _parse_wall3d(w: Table, U: dict, materials, block_types, blocks, rigid, names, warnings=None, U_name="SI",
+                  notes=None):
     """[wall3d]: running-bond wall of bricks (builders3d.running_bond_wall), its block types, optional rigid
     foundation (fixed) and top beam (rigid body with drivers/forces) in the wall's frame."""
     from . import builders3d
@@ -1215,6 +1425,9 @@ def _parse_wall3d(w: Table, U: dict, materials, block_types, blocks, rigid, name
     L = w.number("brick_length", required=True, lo=0, lo_open=True, dim="length")
     H = w.number("brick_height", required=True, lo=0, lo_open=True, dim="length")
     W = w.number("brick_width", required=True, lo=0, lo_open=True, dim="length")
+    if warnings is not None:
+        for k, v in (("brick_length", L), ("brick_height", H), ("brick_width", W)):
+            _warn_implausible(warnings, w, k, v, "length", U_name)
     joint = w.number("joint", 0.0, lo=0, dim="length")
     origin = w.vector("position", 3, (0.0, 0.0, 0.0), dim="length")
     angle = math.radians(w.number("angle", 0.0))
@@ -1227,11 +1440,17 @@ def _parse_wall3d(w: Table, U: dict, materials, block_types, blocks, rigid, name
     res = _resolution_3d(w)
     group = w.string("group", "bricks")
     name = f"{w.source}: wall3d"
-    lay = builders3d.running_bond_wall(w.integer("courses", required=True, lo=1, hi=2000),
-                                       w.integer("bricks_per_course", required=True, lo=1, hi=2000), L, H, W, joint,
-                                       half_bricks=w.boolean("half_bricks", True), openings=ops, leaves=leaves,
+    nc = w.integer("courses", required=True, lo=1, hi=2000)
+    nb = w.integer("bricks_per_course", required=True, lo=1, hi=2000)
+    half = w.boolean("half_bricks", True)
+    lay = builders3d.running_bond_wall(nc, nb, L, H, W, joint, half_bricks=half, openings=ops, leaves=leaves,
                                        stagger_leaves=w.boolean("stagger_leaves", False), origin=origin,
                                        angle=angle, name=name)
+    if notes is not None and ops:  # openings as built, in the wall frame (x, z) of the first leaf
+        from . import builders
+        lay2 = builders.running_bond(nc, nb, L, H, joint, False, half, openings=ops, name=name)
+        for i, op in enumerate(ops):
+            _opening_report(w, i, op, builders.opening_extent(lay2, op, joint), U, U_name, notes, warnings)
     lay.check_no_overlap(name)
     _add_layout_blocks(lay, "brick", mat, res, block_types, blocks, names, group, w)
     R = builders3d.rot_z(angle)

@@ -1,4 +1,5 @@
-"""Command line: `fem-blocks run CASE.toml --out DIR`, `fem-blocks demo [NAME|--list]`, `--version`.
+"""Command line: `fem-blocks run CASE.toml --out DIR`, `fem-blocks check CASE.toml`, `fem-blocks demo [NAME|--list]`,
+`--version`.
 
 Exit status: 0 success, 2 invalid input (one line on stderr naming the file/key and what was
 expected, no traceback), 1 a run that failed numerically or by solver policy (message says where; a
@@ -91,6 +92,20 @@ def _run(case_path: str, out: str, quiet: bool, quick: bool = False, resume: boo
     return 0
 
 
+def _check(case_path: str, quick: bool = False) -> int:
+    """`fem-blocks check`: the report on stdout, each warning on one line on stderr (as a run prints them at its
+    start); exit status 0 if the case is valid, 2 if not (the one-line error)."""
+    from .check import check_case
+    lines, warnings = check_case(case_path, quick)
+    for line in lines:
+        print(line)
+    sys.stdout.flush()
+    for w in warnings:
+        print(f"fem-blocks: warning: {w}", file=sys.stderr)
+    print(f"fem-blocks: {case_path}: valid, {len(warnings)} warning(s)" + (" (on stderr)" if warnings else ""))
+    return 0
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog="fem-blocks", description="Deformable-block masonry simulator (NSCD).")
     p.add_argument("--version", action="version", version=f"fem-blocks {__version__}")
@@ -102,6 +117,9 @@ def main(argv=None) -> int:
     r.add_argument("--quick", action="store_true", help="reduced resolution: element sizes and time steps x2")
     r.add_argument("--resume", action="store_true", help="continue from the last checkpoint in --out")
     r.add_argument("--force", action="store_true", help="with --resume: resume even if the case file changed")
+    c = sub.add_parser("check", help="validate a case file and print what would be built, without running it")
+    c.add_argument("case", help="TOML case file")
+    c.add_argument("--quick", action="store_true", help="check the reduced-resolution variant")
     d = sub.add_parser("demo", help="run a shipped demo")
     d.add_argument("name", nargs="?", default="default", help="demo name (see --list); 'default' = "
                                                               + DEFAULT_DEMO)
@@ -120,6 +138,8 @@ def main(argv=None) -> int:
             if args.force and not args.resume:
                 raise InputError("--force: only meaningful with --resume")
             return _run(args.case, args.out, args.quiet, args.quick, args.resume, args.force)
+        if args.command == "check":
+            return _check(args.case, args.quick)
         demos = list_demos()
         if args.list:
             for name, path in demos.items():

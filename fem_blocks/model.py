@@ -120,3 +120,63 @@ def build_model(case: Case) -> Model:
             parent[index[b.name]] = b.parent
         contact = ContactStep(specs, groups, ContactOptions(**case.contact), body_names=names, body_parent=parent)
     return Model(bodies, block_types, names, np.asarray(case.gravity, dtype=float), groups, contact, D)
+
+
+def groups_without_interface(case: Case, model: Model, sim) -> list[str]:
+    """Warnings (one line each) for every pair of body groups whose bodies touch at the start (boundaries within
+    the search distance of the contact detection: the largest g0 + alert of the interfaces, at least 1 mm) with no
+    [[interfaces]] between them and not listed in `allow_no_interface`: such bodies pass through each other.
+
+    Runs the contact detection once on the reference configuration with one probe interface on exactly those
+    group pairs (candidate points at the FE nodes / rigid vertices). Pairs of massless (always fully driven)
+    rigid bodies, e.g. the parts of a split foundation, are skipped."""
+    from .contact.scene import ContactScene
+    if len(model.bodies) < 2:
+        return []
+    have = {tuple(sorted(i.groups)) for i in case.interfaces} | set(case.allow_no_interface)
+    groups = sorted(set(model.groups))
+    gid = {g: k for k, g in enumerate(groups)}
+    massless = {r.name for r in case.rigid_bodies if r.rho is None and r.mass is None}
+    fixed = np.array([n in massless for n in model.names])  # massless rigid bodies: fully driven, never pushed
+    body_group = np.array([gid[g] for g in model.groups], dtype=np.int64)
+    all_fixed = np.array([fixed[body_group == k].all() for k in range(len(groups))])
+    pair = -np.ones((len(groups), len(groups)), dtype=np.int64)
+    for a in range(len(groups)):
+        for b in range(a, len(groups)):
+            if (groups[a], groups[b]) not in have and not (all_fixed[a] and all_fixed[b]):
+                pair[a, b] = pair[b, a] = 0
+    if np.all(pair < 0):
+        return []
+    search = max([i.g0 + i.alert for i in case.interfaces] + [1e-3])
+    scene = ContactScene(sim)
+    bx = scene.positions(reference=True)
+    if scene.dim == 2:
+        from .contact import detection as det
+        table = det.InterfaceTable(pair_iface=pair, g0=np.zeros(1), alert=np.array([search]),
+                                   placement=np.ones(1, dtype=np.int64), positions=-np.ones((1, 1)),
+                                   cand_group=-np.ones(1, dtype=np.int64), thickness=np.ones(1),
+                                   cos_max_angle=np.cos(np.deg2rad([60.0])), split_head=-np.ones(1, dtype=np.int64))
+        cs = det.detect(bx, scene.bnode_body, scene.bnode_local, scene.bedges, scene.bedge_body, scene.kind,
+                        body_group, table)
+    else:
+        from .contact import detection3d as det3
+        table = det3.simple_table(g0=0.0, alert=search, placement="nodes", max_angle=60.0)
+        table.pair_iface = pair
+        cs = det3.detect(bx, scene.bnode_body, scene.bnode_local, scene.bfaces, scene.bface_body, scene.kind,
+                         body_group, table)
+    cs = cs.subset(np.flatnonzero(~(fixed[cs.cand_body] & fixed[cs.ant_body])))
+    if len(cs.gap) == 0:
+        return []
+    gname = np.array(model.groups, dtype=object)
+    ga, gb = gname[cs.cand_body], gname[cs.ant_body]
+    out = []
+    for a, b in sorted({tuple(sorted(p)) for p in zip(ga, gb)}):
+        sel = np.flatnonzero(((ga == a) & (gb == b)) | ((ga == b) & (gb == a)))
+        pairs = {tuple(sorted((int(cs.cand_body[k]), int(cs.ant_body[k])))) for k in sel}
+        k = sel[np.argmin(cs.gap[sel])]
+        i, j = sorted((int(cs.cand_body[k]), int(cs.ant_body[k])))
+        out.append(f"{case.source}: groups {a!r} and {b!r}: {len(pairs)} pair(s) of bodies in contact at the start "
+                   f"(e.g. {model.names[i]} / {model.names[j]}, gap {cs.gap[k]:.3g} m) but no [[interfaces]] between "
+                   f"them, so they pass through each other; add an interface, or allow_no_interface = "
+                   f"[[\"{a}\", \"{b}\"]] if this is intended")
+    return out

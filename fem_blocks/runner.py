@@ -123,19 +123,29 @@ class _Signals:
         return False
 
 
-def _enter_stage(model: Model, sim: Simulation, case: Case, si: int):
-    """Apply stage `si`'s drivers, forces, time step and solver options (stages accumulate in order)."""
+def _shift(hist, t0: float):
+    """A history with its times moved by t0 (history_times = "stage": times count from the stage's start)."""
+    if isinstance(hist, dict) and t0:
+        return {"times": [t + t0 for t in hist["times"]], "values": list(hist["values"])}
+    return hist
+
+
+def _enter_stage(model: Model, sim: Simulation, case: Case, si: int, t0: float = 0.0):
+    """Apply stage `si`'s drivers, forces, time step and solver options (stages accumulate in order). `t0`: the
+    time the stage started; with history_times = "stage" the stage's histories are shifted by it."""
     st = case.stages[si]
+    off = t0 if getattr(case, "history_times", "absolute") == "stage" else 0.0
     changed = False
     for bname, dofs in st.drivers.items():
         b = model.bodies[model.index(bname)]
         for dof, spec in dofs.items():
-            b.set_driver(dof, None if spec is None else Driver(*spec, name=f"stages[{si}].drivers.{bname}"))
+            b.set_driver(dof, None if spec is None else Driver(spec[0], _shift(spec[1], off),
+                                                               name=f"stages[{si}].drivers.{bname}"))
             changed = True
     for bname, dofs in st.forces.items():
         b = model.bodies[model.index(bname)]
         for dof, force_hist in dofs.items():
-            b.set_force(dof, force_hist)
+            b.set_force(dof, _shift(force_hist, off))
             changed = True
     if changed and model.contact is not None:
         model.contact.mark_W_dirty()  # rigid W (driven dofs) changed
@@ -146,6 +156,33 @@ def _enter_stage(model: Model, sim: Simulation, case: Case, si: int):
         o.tol = st.tol if st.tol is not None else case.contact.get("tol", o.tol)
         o.max_sweeps = st.max_sweeps if st.max_sweeps is not None else case.contact.get("max_sweeps", o.max_sweeps)
         o.on_nonconvergence = "warn"  # the runner applies the policy (it writes a checkpoint before stopping)
+
+
+def _cut_histories(case: Case, si: int, t_end: float, stage_t0: list, stages_done: list) -> list:
+    """Warnings for the driver/force histories that stop applying when stage `si` ends at t_end (it ran its full
+    duration) before their last time, although they fit the stage durations (stage_history_warnings covers those
+    that do not): an earlier stage stopped early and the histories' times are absolute."""
+    from .case import ended_histories, history_value, nominal_stage_times, _unit_of
+    nominal = nominal_stage_times(case)
+    early = [d for d in stages_done if d.get("stopped", "duration") != "duration"]
+    out = []
+    for lab, kind, h, s, dof in ended_histories(case, si):
+        stage_mode = case.history_times == "stage" and s >= 0
+        off = (stage_t0[s] if s < len(stage_t0) else 0.0) if stage_mode else 0.0
+        end = h["times"][-1] + off
+        nominal_end = h["times"][-1] + (nominal[s][0] if stage_mode else 0.0)
+        if end <= t_end + 1e-9 * max(1.0, end) or nominal_end > nominal[si][1] + 1e-9 * max(1.0, nominal_end):
+            continue
+        why = ("; stage " + ", ".join(f"{d['name']!r} stopped early ({d['stopped']})" for d in early)
+               if early else "")
+        out.append(f"{case.source}: {lab}: stage {case.stages[si].name!r} ended at t = {t_end:.6g} s, before the "
+                   f"end of this history (t = {end:.6g} s): {history_value(h, t_end - off):.4g} of "
+                   f"{h['values'][-1]:.4g} {_unit_of(kind, dof)} applied{why}; "
+                   + (f"its times count from the start of stage {case.stages[s].name!r} (history_times = 'stage'): "
+                      "lengthen the stage" if stage_mode else
+                      "history times are absolute (from the start of the run): set history_times = \"stage\" to "
+                      "count them from each stage's start, or lengthen the stage"))
+    return out
 
 
 def _policy(case: Case, st) -> str:
@@ -224,7 +261,8 @@ def _run_arrays(run: dict) -> dict:
     return {"run.stage": np.int64(run["stage"]), "run.k": np.int64(run["k"]),
             "run.stage_done": np.bool_(run["stage_done"]), "run.peak_force": np.float64(run["peak_force"]),
             "run.e0": np.array(run["e0"], dtype=float), "run.frames": np.int64(run["frames"]),
-            "run.json": np.array(json.dumps(dict(cstats=run["cstats"], stages_done=run["stages_done"]))),
+            "run.json": np.array(json.dumps(dict(cstats=run["cstats"], stages_done=run["stages_done"],
+                                                 stage_t0=run.get("stage_t0", [])))),
             "case_hash": np.array(run["case_hash"]), "fem_blocks": np.array(__version__)}
 
 
@@ -292,18 +330,22 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
     st0 = case.stages[0]
     sim = Simulation(model.bodies, h=st0.h, theta=st0.theta, gravity=model.gravity,
                      velocity_reset=st0.velocity_reset, contact=model.contact)
+    from .model import groups_without_interface
+    start_warnings = list(case.warnings) + groups_without_interface(case, model, sim)
+    for w in start_warnings:  # one line each; also in summary.json "warnings"
+        print(f"fem-blocks: warning: {w}", file=sys.stderr)
     import json
     run = dict(stage=0, k=0, stage_done=False, peak_force=0.0, e0=None, frames=0, case_hash=fp,
                cstats=dict(steps=0, sweeps=0, max_sweeps=0, unconverged=0, max_residual=0.0, max_change=0.0,
                            refined_steps=0),
-               stages_done=[])
+               stages_done=[], stage_t0=[])
     if ck is not None:
         extra = json.loads(str(ck["run.json"]))
         run.update(stage=int(ck["run.stage"]), k=int(ck["run.k"]), stage_done=bool(ck["run.stage_done"]),
                    peak_force=float(ck["run.peak_force"]), e0=tuple(float(x) for x in ck["run.e0"]),
                    frames=int(ck["run.frames"]), **extra)
         for si in range(run["stage"] + 1):
-            _enter_stage(model, sim, case, si)
+            _enter_stage(model, sim, case, si, run["stage_t0"][si] if si < len(run["stage_t0"]) else 0.0)
         try:
             _restore(sim, model, ck)
         except (KeyError, ValueError) as e:
@@ -349,6 +391,7 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
     def finish(status: str) -> dict:
         summary = _summary(case, model, sim, info, run, t_start, t_setup, pv, pc, status)
         summary["energy_created_ratio_max"] = guards.max_ratio
+        summary["warnings"] = start_warnings + [w for s in run["stages_done"] for w in s.get("warnings", [])]
         summary.update(_figures(case, sim, model, out_dir))
         write_summary(os.path.join(out_dir, "summary.json"), summary)
         return summary
@@ -364,7 +407,8 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
             for si in range(si0, len(case.stages)):
                 st = case.stages[si]
                 if not resumed_mid_stage:  # (a resumed run entered stages 0..run["stage"] before restoring)
-                    _enter_stage(model, sim, case, si)
+                    run["stage_t0"] = run["stage_t0"][:si] + [sim.time]
+                    _enter_stage(model, sim, case, si, sim.time)
                     run.update(stage=si, k=0, stage_done=False, peak_force=0.0)
                 resumed_mid_stage = False
                 policy = _policy(case, st)
@@ -443,9 +487,14 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
                         stopped = reason
                     if last:
                         n_unconv = cstats["unconverged"] - unconv0
+                        cut = [] if stopped else _cut_histories(case, si, sim.time, run["stage_t0"],
+                                                                run["stages_done"])
+                        for w in cut:
+                            print(f"fem-blocks: warning: {w}", file=sys.stderr)
                         run["stages_done"].append(dict(name=st.name, steps=k, h=st.h, theta=st.theta,
                                                        stopped=stopped or "duration", unconverged_steps=n_unconv,
-                                                       wall_time=_time.perf_counter() - t_stage))
+                                                       wall_time=_time.perf_counter() - t_stage,
+                                                       **({"warnings": cut} if cut else {})))
                         run["stage_done"] = True
                         if n_unconv:
                             print(f"fem-blocks: warning: stage {st.name!r}: {n_unconv} of {k} steps reached the "

@@ -1,0 +1,122 @@
+"""`fem-blocks check CASE.toml`: validate a case and say what would be built, without running it.
+
+Everything a run checks before its first step is done (the case file, the meshes, the bodies, the contact
+detection at the start with its overlap checks); the report lists the bodies, groups, block types, interfaces
+(with the contact points found at the start), the openings as built, the stages with their nominal times and the
+histories they apply, and every warning a run would print at its start (docs/case-files.md "Checking a case").
+"""
+from __future__ import annotations
+
+from collections import Counter
+
+import numpy as np
+
+from .case import Case, active_histories, load_case, nominal_stage_times
+from .case import quick as make_quick
+
+
+def _g(v: float) -> str:
+    return f"{v:.6g}"
+
+
+def check_case(path: str, quick: bool = False) -> tuple[list[str], list[str]]:
+    """(report lines, warnings) for the case file at `path`; raises InputError as `fem-blocks run` would."""
+    from .dynamics import Simulation
+    from .errors import InputError
+    from .model import build_model, groups_without_interface
+    case = load_case(path)
+    if quick:
+        case = make_quick(case)
+    try:
+        model = build_model(case)
+        st0 = case.stages[0]
+        sim = Simulation(model.bodies, h=st0.h, theta=st0.theta, gravity=model.gravity,
+                         velocity_reset=st0.velocity_reset, contact=model.contact)
+        warnings = list(case.warnings) + groups_without_interface(case, model, sim)
+        per_interface = _initial_contacts(model, sim)
+    except InputError as e:  # found while building the model (meshes, overlaps): name the case file
+        msg = str(e)
+        raise InputError(msg if msg.startswith(case.source) else f"{case.source}: {msg}") from None
+    return _report(case, model, per_interface), warnings
+
+
+def _initial_contacts(model, sim):
+    """Contact points per interface in the initial configuration, with the checks of a run's first step (bodies
+    overlapping, points penetrating deeper than the alert distance): the interface names -> count."""
+    c = model.contact
+    if c is None:
+        return {}
+    c._setup(sim)
+    bx = c.scene.positions(reference=True)
+    c.cs = c._detect(bx)
+    c._check_initial_penetration(True, bx)
+    c._assign_laws()
+    n = np.bincount(c.cs.interface, minlength=len(c.interfaces)) if len(c.cs.gap) else \
+        np.zeros(len(c.interfaces), dtype=int)
+    c.scene = None  # a run sets the contact step up again
+    return {itf.name: int(k) for itf, k in zip(c.interfaces, n)}
+
+
+def _report(case: Case, model, per_interface: dict) -> list[str]:
+    L = []
+    L.append(f"case {case.source}: {case.name!r}, dimension {case.dimension}, units {case.units!r} (reported in SI: "
+             "m, s, N)" + (f", variant {case.variant}" if case.variant else ""))
+    nd = sum(b.kind == 0 for b in model.bodies)
+    ndof = sum(b.type.ndof for b in model.bodies if b.kind == 0)
+    L.append(f"bodies: {len(model.bodies)} ({nd} deformable blocks of {len(model.block_types)} block types, "
+             f"{len(model.bodies) - nd} rigid bodies), {ndof} deformable dofs")
+    kinds = {}
+    for b, g in zip(model.bodies, model.groups):
+        kinds.setdefault(g, Counter())["deformable" if b.kind == 0 else "rigid"] += 1
+    L.append("groups: " + "; ".join(f"{g!r} " + ", ".join(f"{n} {k}" for k, n in sorted(c.items()))
+                                      for g, c in kinds.items()))
+    for name, bt in model.block_types.items():
+        spec = case.block_types[name]
+        n = sum(1 for b in model.bodies if b.kind == 0 and b.type is bt)
+        P = bt.mesh.points
+        ext = " x ".join(_g(v) for v in (P.max(axis=0) - P.min(axis=0)))
+        L.append(f"block type {name!r}: {spec.geometry}, {ext} m, material {spec.material!r}, "
+                 f"{len(bt.mesh.cells)} {bt.mesh.cell_type} elements, {len(P)} nodes; {n} block(s)")
+    for r in case.rigid_bodies:
+        V = np.asarray(r.vertices, dtype=float)
+        ext = " x ".join(_g(v) for v in (V.max(axis=0) - V.min(axis=0)))
+        mass = "no mass (fixed or fully driven)" if r.rho is None and r.mass is None else \
+            (f"rho {_g(r.rho)} kg/m^3" if r.rho is not None else f"mass {_g(r.mass)} kg")
+        L.append(f"rigid body {r.name!r} (group {r.group!r}): {ext} m, {mass}; driven dofs "
+                 f"{sorted(r.drivers) or 'none'}")
+    if not case.interfaces:
+        L.append("interfaces: none (bodies do not interact)")
+    for itf in case.interfaces:
+        pars = ", ".join(f"{k} = {_g(v) if isinstance(v, float) else v}" for k, v in itf.params.items())
+        L.append(f"interface {itf.name!r}: {itf.groups[0]} / {itf.groups[1]}, law {itf.law}, mu = {_g(itf.mu)}"
+                 + (f", {pars}" if pars else "") + f", g0 = {_g(itf.g0)} m, alert = {_g(itf.alert)} m, "
+                 f"orientation {itf.orientation}, placement {itf.placement}; "
+                 f"{per_interface.get(itf.name, 0)} contact points at the start")
+    if case.allow_no_interface:
+        L.append("allowed without interface: " + ", ".join(f"{a} / {b}" for a, b in case.allow_no_interface))
+    for note in case.notes:
+        L.append("opening: " + note.split(": ", 1)[-1])
+    times = nominal_stage_times(case)
+    L.append(f"stages: {len(case.stages)}; history times {case.history_times!r}"
+             + (" (from the start of the run)" if case.history_times == "absolute" else
+                " (stage histories from the stage's start)")
+             + "; nominal times: every stage runs its full duration")
+    for si, (st, (t0, t1)) in enumerate(zip(case.stages, times)):
+        stops = [s for s, on in (("at equilibrium", st.stop_at_equilibrium),
+                                 ("at a displacement", st.stop_displacement is not None),
+                                 ("after the peak", st.stop_after_peak is not None)) if on]
+        L.append(f"stage {si} {st.name!r}: t = {_g(t0)} to {_g(t1)} s, h = {_g(st.h)} s, "
+                 f"{max(1, int(round(st.duration / st.h)))} steps, theta = {_g(st.theta)}"
+                 + (", velocity reset" if st.velocity_reset else "")
+                 + (f"; may stop early {' or '.join(stops)} (later stages then start earlier)" if stops else ""))
+        for (body, dof), (lab, kind, h, s) in sorted(active_histories(case, si).items()):
+            if s != si and not (si == 0 and s == -1):  # a stage's own histories; the bodies' ones at stage 0
+                continue
+            if isinstance(h, dict):
+                off = t0 if case.history_times == "stage" else 0.0
+                what = (f"times {_g(h['times'][0] + off)} to {_g(h['times'][-1] + off)} s, values "
+                        f"{_g(h['values'][0])} to {_g(h['values'][-1])}")
+            else:
+                what = f"constant {_g(h)}"
+            L.append(f"  {lab}: {kind}, {what}")
+    return L
