@@ -446,6 +446,7 @@ class RigidBody(_DrivenDofs):
         self.q = np.zeros(3)  # (dx, dy, phi) of the centre of mass
         self.u = np.zeros(3)
         self.reaction = np.zeros(3)  # force/moment applied by the drivers, last step
+        self.inertia = np.zeros(3)  # inertial part of the reaction, last step (dynamics.py module docstring)
 
     def _dof(self, k) -> int:
         if k in DOF_NAMES:
@@ -700,6 +701,7 @@ class RigidBody3D(_DrivenDofs):
         self.q = np.zeros(6)  # displacement of the centre of mass, accumulated rotation vector increments
         self.u = np.zeros(6)
         self.reaction = np.zeros(6)
+        self.inertia = np.zeros(6)  # inertial part of the reaction, last step (dynamics.py module docstring)
 
     @classmethod
     def box(cls, lx: float, ly: float, lz: float, origin=(0.0, 0.0, 0.0), rho: float | None = None,

@@ -25,6 +25,21 @@ Quasi-static option "velocity reset" (thesis §7.1.2.d): u_i := 0 on free dofs a
 every step. Reaction of the drivers on a driven rigid dof (what a load cell reads):
 
     R_drv = m (u_{i+1} - u_i) / h - F_theta - (H r)   (force applied by the driver on the body).
+
+Inertial part of the driver reactions (docs/case-files.md "Quasi-static stages: inertia in the reactions"). The
+step is the exact equilibrium of the inertia forces f_I = M (u_{i+1} - u_i) / h (u_i after a velocity reset) with
+the internal, applied, contact and driver forces; dotted with the step's displacement dq = h((1-theta) u_i +
+theta u_{i+1}) it gives the work identity  sum_k R_k dq_k = W_I + (elastic, damping, applied, contact work),
+
+    W_I = sum over all bodies and dofs of dq . M (u_{i+1} - u_i) / h        (work of the inertia forces).
+
+W_I is attributed to the driven dofs that move in the step, in proportion to |R_k dq_k|:
+
+    I_k = W_I w_k / (sum_j w_j) / dq_k,   w_k = |R_k dq_k|,   I_k = 0 where dq_k = 0 or sum_j w_j = 0,
+
+stored as `body.inertia` (0 on free dofs). With one moving driven dof, I_k = W_I / dq_k is exactly the part of
+R_k that the inertia forces produce through the step's displacement field (virtual work with dq as the
+virtual field): for a rigid block of mass m pushed from rest by dq in a step, I = m dq / h^2.
 """
 from __future__ import annotations
 
@@ -104,6 +119,7 @@ class Simulation:
         self.time, self.step_count = float(t0), 0
         self.external_work = 0.0
         self.driver_work = 0.0  # work of the drivers on driven rigid dofs: sum R_drv . dq
+        self.inertia_work = 0.0  # work of the inertia forces in the last step (W_I, module docstring)
         self.contact = contact
         self.deformable = [i for i, b in enumerate(self.bodies) if b.kind == 0]
         self.rigid = [i for i, b in enumerate(self.bodies) if b.kind == 1]
@@ -208,14 +224,16 @@ class Simulation:
         cinfo = {}
         if self.contact is not None:
             cinfo = self.contact.solve(self, t0, t1)  # sets gr.Ucorr / body.ucorr (W H h r)
-        work = wdrv = 0.0
+        work = wdrv = winert = 0.0
         for gr in self.groups:
             Unew = gr.Ufree if getattr(gr, "Ucorr", None) is None else gr.Ufree + gr.Ucorr
             dQ = h * ((1 - th) * gr.U + th * Unew)
+            winert += float(np.sum(dQ * (gr.type.M @ (Unew - gr.U)))) / h
             work += float(np.sum(gr.Ftheta * dQ) - np.sum(gr.Fg * dQ))
             gr.Q += dQ
             gr.U[:] = Unew
             gr.Ucorr = None
+        drv_moves = []
         for i in self.rigid:
             b = self.bodies[i]
             unew = b.ufree if getattr(b, "ucorr", None) is None else b.ufree + b.ucorr
@@ -224,16 +242,31 @@ class Simulation:
             react = self._rigid_mass_times(b, unew - b.u) / h - b.Ftheta - cimp / h
             b.reaction = np.where(b.driven, react, 0.0)
             dq = h * ((1 - th) * b.u + th * unew)
+            winert += float(np.dot(dq, self._rigid_mass_times(b, unew - b.u))) / h
+            drv_moves.append((b, np.where(b.driven, dq, 0.0)))
             gforce = self._rigid_gravity_force(b)
             work += float(np.dot(np.where(b.driven, 0.0, b.Ftheta - gforce), dq))
             wdrv += float(np.dot(b.reaction, dq))
             self._move_rigid(b, dq, t1)
             b.u[:] = unew
             b.ucorr, b.contact_impulse = None, None
+        self._attribute_inertia(winert, drv_moves)
         self.time, self.step_count = t1, self.step_count + 1
         self.external_work += work
         self.driver_work += wdrv
         return self.info(cinfo)
+
+    def _attribute_inertia(self, winert: float, drv_moves: list) -> None:
+        """body.inertia = I_k on the driven dofs (module docstring): the inertia work W_I of the step split over the
+        moving driven dofs in proportion to |R_k dq_k|, divided by dq_k."""
+        self.inertia_work = winert
+        wts = [np.abs(b.reaction * dq) for b, dq in drv_moves]
+        total = float(sum(w.sum() for w in wts))
+        for (b, dq), w in zip(drv_moves, wts):
+            b.inertia = np.zeros_like(b.reaction)
+            if total > 0.0:
+                moving = dq != 0.0
+                b.inertia[moving] = winert * w[moving] / total / dq[moving]
 
     # -------------------------------------------------------------- checkpoint
     def export_state(self) -> dict:

@@ -62,6 +62,7 @@ def history_columns(model: Model) -> list[str]:
             name = model.names[i]
             cols += [f"{name}.u{d}" for d in model.dofs]
             cols += [f"{name}.R{d}" for d in model.dofs]  # 0 on free dofs; stages may drive or free dofs
+            cols += [f"{name}.I{d}" for d in model.dofs]  # inertial part of R (dynamics.py docstring)
     if model.contact is not None:
         cols += ["contacts", "closed", "slip", "sweeps", "change", "residual", "converged"]
     return cols
@@ -79,6 +80,8 @@ def history_row(model: Model, info, stage_index: int, sim=None, h=None) -> dict:
                 row[f"{name}.u{d}"] = b.q[k]
             for k, d in enumerate(model.dofs):
                 row[f"{name}.R{d}"] = b.reaction[k]
+            for k, d in enumerate(model.dofs):
+                row[f"{name}.I{d}"] = b.inertia[k]
     if model.contact is not None:
         c = info.contact or {}
         row.update(contacts=c.get("contacts", 0), closed=c.get("active", 0), slip=c.get("slip", 0),
@@ -447,6 +450,8 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
                                                        stopped=stopped or "duration", unconverged_steps=n_unconv,
                                                        wall_time=_time.perf_counter() - t_stage))
                         run["stage_done"] = True
+                        hist.flush()
+                        _inertia_report(run["stages_done"][-1], hpath, si, st)
                         if n_unconv:
                             print(f"fem-blocks: warning: stage {st.name!r}: {n_unconv} of {k} steps reached the "
                                   f"NLGS sweep limit without converging (see the 'converged' column of "
@@ -474,6 +479,51 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
             except Exception as e2:  # noqa: BLE001 - the stop message matters more than the summary
                 print(f"fem-blocks: warning: could not write the summary: {e2}", file=sys.stderr)
     return finish("completed")
+
+
+INERTIA_WARN = 0.01   # warn when the inertial part of a driven reaction exceeds 1 % of it (quasi-static stages)
+INERTIA_FLOOR = 0.1   # ... at the steps where |R| is at least 10 % of its largest value in the stage
+
+
+def inertia_shares(hist: dict, stage: int) -> dict:
+    """Per driven reaction column `BODY.Rd` of stage `stage`: `max_share` = max |I|/|R| over the steps where
+    |R| >= INERTIA_FLOOR x max |R| in the stage, `share_at_peak` = |I|/|R| at the step of max |R| (None for
+    reactions that are 0 throughout the stage: free dofs)."""
+    sel = np.asarray(hist["stage"]) == stage
+    if "step" in hist:
+        sel &= np.asarray(hist["step"]) > 0  # the initial row (step 0) belongs to no step
+    out = {}
+    for col in hist:
+        body, _, dof = col.rpartition(".")
+        icol = f"{body}.I{dof[1:]}"
+        if not body or not dof.startswith("R") or icol not in hist:
+            continue
+        R = np.abs(np.asarray(hist[col], float)[sel])
+        inert = np.abs(np.asarray(hist[icol], float)[sel])
+        if R.size == 0 or not np.any(R > 0):
+            continue
+        big = R >= INERTIA_FLOOR * R.max()
+        k = int(np.argmax(R))
+        out[col] = dict(max_share=float(np.max(inert[big] / R[big])), share_at_peak=float(inert[k] / R[k]),
+                        max_abs_R=float(R[k]))
+    return out
+
+
+def _inertia_report(done: dict, hpath: str, si: int, st) -> None:
+    """Adds `inertia_share` (inertia_shares) to the stage's summary entry; warns in quasi-static stages
+    (velocity_reset) when a share exceeds INERTIA_WARN."""
+    from .output.history import read_history
+    shares = inertia_shares(read_history(hpath), si)
+    done["inertia_share"] = shares
+    if not st.velocity_reset:
+        return
+    for col, v in shares.items():
+        if v["max_share"] > INERTIA_WARN:
+            print(f"fem-blocks: warning: stage {st.name!r}: the inertial part of reaction {col} reaches "
+                  f"{v['max_share']:.1%} of it ({v['share_at_peak']:.1%} at its peak |R| = {v['max_abs_R']:.4g}); "
+                  f"the inertia force scales as m du/h^2: use a smaller displacement per step or a larger h "
+                  f"(history column {col.rpartition('.')[0]}.I{col.rpartition('.')[2][1:]}; docs/case-files.md)",
+                  file=sys.stderr)
 
 
 def _summary(case, model, sim, info, run, t_start, t_setup, pv, pc, status) -> dict:

@@ -1,0 +1,117 @@
+"""Inertia in quasi-static stages (issue #18 item 9): the inertial part of the driver reactions (history columns
+BODY.Id, summary `inertia_share`, warning above 1 %).
+
+Closed form: a driven rigid platen pushes a rigid block (mass m, only y free, no gravity) onto a fixed base through
+an elastic joint (c_N, area A). With velocity reset and theta = 1 the block starts every step at rest and must move
+by du = v h with the platen: its inertia force is m du / h^2 exactly, and the platen's reaction is
+R = -(c_N A delta + m du / h^2) with delta = k du after k steps (step 1 also carries the platen's own acceleration
+from rest to v: m_p v / h).
+"""
+import numpy as np
+import pytest
+
+from fem_blocks.case import load_case
+from fem_blocks.output.history import read_history
+from fem_blocks.runner import inertia_shares, run_case
+
+M_BLOCK, M_PLATEN, C_N, AREA = 100.0, 10.0, 1e9, 1.0  # kg, kg, N/m^3, m^2 (1 m face x 1 m thickness)
+
+CASE = """
+name = "platen"
+gravity = [0.0, 0.0]
+[[rigid_bodies]]
+name = "base"
+group = "base"
+vertices = [[0.0, 0.0], [1.0, 0.0], [1.0, 0.5], [0.0, 0.5]]
+mass = 1000.0
+[rigid_bodies.drivers]
+x = {{kind = "velocity", history = 0.0}}
+y = {{kind = "velocity", history = 0.0}}
+rz = {{kind = "velocity", history = 0.0}}
+[[rigid_bodies]]
+name = "block"
+group = "block"
+vertices = [[0.0, 0.5], [1.0, 0.5], [1.0, 1.0], [0.0, 1.0]]
+mass = {m}
+[rigid_bodies.drivers]
+x = {{kind = "velocity", history = 0.0}}
+rz = {{kind = "velocity", history = 0.0}}
+[[rigid_bodies]]
+name = "platen"
+group = "platen"
+vertices = [[0.0, 1.0], [1.0, 1.0], [1.0, 1.2], [0.0, 1.2]]
+mass = {mp}
+[rigid_bodies.drivers]
+x = {{kind = "velocity", history = 0.0}}
+y = {{kind = "velocity", history = {vy}}}
+rz = {{kind = "velocity", history = 0.0}}
+[[interfaces]]
+between = ["block", "base"]
+law = "elastic"
+c_N = {cn}
+c_T = 1.0
+mu = 0.0
+[[interfaces]]
+between = ["platen", "block"]
+positions = [0.5]
+mu = 0.0
+[contact]
+tol = 1e-12
+solver = "newton"
+[[stages]]
+name = "push"
+duration = {dur}
+h = {h}
+theta = 1.0
+velocity_reset = true
+"""
+
+DU, STEPS = 1e-5, 5  # displacement per step [m], steps
+
+
+def _run(tmp_path, h, capsys):
+    path = tmp_path / f"h{h:g}.toml"
+    path.write_text(CASE.format(m=M_BLOCK, mp=M_PLATEN, vy=-DU / h, cn=C_N, dur=STEPS * h, h=h))
+    out = tmp_path / f"out{h:g}"
+    s = run_case(load_case(str(path)), str(out), progress=False)
+    return read_history(out / "history.csv"), s, capsys.readouterr().err
+
+
+def test_inertial_part_of_the_platen_reaction_is_m_du_over_h2(tmp_path, capsys):
+    res = {h: _run(tmp_path, h, capsys) for h in (0.01, 0.002)}
+    for h, (hist, s, err) in res.items():
+        assert np.all(hist["converged"] == 1)
+        inert = M_BLOCK * DU / h ** 2  # by hand
+        k = np.arange(1, STEPS + 1)
+        expected_I = np.full(STEPS, inert)
+        expected_I[0] += M_PLATEN * DU / h ** 2  # step 1: the platen itself goes from rest to v
+        # history rows 1..STEPS; the platen moves down: R and I are negative (force of the driver on the platen)
+        np.testing.assert_allclose(-hist["platen.Iy"][1:], expected_I, rtol=1e-9)
+        np.testing.assert_allclose(-hist["platen.Ry"][1:], C_N * AREA * k * DU + expected_I, rtol=1e-9)
+        # fixed dofs and free dofs carry no inertial part (they do no work)
+        for col in ("base.Iy", "base.Ix", "block.Ix", "block.Iy", "platen.Ix", "platen.Irz"):
+            assert np.all(hist[col] == 0.0), col
+        # summary: max share over the steps with |R| >= 10 % of its stage maximum (here all 5), and at the peak
+        sh = s["stages"][0]["inertia_share"]["platen.Ry"]
+        assert sh["max_share"] == pytest.approx(expected_I[0] / (C_N * AREA * DU + expected_I[0]), rel=1e-9)
+        assert sh["share_at_peak"] == pytest.approx(inert / (C_N * AREA * STEPS * DU + inert), rel=1e-9)
+        assert s["stages"][0]["inertia_share"]["base.Ry"]["max_share"] == 0.0
+    # h = 10 ms: 11 N of 10 011 N (0.11 %) at most: no warning; h = 2 ms: 275 N of 10 275 N (2.7 %): warning
+    assert "inertial part" not in res[0.01][2]
+    err = res[0.002][2]
+    assert "stage 'push'" in err and "inertial part of reaction platen.Ry reaches 2.7%" in err
+    assert "block.R" not in err and "base.R" not in err
+    # the static part R - I does not depend on h
+    np.testing.assert_allclose(res[0.01][0]["platen.Ry"] - res[0.01][0]["platen.Iy"],
+                               res[0.002][0]["platen.Ry"] - res[0.002][0]["platen.Iy"], rtol=1e-9, atol=1e-9)
+
+
+def test_inertia_shares_ignore_small_reactions_and_other_stages():
+    hist = {"step": np.array([0, 1, 2, 3, 4]), "stage": np.array([0, 0, 0, 1, 1]),
+            "b.Rx": np.array([0.0, 1.0, 100.0, 5.0, 5.0]), "b.Ix": np.array([0.0, 0.9, 2.0, 1.0, 0.0]),
+            "b.Ry": np.zeros(5), "b.Iy": np.zeros(5)}
+    s0 = inertia_shares(hist, 0)
+    assert set(s0) == {"b.Rx"}  # b.Ry: zero reaction (free dof) throughout
+    # |R| = 1 is below 10 % of the stage's peak 100: its 90 % share is not counted
+    assert s0["b.Rx"] == dict(max_share=0.02, share_at_peak=0.02, max_abs_R=100.0)
+    assert inertia_shares(hist, 1)["b.Rx"]["max_share"] == 0.2
