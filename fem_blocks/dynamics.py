@@ -21,6 +21,13 @@ the orientation at the start of the step, the free velocity on the free dofs
 and the orientation is updated by the rotation vector Δφ = h [(1-theta) ω_i + theta ω_{i+1}]:
 Rot <- exp([Δφ]x) Rot (RigidBody3D.rotate).
 
+Static step (stage key `static = true`, theta = 1): the same step with M = 0 and C = 0, so that
+h^2 K u_{i+1} = -h K q_i + h F + H P, i.e. K q_{i+1} = F_{i+1} + H P / h: equilibrium at the end of the step with no
+inertia (no dependence on h at a given displacement per step). Mhat = h^2 K must be invertible: every deformable
+body clamped against all its rigid motions, every rigid body driven on all its dofs (`Simulation.static_obstacles`);
+a body held only by contacts has no W = Mhat^-1 and is rejected (InputError). Rigid driver reactions then carry no
+m (u_{i+1} - u_i) / h term, and the inertial parts below are 0.
+
 Quasi-static option "velocity reset" (thesis §7.1.2.d): u_i := 0 on free dofs at the start of
 every step. Reaction of the drivers on a driven rigid dof (what a load cell reads):
 
@@ -37,7 +44,7 @@ W_I is attributed to the driven dofs that move in the step, in proportion to |R_
 
     I_k = W_I w_k / (sum_j w_j) / dq_k,   w_k = |R_k dq_k|,   I_k = 0 where dq_k = 0 or sum_j w_j = 0,
 
-stored as `body.inertia` (0 on free dofs). With one moving driven dof, I_k = W_I / dq_k is exactly the part of
+stored as `body.reaction_inertia` (0 on free dofs). With one moving driven dof, I_k = W_I / dq_k is exactly the part of
 R_k that the inertia forces produce through the step's displacement field (virtual work with dq as the
 virtual field): for a rigid block of mass m pushed from rest by dq in a step, I = m dq / h^2.
 """
@@ -97,7 +104,7 @@ class Simulation:
     """
 
     def __init__(self, bodies, h: float, theta: float = 0.5, gravity=None,
-                 velocity_reset: bool = False, contact=None, t0: float = 0.0):
+                 velocity_reset: bool = False, contact=None, t0: float = 0.0, static: bool = False):
         check_step(h, theta)
         if not bodies:
             raise InputError("bodies: expected at least one body")
@@ -123,21 +130,44 @@ class Simulation:
         self.contact = contact
         self.deformable = [i for i, b in enumerate(self.bodies) if b.kind == 0]
         self.rigid = [i for i, b in enumerate(self.bodies) if b.kind == 1]
-        self.h, self.theta = None, None
-        self.set_step(h, theta)
+        self.h, self.theta, self.static = None, None, False
+        self.set_step(h, theta, static)
 
     # -------------------------------------------------------------- set-up
-    def set_step(self, h: float, theta: float):
-        """(Re)build the step operators for (h, theta); shared per block type and clamp set."""
+    def static_obstacles(self) -> list:
+        """Why a static step (M = 0) is not well-posed for these bodies and drivers: [(body index, reason)]
+        (empty: admissible)."""
+        out = []
+        names = ("x", "y", "rz") if self.dim == 2 else ("x", "y", "z", "rx", "ry", "rz")
+        for i, b in enumerate(self.bodies):
+            if b.kind == 0 and not b.type.clamps_fix_rigid_modes(b.clamped):
+                out.append((i, "its clamps leave a rigid motion free (K is singular without the mass term)"))
+            elif b.kind == 1 and not b.driven.all():
+                free = ", ".join(n for n, d in zip(names, b.driven) if not d)
+                out.append((i, f"its dofs {free} are not driven (a free rigid dof has only its mass)"))
+        return out
+
+    def set_step(self, h: float, theta: float, static: bool | None = None):
+        """(Re)build the step operators for (h, theta, static); shared per block type and clamp set. static=True
+        needs theta = 1 and no `static_obstacles` (InputError otherwise); None keeps the current choice."""
         check_step(h, theta)
-        if (h, theta) == (self.h, self.theta):
+        static = self.static if static is None else bool(static)
+        if static:
+            if theta != 1.0:
+                raise InputError(f"theta = {theta:g} with a static step: expected theta = 1")
+            bad = self.static_obstacles()
+            if bad:
+                i, why = bad[0]
+                raise InputError(f"static step: body {i} cannot be in equilibrium without inertia: {why}; expected "
+                                 "every deformable body clamped against rigid motion and every rigid dof driven")
+        if (h, theta, static) == (self.h, self.theta, self.static):
             return
-        self.h, self.theta = float(h), float(theta)
+        self.h, self.theta, self.static = float(h), float(theta), static
         groups: dict[int, list] = {}
         ops = {}
         for i in self.deformable:
             b = self.bodies[i]
-            op = b.type.step_operator(self.h, self.theta, b.clamped)
+            op = b.type.step_operator(self.h, self.theta, b.clamped, static)
             groups.setdefault(id(op), []).append(i)
             ops[id(op)] = (op, b.type)
         self.groups = [_Group(ops[k][0], ops[k][1], members, self.bodies) for k, members in groups.items()]
@@ -166,10 +196,10 @@ class Simulation:
             bt = gr.type
             gr.Ftheta = (1 - th) * self._group_load(gr, t0) + th * self._group_load(gr, t1)
             KQ = bt.K @ gr.Q
-            rhs = bt.M @ gr.U - h * KQ + h * gr.Ftheta
+            rhs = (-h * KQ + h * gr.Ftheta) if self.static else (bt.M @ gr.U - h * KQ + h * gr.Ftheta)
             if th != 1.0:
                 rhs -= h * h * th * (1 - th) * (bt.K @ gr.U)
-            if bt.C.nnz and th != 1.0:
+            if bt.C.nnz and th != 1.0 and not self.static:
                 rhs -= h * (1 - th) * (bt.C @ gr.U)
             rhs[gr.clamped, :] = 0.0
             gr.Ufree = gr.op.solve(rhs)
@@ -228,7 +258,8 @@ class Simulation:
         for gr in self.groups:
             Unew = gr.Ufree if getattr(gr, "Ucorr", None) is None else gr.Ufree + gr.Ucorr
             dQ = h * ((1 - th) * gr.U + th * Unew)
-            winert += float(np.sum(dQ * (gr.type.M @ (Unew - gr.U)))) / h
+            if not self.static:
+                winert += float(np.sum(dQ * (gr.type.M @ (Unew - gr.U)))) / h
             work += float(np.sum(gr.Ftheta * dQ) - np.sum(gr.Fg * dQ))
             gr.Q += dQ
             gr.U[:] = Unew
@@ -239,10 +270,11 @@ class Simulation:
             unew = b.ufree if getattr(b, "ucorr", None) is None else b.ufree + b.ucorr
             imp = getattr(b, "contact_impulse", None)
             cimp = np.zeros(self.rigid_ndof) if imp is None else imp
-            react = self._rigid_mass_times(b, unew - b.u) / h - b.Ftheta - cimp / h
+            inert = np.zeros(self.rigid_ndof) if self.static else self._rigid_mass_times(b, unew - b.u) / h
+            react = inert - b.Ftheta - cimp / h
             b.reaction = np.where(b.driven, react, 0.0)
             dq = h * ((1 - th) * b.u + th * unew)
-            winert += float(np.dot(dq, self._rigid_mass_times(b, unew - b.u))) / h
+            winert += float(np.dot(dq, inert))
             drv_moves.append((b, np.where(b.driven, dq, 0.0)))
             gforce = self._rigid_gravity_force(b)
             work += float(np.dot(np.where(b.driven, 0.0, b.Ftheta - gforce), dq))
@@ -257,16 +289,16 @@ class Simulation:
         return self.info(cinfo)
 
     def _attribute_inertia(self, winert: float, drv_moves: list) -> None:
-        """body.inertia = I_k on the driven dofs (module docstring): the inertia work W_I of the step split over the
+        """body.reaction_inertia = I_k on the driven dofs (module docstring): the inertia work W_I of the step split over the
         moving driven dofs in proportion to |R_k dq_k|, divided by dq_k."""
         self.inertia_work = winert
         wts = [np.abs(b.reaction * dq) for b, dq in drv_moves]
         total = float(sum(w.sum() for w in wts))
         for (b, dq), w in zip(drv_moves, wts):
-            b.inertia = np.zeros_like(b.reaction)
+            b.reaction_inertia = np.zeros_like(b.reaction)
             if total > 0.0:
                 moving = dq != 0.0
-                b.inertia[moving] = winert * w[moving] / total / dq[moving]
+                b.reaction_inertia[moving] = winert * w[moving] / total / dq[moving]
 
     # -------------------------------------------------------------- checkpoint
     def export_state(self) -> dict:

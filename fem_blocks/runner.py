@@ -81,7 +81,7 @@ def history_row(model: Model, info, stage_index: int, sim=None, h=None) -> dict:
             for k, d in enumerate(model.dofs):
                 row[f"{name}.R{d}"] = b.reaction[k]
             for k, d in enumerate(model.dofs):
-                row[f"{name}.I{d}"] = b.inertia[k]
+                row[f"{name}.I{d}"] = b.reaction_inertia[k]
     if model.contact is not None:
         c = info.contact or {}
         row.update(contacts=c.get("contacts", 0), closed=c.get("active", 0), slip=c.get("slip", 0),
@@ -142,7 +142,14 @@ def _enter_stage(model: Model, sim: Simulation, case: Case, si: int):
             changed = True
     if changed and model.contact is not None:
         model.contact.mark_W_dirty()  # rigid W (driven dofs) changed
-    sim.set_step(st.h, st.theta)
+    if st.static:  # the static step needs every body held without its mass (dynamics.py docstring)
+        bad = sim.static_obstacles()
+        if bad:
+            i, why = bad[0]
+            raise InputError(f"{case.source}: stages[{si}].static = true: body {model.names[i]!r}: {why}; expected "
+                             f"every deformable block clamped against rigid motion and every rigid dof driven "
+                             f"(otherwise use velocity_reset with a small displacement per step)")
+    sim.set_step(st.h, st.theta, st.static)
     sim.velocity_reset = st.velocity_reset
     if model.contact is not None:
         o = model.contact.opts

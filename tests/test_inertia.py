@@ -115,3 +115,107 @@ def test_inertia_shares_ignore_small_reactions_and_other_stages():
     # |R| = 1 is below 10 % of the stage's peak 100: its 90 % share is not counted
     assert s0["b.Rx"] == dict(max_share=0.02, share_at_peak=0.02, max_abs_R=100.0)
     assert inertia_shares(hist, 1)["b.Rx"]["max_share"] == 0.2
+
+
+# ----------------------------------------------------------------------------- static step (stage key static = true)
+E, LX, LY, T = 1e9, 0.2, 0.4, 0.1  # Pa, m, m, m: column clamped at its base, nu = 0 (uniaxial, exact in P1/Q1)
+
+STATIC = """
+name = "static"
+gravity = [0.0, 0.0]
+[materials.m]
+E = {E}
+nu = 0.0
+rho = 2000.0
+thickness = {T}
+[block_types.col]
+geometry = "rectangle"
+material = "m"
+lx = {LX}
+ly = {LY}
+mesh_size = 0.1
+[[blocks]]
+type = "col"
+name = "col"
+group = "col"
+[[blocks.clamps]]
+tag = "bottom"
+components = "{clamp}"
+[[rigid_bodies]]
+name = "platen"
+group = "platen"
+vertices = [[-0.05, {LY}], [0.25, {LY}], [0.25, 0.5], [-0.05, 0.5]]
+mass = 10.0
+[rigid_bodies.drivers]
+x = {{kind = "velocity", history = 0.0}}
+{ydrv}
+rz = {{kind = "velocity", history = 0.0}}
+[[interfaces]]
+between = ["col", "platen"]
+mu = 0.0
+placement = "nodes"
+[contact]
+tol = 1e-12
+solver = "newton"
+[[stages]]
+name = "push"
+duration = {dur}
+h = {h}
+{stage}
+"""
+
+
+def _static_case(tmp_path, h, stage="static = true", clamp="xy", ydrv=None, name="s"):
+    if ydrv is None:
+        ydrv = f'y = {{kind = "velocity", history = {-DU / h!r}}}'
+    path = tmp_path / f"{name}{h:g}.toml"
+    path.write_text(STATIC.format(E=E, T=T, LX=LX, LY=LY, clamp=clamp, ydrv=ydrv, dur=STEPS * h, h=h, stage=stage))
+    return load_case(str(path))
+
+
+def test_static_step_platen_reaction_is_E_A_delta_over_L_for_any_h(tmp_path, capsys):
+    Ry = {}
+    for h in (0.01, 0.002):
+        out = tmp_path / f"out{h:g}"
+        run_case(_static_case(tmp_path, h), str(out), progress=False)
+        hist = read_history(out / "history.csv")
+        assert np.all(hist["converged"] == 1)
+        Ry[h] = hist["platen.Ry"][1:]
+        k = np.arange(1, STEPS + 1)
+        # static equilibrium after k steps: |R| = E A delta / L, A = LX T, delta = k du (closed form, no h)
+        np.testing.assert_allclose(-Ry[h], E * LX * T * k * DU / LY, rtol=1e-10)
+        assert np.all(hist["platen.Iy"] == 0.0)
+    np.testing.assert_allclose(Ry[0.002], Ry[0.01], rtol=1e-10)
+    assert "inertial part" not in capsys.readouterr().err
+    # the same stage with velocity reset instead: the column's inertia is in the reaction and depends on h
+    out = tmp_path / "reset"
+    run_case(_static_case(tmp_path, 0.002, stage="theta = 1.0\nvelocity_reset = true", name="r"), str(out),
+             progress=False)
+    Rr = read_history(out / "history.csv")["platen.Ry"][1:]
+    assert np.all(np.abs(Rr - Ry[0.002]) > 1e-3 * np.abs(Ry[0.002]))
+
+
+def test_static_step_rejects_bodies_without_static_equilibrium(tmp_path):
+    from fem_blocks.errors import InputError
+    with pytest.raises(InputError, match=r"stages\[0\]\.static = true: body 'platen': its dofs y are not driven"):
+        run_case(_static_case(tmp_path, 0.01, ydrv="", name="a"), str(tmp_path / "a"), progress=False)
+    with pytest.raises(InputError, match=r"stages\[0\]\.static = true: body 'col': its clamps leave a rigid motion"):
+        run_case(_static_case(tmp_path, 0.01, clamp="y", name="b"), str(tmp_path / "b"), progress=False)
+    with pytest.raises(InputError, match=r"stages\[0\]\.theta: = 0\.5: expected 1 .*static = true"):
+        _static_case(tmp_path, 0.01, stage="static = true\ntheta = 0.5", name="c")
+
+
+def test_clamps_fix_rigid_modes():
+    from fem_blocks.bodies import BlockType, Material
+    from fem_blocks.meshing import mesh_rectangle
+    bt = BlockType(mesh_rectangle(0.2, 0.4, 0.1), Material(E=1e9, nu=0.0, rho=2000.0))
+    y = bt.mesh.points[:, 1]
+    base = np.flatnonzero(np.abs(y) < 1e-12)
+    clamped = np.zeros(bt.ndof, dtype=bool)
+    clamped[2 * base + 1] = True          # base, y only: x translation free
+    assert not bt.clamps_fix_rigid_modes(clamped)
+    clamped[2 * base[0]] = True           # + x of one base node: fixed (the y of two nodes stop the rotation)
+    assert bt.clamps_fix_rigid_modes(clamped)
+    one = np.zeros(bt.ndof, dtype=bool)
+    one[[2 * base[0], 2 * base[0] + 1]] = True  # one node, x and y: rotation about it free
+    assert not bt.clamps_fix_rigid_modes(one)
