@@ -332,15 +332,16 @@ class Simulation:
 
     # -------------------------------------------------------------- diagnostics
     def energies(self):
-        """(kinetic, elastic, gravity potential) = (1/2 u.Mu, 1/2 q.Kq, -F_g.q) summed over bodies."""
+        """(kinetic, elastic, gravity potential) = (1/2 u.Mu, 1/2 q.Kq, -F_g.q) summed over bodies; kinetic = 0 in a
+        static step (the model has no inertia; u = dq/h is a pseudo-velocity)."""
         kin = ela = pot = 0.0
         for gr in self.groups:
-            kin += 0.5 * float(np.sum(gr.U * (gr.type.M @ gr.U)))
+            kin += 0.0 if self.static else 0.5 * float(np.sum(gr.U * (gr.type.M @ gr.U)))
             ela += 0.5 * float(np.sum(gr.Q * (gr.type.K @ gr.Q)))
             pot -= float(np.sum(gr.Fg * gr.Q))
         for i in self.rigid:
             b = self.bodies[i]
-            kin += 0.5 * float(np.dot(b.u, self._rigid_mass_times(b, b.u)))
+            kin += 0.0 if self.static else 0.5 * float(np.dot(b.u, self._rigid_mass_times(b, b.u)))
             pot -= float(np.dot(self._rigid_gravity_force(b), b.q))
         return kin, ela, pot
 
