@@ -44,8 +44,8 @@ W_I is attributed to the driven dofs that move in the step, in proportion to |R_
 
     I_k = W_I w_k / (sum_j w_j) / dq_k,   w_k = |R_k dq_k|,   I_k = 0 where dq_k = 0 or sum_j w_j = 0,
 
-stored as `body.reaction_inertia` (0 on free dofs). With one moving driven dof, I_k = W_I / dq_k is exactly the part of
-R_k that the inertia forces produce through the step's displacement field (virtual work with dq as the
+stored as `body.reaction_inertia` (0 on free dofs). With one moving driven dof, I_k = W_I / dq_k is exactly the
+part of R_k that the inertia forces produce through the step's displacement field (virtual work with dq as the
 virtual field): for a rigid block of mass m pushed from rest by dq in a step, I = m dq / h^2.
 """
 from __future__ import annotations
@@ -289,8 +289,8 @@ class Simulation:
         return self.info(cinfo)
 
     def _attribute_inertia(self, winert: float, drv_moves: list) -> None:
-        """body.reaction_inertia = I_k on the driven dofs (module docstring): the inertia work W_I of the step split over the
-        moving driven dofs in proportion to |R_k dq_k|, divided by dq_k."""
+        """body.reaction_inertia = I_k on the driven dofs (module docstring): the inertia work W_I of the step split
+        over the moving driven dofs in proportion to |R_k dq_k|, divided by dq_k."""
         self.inertia_work = winert
         wts = [np.abs(b.reaction * dq) for b, dq in drv_moves]
         total = float(sum(w.sum() for w in wts))

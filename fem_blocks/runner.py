@@ -494,8 +494,8 @@ INERTIA_FLOOR = 0.1   # ... at the steps where |R| is at least 10 % of its large
 
 def inertia_shares(hist: dict, stage: int) -> dict:
     """Per driven reaction column `BODY.Rd` of stage `stage`: `max_share` = max |I|/|R| over the steps where
-    |R| >= INERTIA_FLOOR x max |R| in the stage, `share_at_peak` = |I|/|R| at the step of max |R| (None for
-    reactions that are 0 throughout the stage: free dofs)."""
+    |R| >= INERTIA_FLOOR x max |R| in the stage, `share_at_peak` = |I|/|R| at the step of max |R|, `max_abs_R`
+    (reactions that are 0 throughout the stage, e.g. free dofs, are left out)."""
     sel = np.asarray(hist["stage"]) == stage
     if "step" in hist:
         sel &= np.asarray(hist["step"]) > 0  # the initial row (step 0) belongs to no step
@@ -528,7 +528,8 @@ def _inertia_report(done: dict, hpath: str, si: int, st) -> None:
         if v["max_share"] > INERTIA_WARN:
             print(f"fem-blocks: warning: stage {st.name!r}: the inertial part of reaction {col} reaches "
                   f"{v['max_share']:.1%} of it ({v['share_at_peak']:.1%} at its peak |R| = {v['max_abs_R']:.4g}); "
-                  f"the inertia force scales as m du/h^2: use a smaller displacement per step or a larger h "
+                  f"the inertia force scales as m du/h^2: use a smaller displacement per step, a larger h, or "
+                  f"static = true where admissible "
                   f"(history column {col.rpartition('.')[0]}.I{col.rpartition('.')[2][1:]}; docs/case-files.md)",
                   file=sys.stderr)
 
