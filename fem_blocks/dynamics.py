@@ -42,7 +42,10 @@ theta u_{i+1}) it gives the work identity  sum_k R_k dq_k = W_I + (elastic, damp
 
 W_I is attributed to the driven dofs that move in the step, in proportion to |R_k dq_k|:
 
-    I_k = W_I w_k / (sum_j w_j) / dq_k,   w_k = |R_k dq_k|,   I_k = 0 where dq_k = 0 or sum_j w_j = 0,
+    I_k = W_I w_k / (sum_j w_j) / dq_k,   w_k = |R_k dq_k|,   I_k = 0 where sum_j w_j = 0 or dof k does not move:
+    |dq_k| (rotations: |dq_k| x the body's radius) < MOVE_TOL x the largest displacement increment of the model
+    in the step (a driver that stands still, up to rounding, while something else moves, e.g. settles under
+    gravity, is not the cause of that motion),
 
 stored as `body.reaction_inertia` (0 on free dofs). With one moving driven dof, I_k = W_I / dq_k is exactly the
 part of R_k that the inertia forces produce through the step's displacement field (virtual work with dq as the
@@ -56,6 +59,8 @@ import numpy as np
 
 from .bodies import DeformableBody, DeformableBody3D, RigidBody, RigidBody3D, check_step
 from .errors import InputError
+
+MOVE_TOL = 1e-3  # a driven dof "moves" in a step if its increment is >= MOVE_TOL x the model's largest increment
 
 
 @dataclass
@@ -254,10 +259,11 @@ class Simulation:
         cinfo = {}
         if self.contact is not None:
             cinfo = self.contact.solve(self, t0, t1)  # sets gr.Ucorr / body.ucorr (W H h r)
-        work = wdrv = winert = 0.0
+        work = wdrv = winert = dmax = 0.0
         for gr in self.groups:
             Unew = gr.Ufree if getattr(gr, "Ucorr", None) is None else gr.Ufree + gr.Ucorr
             dQ = h * ((1 - th) * gr.U + th * Unew)
+            dmax = max(dmax, float(np.max(np.abs(dQ), initial=0.0)))
             if not self.static:
                 winert += float(np.sum(dQ * (gr.type.M @ (Unew - gr.U)))) / h
             work += float(np.sum(gr.Ftheta * dQ) - np.sum(gr.Fg * dQ))
@@ -275,30 +281,39 @@ class Simulation:
             b.reaction = np.where(b.driven, react, 0.0)
             dq = h * ((1 - th) * b.u + th * unew)
             winert += float(np.dot(dq, inert))
-            drv_moves.append((b, np.where(b.driven, dq, 0.0)))
+            size = np.abs(dq) * self._dof_lengths(b)  # translations [m], rotations x radius [m]
+            dmax = max(dmax, float(size.max()))
+            drv_moves.append((b, np.where(b.driven, dq, 0.0), size))
             gforce = self._rigid_gravity_force(b)
             work += float(np.dot(np.where(b.driven, 0.0, b.Ftheta - gforce), dq))
             wdrv += float(np.dot(b.reaction, dq))
             self._move_rigid(b, dq, t1)
             b.u[:] = unew
             b.ucorr, b.contact_impulse = None, None
-        self._attribute_inertia(winert, drv_moves)
+        self._attribute_inertia(winert, drv_moves, dmax)
         self.time, self.step_count = t1, self.step_count + 1
         self.external_work += work
         self.driver_work += wdrv
         return self.info(cinfo)
 
-    def _attribute_inertia(self, winert: float, drv_moves: list) -> None:
+    def _dof_lengths(self, b) -> np.ndarray:
+        """Length per dof of a rigid body that turns a dof increment into a displacement: 1 for translations, the
+        largest distance of its vertices from the centre of mass for rotations."""
+        pts = b.vertices_rel if self.dim == 2 else b.points_rel
+        r = float(np.max(np.linalg.norm(pts, axis=1)))
+        return np.r_[np.ones(self.dim), np.full(self.rigid_ndof - self.dim, r)]
+
+    def _attribute_inertia(self, winert: float, drv_moves: list, dmax: float) -> None:
         """body.reaction_inertia = I_k on the driven dofs (module docstring): the inertia work W_I of the step split
         over the moving driven dofs in proportion to |R_k dq_k|, divided by dq_k."""
         self.inertia_work = winert
-        wts = [np.abs(b.reaction * dq) for b, dq in drv_moves]
+        moves = [(dq != 0.0) & (size >= MOVE_TOL * dmax) for _, dq, size in drv_moves]
+        wts = [np.where(mv, np.abs(b.reaction * dq), 0.0) for (b, dq, _), mv in zip(drv_moves, moves)]
         total = float(sum(w.sum() for w in wts))
-        for (b, dq), w in zip(drv_moves, wts):
+        for (b, dq, _), w, mv in zip(drv_moves, wts, moves):
             b.reaction_inertia = np.zeros_like(b.reaction)
             if total > 0.0:
-                moving = dq != 0.0
-                b.reaction_inertia[moving] = winert * w[moving] / total / dq[moving]
+                b.reaction_inertia[mv] = winert * w[mv] / total / dq[mv]
 
     # -------------------------------------------------------------- checkpoint
     def export_state(self) -> dict:

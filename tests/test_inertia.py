@@ -264,3 +264,26 @@ def test_inertial_part_from_a_deformable_column_matches_the_1d_bar_by_hand(tmp_p
     # linear mode, then 6e-4, 5e-7, 4e-9, 3e-11 (the increments become the linear mode)
     m = rho * LX * LY * T
     np.testing.assert_allclose(-np.array(I_hand), m / 3 * DU / h ** 2, rtol=0.01)
+
+
+def test_a_driver_standing_still_gets_no_inertia_from_motion_it_does_not_drive():
+    """A free block falls (velocity reset: dq = g h^2 per step) beside a driven block whose increment is rounding
+    noise (1e-18 m per step): the falling block's inertia work is not divided by that increment (before: I ~ 1e10 N);
+    a driver that moves (here 1 mm per step, the only driver) still gets W_I / dq."""
+    from fem_blocks.bodies import Driver, RigidBody
+    from fem_blocks.dynamics import Simulation
+    sq = [(0.0, 0.0), (1.0, 0.0), (1.0, 1.0), (0.0, 1.0)]
+    for vy, expect_zero in ((-1e-18 / 0.01, True), (-1e-3 / 0.01, False)):
+        falling = RigidBody(sq, mass=100.0, inertia=10.0)
+        drv = {k: Driver("velocity", 0.0) for k in ("x", "rz")}
+        drv["y"] = Driver("velocity", vy)
+        fixed = RigidBody([(x + 5.0, y) for x, y in sq], mass=1.0, inertia=1.0, drivers=drv)
+        sim = Simulation([falling, fixed], h=0.01, theta=1.0, velocity_reset=True)
+        sim.step()
+        sim.step()
+        w_i = 100.0 * 9.81 ** 2 * 0.01 ** 2  # dq . m (u - 0) / h = (g h^2)(m g h)/h
+        assert sim.inertia_work == pytest.approx(w_i, rel=1e-12)
+        if expect_zero:
+            assert np.all(fixed.reaction_inertia == 0.0)
+        else:
+            assert fixed.reaction_inertia[1] == pytest.approx(w_i / (vy * 0.01), rel=1e-12)
