@@ -109,14 +109,17 @@ class StepOperator:
 
     Clamped dofs (zero velocity) get an identity row and column, so `solve(b)` returns x with
     x_c = b_c and x_f = Mhat_ff^-1 b_f; callers set b_c = 0.
+    static=True: Mhat = h^2 theta^2 K (no inertia, no damping; the static step, dynamics.py), which needs clamps
+    that fix every rigid motion of the block (`BlockType.clamps_fix_rigid_modes`).
     """
 
-    def __init__(self, block_type: "BlockType", h: float, theta: float, clamped: np.ndarray):
+    def __init__(self, block_type: "BlockType", h: float, theta: float, clamped: np.ndarray, static: bool = False):
         from .linalg import Factor
-        self.h, self.theta = h, theta
+        self.h, self.theta, self.static = h, theta, bool(static)
         self.clamped = clamped  # bool (ndof,)
         bt = block_type
-        Mhat = (bt.M + (h * theta) * bt.C + (h * theta) ** 2 * bt.K).tocsr()
+        Mhat = ((h * theta) ** 2 * bt.K).tocsr() if static else \
+            (bt.M + (h * theta) * bt.C + (h * theta) ** 2 * bt.K).tocsr()
         keep = sp.diags((~clamped).astype(float))
         Mmod = (keep @ Mhat @ keep + sp.diags(clamped.astype(float))).tocsr()
         Mmod.eliminate_zeros()
@@ -171,13 +174,32 @@ class BlockType:
         self._ops: dict = {}
         self._stress = None
 
-    def step_operator(self, h: float, theta: float, clamped: np.ndarray) -> StepOperator:
-        """Shared (cached) step operator for (h, theta, clamped dof set)."""
-        key = (float(h), float(theta), clamped.tobytes())
+    def step_operator(self, h: float, theta: float, clamped: np.ndarray, static: bool = False) -> StepOperator:
+        """Shared (cached) step operator for (h, theta, clamped dof set, static)."""
+        key = (float(h), float(theta), clamped.tobytes()) + (("static",) if static else ())
         op = self._ops.get(key)
         if op is None:
-            op = self._ops[key] = StepOperator(self, h, theta, clamped)
+            op = self._ops[key] = StepOperator(self, h, theta, clamped, static)
         return op
+
+    def clamps_fix_rigid_modes(self, clamped: np.ndarray) -> bool:
+        """True if no rigid motion of the block (2D: 2 translations, 1 rotation; 3D: 3 + 3) leaves every clamped
+        dof at rest, i.e. K restricted to the free dofs is non-singular (the mesh is connected: `validate`)."""
+        X = self.mesh.points - self.mesh.points.mean(axis=0)
+        d = X.shape[1]
+        n = X.shape[0]
+        modes = []
+        for c in range(d):
+            m = np.zeros((n, d))
+            m[:, c] = 1.0
+            modes.append(m)
+        axes = [np.array([0.0, 0.0, 1.0])] if d == 2 else list(np.eye(3))
+        for a in axes:
+            Xp = np.column_stack([X, np.zeros(n)]) if d == 2 else X
+            modes.append(np.cross(a, Xp)[:, :d])
+        P = np.column_stack([m.ravel() for m in modes])[clamped]  # dof d*i + c
+        scale = max(1.0, float(np.abs(X).max()))
+        return P.shape[0] >= P.shape[1] and np.linalg.matrix_rank(P / scale, tol=1e-10) == P.shape[1]
 
     @property
     def stress_operator(self) -> sp.csr_matrix:
@@ -446,6 +468,7 @@ class RigidBody(_DrivenDofs):
         self.q = np.zeros(3)  # (dx, dy, phi) of the centre of mass
         self.u = np.zeros(3)
         self.reaction = np.zeros(3)  # force/moment applied by the drivers, last step
+        self.reaction_inertia = np.zeros(3)  # inertial part of the reaction, last step (dynamics.py module docstring)
 
     def _dof(self, k) -> int:
         if k in DOF_NAMES:
@@ -700,6 +723,7 @@ class RigidBody3D(_DrivenDofs):
         self.q = np.zeros(6)  # displacement of the centre of mass, accumulated rotation vector increments
         self.u = np.zeros(6)
         self.reaction = np.zeros(6)
+        self.reaction_inertia = np.zeros(6)  # inertial part of the reaction, last step (dynamics.py module docstring)
 
     @classmethod
     def box(cls, lx: float, ly: float, lz: float, origin=(0.0, 0.0, 0.0), rho: float | None = None,

@@ -357,6 +357,7 @@ class StageSpec:
     theta: float
     velocity_reset: bool
     output_every: int
+    static: bool = False             # static step: no inertia, no damping (theta = 1); dynamics.py
     stop_at_equilibrium: bool = False
     equilibrium_velocity: float = 1e-6
     min_steps: int = 1
@@ -677,10 +678,14 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
             raise t.error("duration", f"= {dur:g} s: expected at least one time step h = {h:g} s")
         if dur / h > 1e8:
             raise t.error("duration", f"= {dur:g} s: expected at most 1e8 steps of h = {h:g} s")
+        static = t.boolean("static", False)
         st = StageSpec(name=sname, duration=dur, h=h,
-                       theta=t.number("theta", 0.5, lo=0.5, hi=1.0),
+                       theta=t.number("theta", 1.0 if static else 0.5, lo=0.5, hi=1.0),
                        velocity_reset=t.boolean("velocity_reset", False),
-                       output_every=t.integer("output_every", 1, lo=1))
+                       output_every=t.integer("output_every", 1, lo=1), static=static)
+        if static and st.theta != 1.0:
+            raise t.error("theta", f"= {st.theta:g}: expected 1 (or no theta) in a stage with static = true: the "
+                                   "static step is the backward-Euler step without inertia")
         dtab = t.table("drivers")
         if dtab is not None:
             for body in list(dtab.data):

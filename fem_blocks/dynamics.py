@@ -21,10 +21,35 @@ the orientation at the start of the step, the free velocity on the free dofs
 and the orientation is updated by the rotation vector Δφ = h [(1-theta) ω_i + theta ω_{i+1}]:
 Rot <- exp([Δφ]x) Rot (RigidBody3D.rotate).
 
+Static step (stage key `static = true`, theta = 1): the same step with M = 0 and C = 0, so that
+h^2 K u_{i+1} = -h K q_i + h F + H P, i.e. K q_{i+1} = F_{i+1} + H P / h: equilibrium at the end of the step with no
+inertia (no dependence on h at a given displacement per step). Mhat = h^2 K must be invertible: every deformable
+body clamped against all its rigid motions, every rigid body driven on all its dofs (`Simulation.static_obstacles`);
+a body held only by contacts has no W = Mhat^-1 and is rejected (InputError). Rigid driver reactions then carry no
+m (u_{i+1} - u_i) / h term, and the inertial parts below are 0.
+
 Quasi-static option "velocity reset" (thesis §7.1.2.d): u_i := 0 on free dofs at the start of
 every step. Reaction of the drivers on a driven rigid dof (what a load cell reads):
 
     R_drv = m (u_{i+1} - u_i) / h - F_theta - (H r)   (force applied by the driver on the body).
+
+Inertial part of the driver reactions (docs/case-files.md "Quasi-static stages: inertia in the reactions"). The
+step is the exact equilibrium of the inertia forces f_I = M (u_{i+1} - u_i) / h (u_i after a velocity reset) with
+the internal, applied, contact and driver forces; dotted with the step's displacement dq = h((1-theta) u_i +
+theta u_{i+1}) it gives the work identity  sum_k R_k dq_k = W_I + (elastic, damping, applied, contact work),
+
+    W_I = sum over all bodies and dofs of dq . M (u_{i+1} - u_i) / h        (work of the inertia forces).
+
+W_I is attributed to the driven dofs that move in the step, in proportion to |R_k dq_k|:
+
+    I_k = W_I w_k / (sum_j w_j) / dq_k,   w_k = |R_k dq_k|,   I_k = 0 where sum_j w_j = 0 or dof k does not move:
+    |dq_k| (rotations: |dq_k| x the body's radius) < MOVE_TOL x the largest displacement increment of the model
+    in the step (a driver that stands still, up to rounding, while something else moves, e.g. settles under
+    gravity, is not the cause of that motion),
+
+stored as `body.reaction_inertia` (0 on free dofs). With one moving driven dof, I_k = W_I / dq_k is exactly the
+part of R_k that the inertia forces produce through the step's displacement field (virtual work with dq as the
+virtual field): for a rigid block of mass m pushed from rest by dq in a step, I = m dq / h^2.
 """
 from __future__ import annotations
 
@@ -34,6 +59,8 @@ import numpy as np
 
 from .bodies import DeformableBody, DeformableBody3D, RigidBody, RigidBody3D, check_step
 from .errors import InputError
+
+MOVE_TOL = 1e-3  # a driven dof "moves" in a step if its increment is >= MOVE_TOL x the model's largest increment
 
 
 @dataclass
@@ -78,7 +105,7 @@ class Simulation:
     """
 
     def __init__(self, bodies, h: float, theta: float = 0.5, gravity=None,
-                 velocity_reset: bool = False, contact=None, t0: float = 0.0):
+                 velocity_reset: bool = False, contact=None, t0: float = 0.0, static: bool = False):
         check_step(h, theta)
         if not bodies:
             raise InputError("bodies: expected at least one body")
@@ -100,24 +127,48 @@ class Simulation:
         self.time, self.step_count = float(t0), 0
         self.external_work = 0.0
         self.driver_work = 0.0  # work of the drivers on driven rigid dofs: sum R_drv . dq
+        self.inertia_work = 0.0  # work of the inertia forces in the last step (W_I, module docstring)
         self.contact = contact
         self.deformable = [i for i, b in enumerate(self.bodies) if b.kind == 0]
         self.rigid = [i for i, b in enumerate(self.bodies) if b.kind == 1]
-        self.h, self.theta = None, None
-        self.set_step(h, theta)
+        self.h, self.theta, self.static = None, None, False
+        self.set_step(h, theta, static)
 
     # -------------------------------------------------------------- set-up
-    def set_step(self, h: float, theta: float):
-        """(Re)build the step operators for (h, theta); shared per block type and clamp set."""
+    def static_obstacles(self) -> list:
+        """Why a static step (M = 0) is not well-posed for these bodies and drivers: [(body index, reason)]
+        (empty: admissible)."""
+        out = []
+        names = ("x", "y", "rz") if self.dim == 2 else ("x", "y", "z", "rx", "ry", "rz")
+        for i, b in enumerate(self.bodies):
+            if b.kind == 0 and not b.type.clamps_fix_rigid_modes(b.clamped):
+                out.append((i, "its clamps leave a rigid motion free (K is singular without the mass term)"))
+            elif b.kind == 1 and not b.driven.all():
+                free = ", ".join(n for n, d in zip(names, b.driven) if not d)
+                out.append((i, f"its dofs {free} are not driven (a free rigid dof has only its mass)"))
+        return out
+
+    def set_step(self, h: float, theta: float, static: bool | None = None):
+        """(Re)build the step operators for (h, theta, static); shared per block type and clamp set. static=True
+        needs theta = 1 and no `static_obstacles` (InputError otherwise); None keeps the current choice."""
         check_step(h, theta)
-        if (h, theta) == (self.h, self.theta):
+        static = self.static if static is None else bool(static)
+        if static:
+            if theta != 1.0:
+                raise InputError(f"theta = {theta:g} with a static step: expected theta = 1")
+            bad = self.static_obstacles()
+            if bad:
+                i, why = bad[0]
+                raise InputError(f"static step: body {i} cannot be in equilibrium without inertia: {why}; expected "
+                                 "every deformable body clamped against rigid motion and every rigid dof driven")
+        if (h, theta, static) == (self.h, self.theta, self.static):
             return
-        self.h, self.theta = float(h), float(theta)
+        self.h, self.theta, self.static = float(h), float(theta), static
         groups: dict[int, list] = {}
         ops = {}
         for i in self.deformable:
             b = self.bodies[i]
-            op = b.type.step_operator(self.h, self.theta, b.clamped)
+            op = b.type.step_operator(self.h, self.theta, b.clamped, static)
             groups.setdefault(id(op), []).append(i)
             ops[id(op)] = (op, b.type)
         self.groups = [_Group(ops[k][0], ops[k][1], members, self.bodies) for k, members in groups.items()]
@@ -146,10 +197,10 @@ class Simulation:
             bt = gr.type
             gr.Ftheta = (1 - th) * self._group_load(gr, t0) + th * self._group_load(gr, t1)
             KQ = bt.K @ gr.Q
-            rhs = bt.M @ gr.U - h * KQ + h * gr.Ftheta
+            rhs = (-h * KQ + h * gr.Ftheta) if self.static else (bt.M @ gr.U - h * KQ + h * gr.Ftheta)
             if th != 1.0:
                 rhs -= h * h * th * (1 - th) * (bt.K @ gr.U)
-            if bt.C.nnz and th != 1.0:
+            if bt.C.nnz and th != 1.0 and not self.static:
                 rhs -= h * (1 - th) * (bt.C @ gr.U)
             rhs[gr.clamped, :] = 0.0
             gr.Ufree = gr.op.solve(rhs)
@@ -204,32 +255,61 @@ class Simulation:
         cinfo = {}
         if self.contact is not None:
             cinfo = self.contact.solve(self, t0, t1)  # sets gr.Ucorr / body.ucorr (W H h r)
-        work = wdrv = 0.0
+        work = wdrv = winert = dmax = 0.0
         for gr in self.groups:
             Unew = gr.Ufree if getattr(gr, "Ucorr", None) is None else gr.Ufree + gr.Ucorr
             dQ = h * ((1 - th) * gr.U + th * Unew)
+            dmax = max(dmax, float(np.max(np.abs(dQ), initial=0.0)))
+            if not self.static:
+                winert += float(np.sum(dQ * (gr.type.M @ (Unew - gr.U)))) / h
             work += float(np.sum(gr.Ftheta * dQ) - np.sum(gr.Fg * dQ))
             gr.Q += dQ
             gr.U[:] = Unew
             gr.Ucorr = None
+        drv_moves = []
         for i in self.rigid:
             b = self.bodies[i]
             unew = b.ufree if getattr(b, "ucorr", None) is None else b.ufree + b.ucorr
             imp = getattr(b, "contact_impulse", None)
             cimp = np.zeros(self.rigid_ndof) if imp is None else imp
-            react = self._rigid_mass_times(b, unew - b.u) / h - b.Ftheta - cimp / h
+            inert = np.zeros(self.rigid_ndof) if self.static else self._rigid_mass_times(b, unew - b.u) / h
+            react = inert - b.Ftheta - cimp / h
             b.reaction = np.where(b.driven, react, 0.0)
             dq = h * ((1 - th) * b.u + th * unew)
+            winert += float(np.dot(dq, inert))
+            size = np.abs(dq) * self._dof_lengths(b)  # translations [m], rotations x radius [m]
+            dmax = max(dmax, float(size.max()))
+            drv_moves.append((b, np.where(b.driven, dq, 0.0), size))
             gforce = self._rigid_gravity_force(b)
             work += float(np.dot(np.where(b.driven, 0.0, b.Ftheta - gforce), dq))
             wdrv += float(np.dot(b.reaction, dq))
             self._move_rigid(b, dq, t1)
             b.u[:] = unew
             b.ucorr, b.contact_impulse = None, None
+        self._attribute_inertia(winert, drv_moves, dmax)
         self.time, self.step_count = t1, self.step_count + 1
         self.external_work += work
         self.driver_work += wdrv
         return self.info(cinfo)
+
+    def _dof_lengths(self, b) -> np.ndarray:
+        """Length per dof of a rigid body that turns a dof increment into a displacement: 1 for translations, the
+        largest distance of its vertices from the centre of mass for rotations."""
+        pts = b.vertices_rel if self.dim == 2 else b.points_rel
+        r = float(np.max(np.linalg.norm(pts, axis=1)))
+        return np.r_[np.ones(self.dim), np.full(self.rigid_ndof - self.dim, r)]
+
+    def _attribute_inertia(self, winert: float, drv_moves: list, dmax: float) -> None:
+        """body.reaction_inertia = I_k on the driven dofs (module docstring): the inertia work W_I of the step split
+        over the moving driven dofs in proportion to |R_k dq_k|, divided by dq_k."""
+        self.inertia_work = winert
+        moves = [(dq != 0.0) & (size >= MOVE_TOL * dmax) for _, dq, size in drv_moves]
+        wts = [np.where(mv, np.abs(b.reaction * dq), 0.0) for (b, dq, _), mv in zip(drv_moves, moves)]
+        total = float(sum(w.sum() for w in wts))
+        for (b, dq, _), w, mv in zip(drv_moves, wts, moves):
+            b.reaction_inertia = np.zeros_like(b.reaction)
+            if total > 0.0:
+                b.reaction_inertia[mv] = winert * w[mv] / total / dq[mv]
 
     # -------------------------------------------------------------- checkpoint
     def export_state(self) -> dict:
@@ -263,15 +343,16 @@ class Simulation:
 
     # -------------------------------------------------------------- diagnostics
     def energies(self):
-        """(kinetic, elastic, gravity potential) = (1/2 u.Mu, 1/2 q.Kq, -F_g.q) summed over bodies."""
+        """(kinetic, elastic, gravity potential) = (1/2 u.Mu, 1/2 q.Kq, -F_g.q) summed over bodies; kinetic = 0 in a
+        static step (the model has no inertia; u = dq/h is a pseudo-velocity)."""
         kin = ela = pot = 0.0
         for gr in self.groups:
-            kin += 0.5 * float(np.sum(gr.U * (gr.type.M @ gr.U)))
+            kin += 0.0 if self.static else 0.5 * float(np.sum(gr.U * (gr.type.M @ gr.U)))
             ela += 0.5 * float(np.sum(gr.Q * (gr.type.K @ gr.Q)))
             pot -= float(np.sum(gr.Fg * gr.Q))
         for i in self.rigid:
             b = self.bodies[i]
-            kin += 0.5 * float(np.dot(b.u, self._rigid_mass_times(b, b.u)))
+            kin += 0.0 if self.static else 0.5 * float(np.dot(b.u, self._rigid_mass_times(b, b.u)))
             pot -= float(np.dot(self._rigid_gravity_force(b), b.q))
         return kin, ela, pot
 

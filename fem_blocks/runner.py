@@ -62,6 +62,7 @@ def history_columns(model: Model) -> list[str]:
             name = model.names[i]
             cols += [f"{name}.u{d}" for d in model.dofs]
             cols += [f"{name}.R{d}" for d in model.dofs]  # 0 on free dofs; stages may drive or free dofs
+            cols += [f"{name}.I{d}" for d in model.dofs]  # inertial part of R (dynamics.py docstring)
     if model.contact is not None:
         cols += ["contacts", "closed", "slip", "sweeps", "change", "residual", "converged"]
     return cols
@@ -79,6 +80,8 @@ def history_row(model: Model, info, stage_index: int, sim=None, h=None) -> dict:
                 row[f"{name}.u{d}"] = b.q[k]
             for k, d in enumerate(model.dofs):
                 row[f"{name}.R{d}"] = b.reaction[k]
+            for k, d in enumerate(model.dofs):
+                row[f"{name}.I{d}"] = b.reaction_inertia[k]
     if model.contact is not None:
         c = info.contact or {}
         row.update(contacts=c.get("contacts", 0), closed=c.get("active", 0), slip=c.get("slip", 0),
@@ -149,7 +152,14 @@ def _enter_stage(model: Model, sim: Simulation, case: Case, si: int, t0: float =
             changed = True
     if changed and model.contact is not None:
         model.contact.mark_W_dirty()  # rigid W (driven dofs) changed
-    sim.set_step(st.h, st.theta)
+    if st.static:  # the static step needs every body held without its mass (dynamics.py docstring)
+        bad = sim.static_obstacles()
+        if bad:
+            i, why = bad[0]
+            raise InputError(f"{case.source}: stages[{si}].static = true: body {model.names[i]!r}: {why}; expected "
+                             f"every deformable block clamped against rigid motion and every rigid dof driven "
+                             f"(otherwise use velocity_reset with a small displacement per step)")
+    sim.set_step(st.h, st.theta, st.static)
     sim.velocity_reset = st.velocity_reset
     if model.contact is not None:
         o = model.contact.opts
@@ -496,6 +506,8 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
                                                        wall_time=_time.perf_counter() - t_stage,
                                                        **({"warnings": cut} if cut else {})))
                         run["stage_done"] = True
+                        hist.flush()
+                        _inertia_report(run["stages_done"][-1], hpath, si, st)
                         if n_unconv:
                             print(f"fem-blocks: warning: stage {st.name!r}: {n_unconv} of {k} steps reached the "
                                   f"NLGS sweep limit without converging (see the 'converged' column of "
@@ -523,6 +535,52 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
             except Exception as e2:  # noqa: BLE001 - the stop message matters more than the summary
                 print(f"fem-blocks: warning: could not write the summary: {e2}", file=sys.stderr)
     return finish("completed")
+
+
+INERTIA_WARN = 0.01   # warn when the inertial part of a driven reaction exceeds 1 % of it (quasi-static stages)
+INERTIA_FLOOR = 0.1   # ... at the steps where |R| is at least 10 % of its largest value in the stage
+
+
+def inertia_shares(hist: dict, stage: int) -> dict:
+    """Per driven reaction column `BODY.Rd` of stage `stage`: `max_share` = max |I|/|R| over the steps where
+    |R| >= INERTIA_FLOOR x max |R| in the stage, `share_at_peak` = |I|/|R| at the step of max |R|, `max_abs_R`
+    (reactions that are 0 throughout the stage, e.g. free dofs, are left out)."""
+    sel = np.asarray(hist["stage"]) == stage
+    if "step" in hist:
+        sel &= np.asarray(hist["step"]) > 0  # the initial row (step 0) belongs to no step
+    out = {}
+    for col in hist:
+        body, _, dof = col.rpartition(".")
+        icol = f"{body}.I{dof[1:]}"
+        if not body or not dof.startswith("R") or icol not in hist:
+            continue
+        R = np.abs(np.asarray(hist[col], float)[sel])
+        inert = np.abs(np.asarray(hist[icol], float)[sel])
+        if R.size == 0 or not np.any(R > 0):
+            continue
+        big = R >= INERTIA_FLOOR * R.max()
+        k = int(np.argmax(R))
+        out[col] = dict(max_share=float(np.max(inert[big] / R[big])), share_at_peak=float(inert[k] / R[k]),
+                        max_abs_R=float(R[k]))
+    return out
+
+
+def _inertia_report(done: dict, hpath: str, si: int, st) -> None:
+    """Adds `inertia_share` (inertia_shares) to the stage's summary entry; warns in quasi-static stages
+    (velocity_reset) when a share exceeds INERTIA_WARN."""
+    from .output.history import read_history
+    shares = inertia_shares(read_history(hpath), si)
+    done["inertia_share"] = shares
+    if not st.velocity_reset:
+        return
+    for col, v in shares.items():
+        if v["max_share"] > INERTIA_WARN:
+            print(f"fem-blocks: warning: stage {st.name!r}: the inertial part of reaction {col} reaches "
+                  f"{v['max_share']:.1%} of it ({v['share_at_peak']:.1%} at its peak |R| = {v['max_abs_R']:.4g}); "
+                  f"the inertia force scales as m du/h^2: use a smaller displacement per step, a larger h, or "
+                  f"static = true where admissible "
+                  f"(history column {col.rpartition('.')[0]}.I{col.rpartition('.')[2][1:]}; docs/case-files.md)",
+                  file=sys.stderr)
 
 
 def _summary(case, model, sim, info, run, t_start, t_setup, pv, pc, status) -> dict:
