@@ -430,14 +430,14 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
         hist.flush()  # the history must hold every step up to the checkpoint
         write_checkpoint(out_dir, arrays if arrays is not None else _snapshot(sim, model, run))
 
-    def finish(status: str) -> dict:
+    def finish(status: str, code: int | None = None) -> dict:
         conv = convergence_report(case, run["cstats"], model.contact is not None)
         if status == "completed" and conv["unconverged_steps"]:
             status = "completed with unconverged steps"
         summary = _summary(case, model, sim, info, run, t_start, t_setup, pv, pc, status)
         summary["energy_created_ratio_max"] = guards.max_ratio
         summary["convergence"] = conv
-        summary["exit_status"] = conv["exit_status"] if status.startswith("completed") else None
+        summary["exit_status"] = conv["exit_status"] if code is None else code
         summary.update(_figures(case, sim, model, out_dir, conv))
         write_summary(os.path.join(out_dir, "summary.json"), summary)
         return summary
@@ -570,7 +570,7 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
         bar.close()
         if stopped_run is not None:
             try:
-                finish(f"stopped: {stopped_run}")
+                finish(f"stopped: {stopped_run}", stopped_run.code)
             except Exception as e2:  # noqa: BLE001 - the stop message matters more than the summary
                 print(f"fem-blocks: warning: could not write the summary: {e2}", file=sys.stderr)
     return finish("completed")

@@ -182,6 +182,9 @@ def test_fail_policy_message_names_the_solver(tmp_path, capsys):
     rc = main(["run", str(tmp_path / "f.toml"), "--out", str(tmp_path / "f"), "--quiet"])
     err = capsys.readouterr().err
     assert rc == 1 and "contact solver (NLGS) did not converge: not converged after 1 sweeps" in err
+    s = json.loads((tmp_path / "f" / "summary.json").read_text())
+    assert s["status"].startswith("stopped:") and s["exit_status"] == 1
+    assert s["convergence"]["unconverged_steps"] == 1 and s["convergence"]["worst_step"] == 1
 
 
 # ----------------------------------------------------------------------------- item 11: signed data, units
