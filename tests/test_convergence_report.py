@@ -142,6 +142,20 @@ def test_accepted_unconverged_run_exits_0_and_still_reports(tmp_path, capsys):
     assert "unconverged (accepted)" in last and f"{n} of 4 steps" in last and "exit status 0" in last
 
 
+def test_refined_sub_steps_are_counted_as_rows(tmp_path, capsys):
+    """on_nonconvergence = "refine" at its limit: every kept sub-step is a history row and counts."""
+    case = CASE.replace("SOLVER", "nlgs").replace("TOL", "1e-10").replace(
+        "max_sweeps = 1", "max_sweeps = 1\non_nonconvergence = \"refine\"\nmax_refinements = 1")
+    (tmp_path / "r.toml").write_text(case)
+    rc = main(["run", str(tmp_path / "r.toml"), "--out", str(tmp_path / "r"), "--quiet"])
+    s = json.loads((tmp_path / "r" / "summary.json").read_text())
+    h = read_history(tmp_path / "r" / "history.csv")
+    n, worst, step, _t = _expected(h)
+    assert len(h["step"]) - 1 == 8 and np.all(h["h"][1:] == 5e-4)  # 4 steps, each redone as 2 sub-steps
+    assert rc == 3 and s["convergence"]["unconverged_steps"] == n and s["convergence"]["solved_steps"] == 8
+    assert s["convergence"]["worst_residual"] == worst and s["convergence"]["worst_step"] == step
+
+
 def test_converged_run_exits_0_with_a_converged_last_line(tmp_path, capsys):
     case = CASE.replace("max_sweeps = 1", "max_sweeps = 100000")
     (tmp_path / "c.toml").write_text(case.replace("SOLVER", "nlgs").replace("TOL", "1e-8"))
