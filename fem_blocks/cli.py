@@ -3,8 +3,10 @@
 
 Exit status: 0 success, 2 invalid input (one line on stderr naming the file/key and what was
 expected, no traceback), 1 a run that failed numerically or by solver policy (message says where; a
-checkpoint of the last good step and the outputs so far are written), 130/143 stopped by SIGINT/SIGTERM
-after finishing the current step and writing a checkpoint (`--resume` continues it).
+checkpoint of the last good step and the outputs so far are written), 3 a run that completed with steps
+whose contact solve stayed above the tolerance (unless `[checks] accept_unconverged = true`; the last line
+printed gives their count and the worst residual with its step), 130/143 stopped by SIGINT/SIGTERM after
+finishing the current step and writing a checkpoint (`--resume` continues it).
 """
 from __future__ import annotations
 
@@ -68,7 +70,7 @@ def _run(case_path: str, out: str, quiet: bool, quick: bool = False, resume: boo
     case = load_case(case_path)  # validate before importing the heavy stages
     if quick:
         case = make_quick(case)
-    from .runner import RunStopped, run_case
+    from .runner import RunStopped, convergence_line, run_case
     try:
         summary = run_case(case, out, progress=not quiet, resume=resume, force=force)
     except InputError as e:  # found while building or starting the model (overlaps, meshes): name the case file
@@ -86,10 +88,13 @@ def _run(case_path: str, out: str, quiet: bool, quick: bool = False, resume: boo
     figs = [summary[k] for k in ("force_displacement", "crack_pattern", "blocks_png") if summary.get(k)]
     if figs:
         print("figures: " + ", ".join(os.path.join(os.path.abspath(out), f) for f in figs))
-    if "peak_horizontal_force_kN" in summary:
+    if "peak_horizontal_force_kN" in summary and "displacement_at_peak_mm" in summary:
         print(f"peak horizontal force {summary['peak_horizontal_force_kN']:.3f} kN at "
               f"{summary['displacement_at_peak_mm']:.3f} mm (vertical force {summary['vertical_force_at_peak_kN']:.3f} kN)")
-    return 0
+    line = convergence_line(summary.get("convergence"))
+    if line:
+        print(line)  # the last line: the outcome of the contact solves
+    return int(summary.get("exit_status") or 0)
 
 
 def _check(case_path: str, quick: bool = False) -> int:

@@ -90,6 +90,90 @@ def history_row(model: Model, info, stage_index: int, sim=None, h=None) -> dict:
     return row
 
 
+def _new_cstats() -> dict:
+    """Contact-solver statistics of a run (summary.json "contact"; kept in checkpoints). steps, sweeps,
+    max_sweeps, unconverged, max_residual, max_change, refined_steps: per nominal step; rows, unconverged_rows,
+    worst_unconverged, unconverged_solvers: per history row (a sub-step of "refine" is a row), the steps whose
+    state the run kept."""
+    return dict(steps=0, sweeps=0, max_sweeps=0, unconverged=0, max_residual=0.0, max_change=0.0, refined_steps=0,
+                rows=0, unconverged_rows=0, worst_unconverged=None, unconverged_solvers=[])
+
+
+def _count_row(cstats: dict, stage_bad: dict, row: dict, c: dict, stage: str, tol: float, criterion: str) -> None:
+    """Count a history row written after a contact solve `c` (ContactStep.last); an unconverged one updates the
+    run's and the stage's (`stage_bad`) count, worst residual (NaN counts as the worst) and solvers."""
+    cstats["rows"] += 1
+    stage_bad["rows"] = stage_bad.get("rows", 0) + 1
+    if c.get("converged", True):
+        return
+    res = float(c.get("residual", np.nan))
+    rec = dict(step=int(row["step"]), time=float(row["time"]), stage=stage, residual=res,
+               solver=str(c.get("solver", "NLGS")), message=str(c.get("message", "")), tolerance=tol,
+               criterion=criterion)
+
+    def worse(a, b):  # a worse than b (None: nothing yet)
+        return b is None or (not np.isfinite(a["residual"]) and np.isfinite(b["residual"])) \
+            or a["residual"] > b["residual"]
+
+    cstats["unconverged_rows"] += 1
+    if worse(rec, cstats["worst_unconverged"]):
+        cstats["worst_unconverged"] = rec
+    if rec["solver"] not in cstats["unconverged_solvers"]:
+        cstats["unconverged_solvers"] = sorted(cstats["unconverged_solvers"] + [rec["solver"]])
+    stage_bad["count"] = stage_bad.get("count", 0) + 1
+    if worse(rec, stage_bad.get("worst")):
+        stage_bad["worst"] = rec
+    stage_bad.setdefault("solvers", set()).add(rec["solver"])
+
+
+def _stage_warning(st, stage_bad: dict) -> str:
+    w = stage_bad["worst"]
+    return (f"fem-blocks: warning: stage {st.name!r}: {stage_bad['count']} of {stage_bad.get('rows', 0)} steps did "
+            f"not converge ({' / '.join(sorted(stage_bad['solvers']))} solver, tolerance {w['tolerance']:g} on the "
+            f"{w['criterion']}); worst residual {w['residual']:.3g} at step {w['step']} (t = {w['time']:.6g} s): "
+            f"{w['message']}; see the 'converged' and 'residual' columns of history.csv")
+
+
+EXIT_UNCONVERGED = 3  # exit status of a run that completed with unconverged steps ([checks] accept_unconverged)
+
+
+def convergence_report(case: Case, cstats: dict, has_contact: bool = True) -> dict:
+    """summary.json "convergence": the steps (history rows) whose contact solve ended above the tolerance, the
+    worst residual with its step, time, stage, solver and message, and the exit status the CLI gives a completed
+    run: EXIT_UNCONVERGED (3) when there are such steps and `[checks] accept_unconverged` is false, else 0."""
+    n = int(cstats.get("unconverged_rows", 0)) if has_contact else 0
+    w = cstats.get("worst_unconverged") if has_contact else None
+    accept = bool(case.checks.get("accept_unconverged", False))
+    out = dict(unconverged_steps=n, solved_steps=int(cstats.get("rows", 0)) if has_contact else 0,
+               accepted=accept, exit_status=EXIT_UNCONVERGED if n and not accept else 0,
+               max_residual=float(cstats.get("max_residual", 0.0)) if has_contact else None,
+               worst_residual=None, worst_step=None, worst_time=None, worst_stage=None, worst_solver=None,
+               worst_message=None, tolerance=None, criterion=None,
+               solvers=list(cstats.get("unconverged_solvers", [])) if has_contact else [])
+    if w:
+        out.update(worst_residual=w["residual"], worst_step=w["step"], worst_time=w["time"], worst_stage=w["stage"],
+                   worst_solver=w["solver"], worst_message=w["message"], tolerance=w["tolerance"],
+                   criterion=w["criterion"])
+    return out
+
+
+def convergence_line(conv: dict) -> str | None:
+    """The CLI's last line: the outcome of the contact solves (None for a run without contact)."""
+    if conv is None or conv.get("max_residual") is None:
+        return None
+    n = conv["unconverged_steps"]
+    if not n:
+        return (f"fem-blocks: contact solver: all {conv['solved_steps']} steps converged (largest residual "
+                f"{conv['max_residual']:.3g})")
+    res = conv["worst_residual"]
+    return (f"fem-blocks: {'UNCONVERGED' if not conv['accepted'] else 'unconverged (accepted)'}: {n} of "
+            f"{conv['solved_steps']} steps above the tolerance ({conv['tolerance']:g} on the {conv['criterion']}, "
+            f"{' / '.join(conv['solvers'])}); worst residual {res:.3g} at step {conv['worst_step']} (t = "
+            f"{conv['worst_time']:.6g} s, stage {conv['worst_stage']!r}); exit status {conv['exit_status']}"
+            + (" ([checks] accept_unconverged = true)" if conv["accepted"] else
+               " (set [checks] accept_unconverged = true to accept)"))
+
+
 class RunStopped(Exception):
     """The run stopped before its end (signal, numerical failure, solver policy); outputs and a checkpoint were
     written. `code`: exit status for the CLI (1 failure, 130 SIGINT, 143 SIGTERM)."""
@@ -346,14 +430,14 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
         print(f"fem-blocks: warning: {w}", file=sys.stderr)
     import json
     run = dict(stage=0, k=0, stage_done=False, peak_force=0.0, e0=None, frames=0, case_hash=fp,
-               cstats=dict(steps=0, sweeps=0, max_sweeps=0, unconverged=0, max_residual=0.0, max_change=0.0,
-                           refined_steps=0),
+               cstats=_new_cstats(),
                stages_done=[], stage_t0=[])
     if ck is not None:
         extra = json.loads(str(ck["run.json"]))
         run.update(stage=int(ck["run.stage"]), k=int(ck["run.k"]), stage_done=bool(ck["run.stage_done"]),
                    peak_force=float(ck["run.peak_force"]), e0=tuple(float(x) for x in ck["run.e0"]),
                    frames=int(ck["run.frames"]), **extra)
+        run["cstats"] = {**_new_cstats(), **run["cstats"]}  # (checkpoints written before the row counters)
         for si in range(run["stage"] + 1):
             _enter_stage(model, sim, case, si, run["stage_t0"][si] if si < len(run["stage_t0"]) else 0.0)
         try:
@@ -398,16 +482,33 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
         hist.flush()  # the history must hold every step up to the checkpoint
         write_checkpoint(out_dir, arrays if arrays is not None else _snapshot(sim, model, run))
 
-    def finish(status: str) -> dict:
+    def finish(status: str, code: int | None = None) -> dict:
+        conv = convergence_report(case, run["cstats"], model.contact is not None)
+        if status == "completed" and conv["unconverged_steps"]:
+            status = "completed with unconverged steps"
         summary = _summary(case, model, sim, info, run, t_start, t_setup, pv, pc, status)
         summary["energy_created_ratio_max"] = guards.max_ratio
         summary["warnings"] = start_warnings + [w for s in run["stages_done"] for w in s.get("warnings", [])]
-        summary.update(_figures(case, sim, model, out_dir))
+        summary["convergence"] = conv
+        summary["exit_status"] = conv["exit_status"] if code is None else code
+        summary.update(_figures(case, sim, model, out_dir, conv))
         write_summary(os.path.join(out_dir, "summary.json"), summary)
         return summary
 
+    stage_bad = {}  # this stage's unconverged rows: count, worst (step, time, residual, solver, message), solvers
+
     def make_row(inf, hh):
-        return history_row(model, inf, run["stage"], sim, hh)
+        row = history_row(model, inf, run["stage"], sim, hh)
+        row["_contact"] = inf.contact  # (popped by write_row: the solver and its message, not history columns)
+        return row
+
+    def write_row(row):
+        c = row.pop("_contact", None)
+        hist.write(row)
+        if c:
+            o = model.contact.opts
+            _count_row(cstats, stage_bad, row, c, case.stages[run["stage"]].name, o.tol,
+                       "residual" if o.solver == "newton" else o.criterion)
 
     stopped_run = None
     try:
@@ -429,13 +530,13 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
                         stop_body[key] = (model.bodies[model.index(ref[0])], model.dofs.index(ref[1])) + tuple(ref[2:])
                 n_steps = max(1, int(round(st.duration / st.h)))
                 t_stage = _time.perf_counter()
-                unconv0 = cstats["unconverged"]
+                stage_bad.clear()
                 stopped = None
                 k = run["k"]
                 while k < n_steps:
                     k += 1
                     good = _snapshot(sim, model, run)  # last good state, checkpointed if this step fails
-                    info, level = _step(sim, model, run, policy, max_level, make_row, hist.write)
+                    info, level = _step(sim, model, run, policy, max_level, make_row, write_row)
                     run["k"] = k
                     c = info.contact
                     if c:
@@ -450,8 +551,9 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
                     if failure is None and c and not c["converged"] and policy in ("fail", "refine") \
                             and (policy == "fail" or level >= max_level):
                         if policy == "fail":
-                            failure = (f"the contact solver did not converge in {c['sweeps']} sweeps (change "
-                                       f"{c['change']:.3g}, residual {c['residual']:.3g}; on_nonconvergence = 'fail')")
+                            failure = (f"the contact solver ({c.get('solver', 'NLGS')}) did not converge: "
+                                       f"{c.get('message', '')} (residual {c['residual']:.3g}; on_nonconvergence = "
+                                       f"'fail')")
                     if failure is not None:
                         if pv:
                             pv.write(sim.time)
@@ -496,7 +598,7 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
                     elif reason is not None:
                         stopped = reason
                     if last:
-                        n_unconv = cstats["unconverged"] - unconv0
+                        n_unconv = stage_bad.get("count", 0)
                         cut = [] if stopped else _cut_histories(case, si, sim.time, run["stage_t0"],
                                                                 run["stages_done"])
                         for w in cut:
@@ -509,9 +611,7 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
                         hist.flush()
                         _inertia_report(run["stages_done"][-1], hpath, si, st)
                         if n_unconv:
-                            print(f"fem-blocks: warning: stage {st.name!r}: {n_unconv} of {k} steps reached the "
-                                  f"NLGS sweep limit without converging (see the 'converged' column of "
-                                  f"history.csv)", file=sys.stderr)
+                            print(_stage_warning(st, stage_bad), file=sys.stderr)
                     if last or interrupted or (ckpt_every and sim.step_count % ckpt_every == 0):
                         checkpoint()
                     if interrupted:
@@ -531,7 +631,7 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
         bar.close()
         if stopped_run is not None:
             try:
-                finish(f"stopped: {stopped_run}")
+                finish(f"stopped: {stopped_run}", stopped_run.code)
             except Exception as e2:  # noqa: BLE001 - the stop message matters more than the summary
                 print(f"fem-blocks: warning: could not write the summary: {e2}", file=sys.stderr)
     return finish("completed")
@@ -639,9 +739,14 @@ def _vertical_force(case, hist, body: str, k: int):
     return 0.0 if force is None else float(as_history(force, f"{body}.forces.{up}")(float(hist["time"][k])) / 1e3)
 
 
-def _figures(case, sim, model, out_dir) -> dict:
-    """force_displacement.png and crack_pattern.png, and the curve's peak figures for summary.json."""
-    from .output.figures import write_crack_pattern, write_curve
+def _unit_key(unit: str) -> str:
+    return {"kN·m": "kNm"}.get(unit, unit)
+
+
+def _figures(case, sim, model, out_dir, conv=None) -> dict:
+    """force_displacement.png and crack_pattern.png, and the curve's peak figures for summary.json (keys named
+    with their unit: translations mm / forces kN, rotations rad / moments kN·m; figures.dof_unit)."""
+    from .output.figures import curve_data, dof_unit, write_crack_pattern, write_curve
     from .output.history import read_history
     out = {}
     if case.dimension == 3:  # deformed blocks, off-screen (pyvista when installed, else matplotlib)
@@ -657,18 +762,31 @@ def _figures(case, sim, model, out_dir) -> dict:
         body, fk, dk = cv["body"], f"R{cv['force']}", f"u{cv['displacement']}"
         if f"{body}.{fk}" not in hist:
             return out
-        write_curve(os.path.join(out_dir, "force_displacement.png"), hist, body, fk, dk, title=case.name)
-        F = np.abs(hist[f"{body}.{fk}"])
-        D = np.abs(hist[f"{body}.{dk}"])
+        note = ""
+        if conv and conv.get("unconverged_steps"):
+            note = (f"{conv['unconverged_steps']} unconverged steps (x){' (accepted)' if conv['accepted'] else ''}: "
+                    f"worst residual {conv['worst_residual']:.3g} at step {conv['worst_step']} "
+                    f"(t = {conv['worst_time']:.4g} s)")
+        write_curve(os.path.join(out_dir, "force_displacement.png"), hist, body, fk, dk, title=case.name, note=note)
+        c = curve_data(hist, body, fk, dk)
+        F, D = np.abs(c["y"]), np.abs(c["x"])  # the peak: largest |force|; magnitudes, as before
         if F.size == 0 or not np.any(np.isfinite(F)):
             return out
-        k = int(np.argmax(F))
-        out["peak_force_kN"] = float(F[k] / 1e3)
-        out["displacement_at_peak_mm"] = float(D[k] * 1e3)
-        other = [c for c in hist if c.startswith(f"{body}.R") and c != f"{body}.{fk}"]
-        out["other_reactions_at_peak_kN"] = {c: float(hist[c][k] / 1e3) for c in other}
+        k = int(np.nanargmax(F))
+        fu, du = _unit_key(c["yunit"]), _unit_key(c["xunit"])
+        fname = "peak_moment" if cv["force"].startswith("r") else "peak_force"
+        dname = "rotation" if cv["displacement"].startswith("r") else "displacement"
+        out[f"{fname}_{fu}"] = float(F[k])
+        out[f"{dname}_at_peak_{du}"] = float(D[k])
+        others = [col for col in hist if col.startswith(f"{body}.R") and col != f"{body}.{fk}"]
+        out["other_reactions_at_peak_kN"] = {col: float(hist[col][k] * dof_unit(col.split(".", 1)[1])[0])
+                                             for col in others if not col.split(".", 1)[1][1:].startswith("r")}
+        moments = {col: float(hist[col][k] * dof_unit(col.split(".", 1)[1])[0])
+                   for col in others if col.split(".", 1)[1][1:].startswith("r")}
+        if moments:
+            out["other_moments_at_peak_kNm"] = moments
         sel = (F > 0) & (F <= 0.4 * F[k]) & (D > 0)
-        out["initial_stiffness_kN_per_mm"] = float(np.polyfit(D[sel] * 1e3, F[sel] / 1e3, 1)[0]) \
+        out[f"initial_stiffness_{fu}_per_{du}"] = float(np.polyfit(D[sel], F[sel], 1)[0]) \
             if sel.sum() >= 3 else None
         if cv["force"] == "x":
             out["peak_horizontal_force_kN"] = out["peak_force_kN"]

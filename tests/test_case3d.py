@@ -235,7 +235,7 @@ def test_resume_3d_after_sigkill_is_bitwise_identical(tmp_path):
     path.write_text(RESUME)
     ref = tmp_path / "ref"
     s = run_case(load_case(str(path)), str(ref), progress=False)
-    assert s["status"] == "completed" and s["steps"] == 5 + 120
+    assert s["status"].startswith("completed") and s["steps"] == 5 + 120  # (its gravity steps end above 1e-10)
     out = tmp_path / "killed"
     proc = _cli(path, out, wait=False)
     t0, step = time.monotonic(), None
@@ -252,8 +252,9 @@ def test_resume_3d_after_sigkill_is_bitwise_identical(tmp_path):
     proc.wait()
     assert int(read_checkpoint(out / "checkpoint.npz")["sim.step"]) < 125  # killed mid-run
     p = _cli(path, out, "--resume")
-    assert p.returncode == 0, p.stderr
+    assert p.returncode == s["exit_status"], p.stderr  # 3: completed with unconverged (gravity) steps
     assert (out / "history.csv").read_text() == (ref / "history.csv").read_text()
+    assert json.loads((out / "summary.json").read_text())["convergence"] == s["convergence"]  # across the resume
     a, b = read_checkpoint(out / "checkpoint.npz"), read_checkpoint(ref / "checkpoint.npz")
     keys = sorted(k for k in a if k.startswith(("sim.", "contact.")))
     assert keys == sorted(k for k in b if k.startswith(("sim.", "contact.")))
@@ -283,15 +284,18 @@ def _toml(text):
 
 
 def test_wall3d_push_quick_through_the_cli(tmp_path):
-    """demos/wall3d_push.toml --quick through the CLI: exit 0, the push stops at its target displacement, the
-    foundation carries the weight of the 14 bricks + the beam after the gravity stage (to 1e-6), outputs written."""
+    """demos/wall3d_push.toml --quick through the CLI: the push stops at its target displacement, the
+    foundation carries the weight of the 14 bricks + the beam after the gravity stage (to 1e-6), outputs written.
+    Exit status 3 when some steps end above the tolerance (measured: 4 of the 30 push steps at ≈ 3e-6 > 1e-8,
+    Newton with NLGS fallbacks), 0 when all converge; the summary counts the history's unconverged rows."""
     from fem_blocks.cli import main
     out = tmp_path / "wp"
-    assert main(["run", os.path.join(ROOT, "demos", "wall3d_push.toml"), "--out", str(out), "--quick",
-                 "--quiet"]) == 0
+    rc = main(["run", os.path.join(ROOT, "demos", "wall3d_push.toml"), "--out", str(out), "--quick", "--quiet"])
     s = json.loads((out / "summary.json").read_text())
-    assert s["status"] == "completed" and s["stages"][1]["stopped"].startswith("target displacement 0.003")
     h = read_history(str(out / "history.csv"))
+    n_bad = int(np.sum(h["converged"][1:] == 0))
+    assert rc == (3 if n_bad else 0) and s["convergence"]["unconverged_steps"] == n_bad
+    assert s["status"].startswith("completed") and s["stages"][1]["stopped"].startswith("target displacement 0.003")
     g = int(np.flatnonzero(h["stage"] == 0)[-1])
     W = 9.81 * (2000.0 * 0.75 * 0.12 * 4 * 0.065 + 7800.0 * 0.75 * 0.12 * 0.1)
     assert abs(h["foundation.Rz"][g] / W - 1) <= 1e-6

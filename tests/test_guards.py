@@ -87,7 +87,7 @@ def test_nonconvergence_policy_fail(tmp_path):
     text = CASE.replace("tol = 1e-10\nmax_sweeps = 100000", 'tol = 1e-12\nmax_sweeps = 2\non_nonconvergence = "fail"')
     with pytest.raises(RunStopped) as e:
         run_case(_case(tmp_path, text), str(tmp_path / "out"), progress=False)
-    assert "step 1 " in str(e.value) and "did not converge in 2 sweeps" in str(e.value)
+    assert "step 1 " in str(e.value) and "(NLGS) did not converge: not converged after 2 sweeps" in str(e.value)
     _check_stopped_outputs(tmp_path / "out", 1)
 
 

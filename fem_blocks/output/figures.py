@@ -121,16 +121,49 @@ def write_crack_pattern(path, sim, contact, title=""):
                               if wmax > 0 else "")
 
 
-def curve_arrays(history: dict, body: str, force: str, displacement: str, scale_force=1e-3, scale_disp=1e3):
-    f = np.asarray(history[f"{body}.{force}"], float) * scale_force
-    d = np.asarray(history[f"{body}.{displacement}"], float) * scale_disp
-    return d, f
+def dof_unit(column: str):
+    """Plot scale and unit of a rigid-body history column `uD` / `RD` (history values are SI): translations
+    `ux, uy, uz` [m] -> mm, rotations `urx, ury, urz` [rad] -> rad, forces `Rx, Ry, Rz` [N] -> kN, moments
+    `Rrx, Rry, Rrz` [N m] -> kN·m. Returns (scale, unit, quantity)."""
+    kind, dof = column[:1], column[1:]
+    rot = dof.startswith("r")
+    if kind == "u":
+        return (1.0, "rad", "rotation") if rot else (1e3, "mm", "displacement")
+    if kind == "R":
+        return (1e-3, "kN·m", "moment") if rot else (1e-3, "kN", "reaction")
+    from ..errors import InputError
+    raise InputError(f"history column {column!r}: expected a rigid-body dof column uD or RD (D in x, y, z, rx, ry, "
+                     "rz)")
 
 
-def write_curve(path, history: dict, body: str, force: str, displacement: str, title=""):
-    d, f = curve_arrays(history, body, force, displacement)
-    return plot_curve(path, np.abs(d), np.abs(f), f"{body} displacement {displacement} [mm]",
-                      f"{body} reaction {force} [kN]", title=title)
+def curve_data(history: dict, body: str, force: str, displacement: str) -> dict:
+    """Data of the force–displacement figure: signed values (no abs: a cyclic test keeps its loops in all four
+    quadrants) in the unit of each dof (dof_unit), axis labels, and the rows whose contact solve did not converge
+    (`converged` = 0 in history.csv; all False without contact). `force`/`displacement`: columns without the body,
+    e.g. "Rx", "urz". Returns dict(x, y, xlabel, ylabel, xunit, yunit, unconverged)."""
+    sx, ux, qx = dof_unit(displacement)
+    sy, uy, qy = dof_unit(force)
+    x = np.asarray(history[f"{body}.{displacement}"], float) * sx
+    y = np.asarray(history[f"{body}.{force}"], float) * sy
+    conv = history.get("converged")
+    bad = np.zeros(x.shape, bool) if conv is None else (np.asarray(conv, float) == 0)
+    return dict(x=x, y=y, xlabel=f"{body} {qx} {displacement} [{ux}]", ylabel=f"{body} {qy} {force} [{uy}]",
+                xunit=ux, yunit=uy, unconverged=bad)
+
+
+def curve_arrays(history: dict, body: str, force: str, displacement: str):
+    """(displacement, force) of `body`, signed, in the units of dof_unit."""
+    c = curve_data(history, body, force, displacement)
+    return c["x"], c["y"]
+
+
+def write_curve(path, history: dict, body: str, force: str, displacement: str, title="", note=""):
+    """force_displacement.png: signed curve (curve_data), unconverged steps marked; `note` (e.g. the count and
+    worst residual of the unconverged steps) is added under the title."""
+    c = curve_data(history, body, force, displacement)
+    return plot_curve(path, c["x"], c["y"], c["xlabel"], c["ylabel"], title=title,
+                      marks=c["unconverged"] if c["unconverged"].any() else None,
+                      marks_label=f"unconverged step ({int(c['unconverged'].sum())})", note=note)
 
 
 def body_faces_3d(bodies, amplification: float = 1.0):

@@ -32,20 +32,29 @@ def _no_data(ax):
     ax.text(0.5, 0.5, "no data", ha="center", va="center", fontsize=16, color="0.4", transform=ax.transAxes)
 
 
-def plot_curve(path, x, y, xlabel, ylabel, title="", peak=True):
+def plot_curve(path, x, y, xlabel, ylabel, title="", peak=True, marks=None, marks_label="", note=""):
     """Curve y(x) (e.g. force–displacement); with peak=True the point of largest |y| is marked and annotated
-    "peak y at x". Non-finite points are skipped. Returns `path`."""
+    "peak y at x". `marks` (bool, one per point): points drawn as red crosses with a legend entry `marks_label`
+    (e.g. unconverged steps); `note`: a second title line (in red). Non-finite points are skipped. Returns `path`."""
     x = np.asarray(x, dtype=float).ravel()
     y = np.asarray(y, dtype=float).ravel()
     if x.shape != y.shape:
         raise InputError(f"plot_curve: x and y must have the same length, got {x.size} and {y.size}")
+    if marks is not None:
+        marks = np.asarray(marks, dtype=bool).ravel()
+        if marks.shape != x.shape:
+            raise InputError(f"plot_curve: marks must have one flag per point ({x.size}), got {marks.size}")
     ok = np.isfinite(x) & np.isfinite(y)
-    fig = _figure((6.4, 4.2))
+    fig = _figure((6.4, 4.4 if note else 4.2))
     ax = fig.add_subplot()
     if not ok.any():
         _no_data(ax)
     else:
         ax.plot(x, y, "-", lw=1.5, color="C0")
+        if marks is not None and (marks & ok).any():
+            m = marks & ok
+            ax.plot(x[m], y[m], "x", color="red", ms=7, mew=1.8, zorder=4, label=marks_label or "marked")
+            ax.legend(loc="best", fontsize=9)
         if peak:
             k = int(np.flatnonzero(ok)[np.argmax(np.abs(y[ok]))])
             ax.plot([x[k]], [y[k]], "o", color="C3", ms=7, zorder=3)
@@ -55,7 +64,12 @@ def plot_curve(path, x, y, xlabel, ylabel, title="", peak=True):
                         xytext=(-10 if right else 10, -16 if y[k] >= 0 else 12), ha="right" if right else "left",
                         color="C3", bbox=dict(facecolor="white", alpha=0.8, edgecolor="none", pad=1))
         ax.grid(alpha=0.3)
-    ax.set(xlabel=xlabel, ylabel=ylabel, title=title)
+    ax.set(xlabel=xlabel, ylabel=ylabel)
+    if note:
+        ax.set_title(note, color="red", fontsize=9)
+        fig.suptitle(title, fontsize=12)
+    else:
+        ax.set_title(title)
     fig.tight_layout()
     return _save(fig, path, 120)
 
