@@ -118,7 +118,8 @@ def test_unconverged_run_exits_3_and_reports_everywhere(tmp_path, capsys):
     assert last.startswith("fem-blocks: UNCONVERGED:") and f"{n} of 4 steps" in last
     assert f"worst residual {worst:.3g} at step {step}" in last and "exit status 3" in last
     assert "accept_unconverged" in last
-    warn = [ln for ln in cap.err.splitlines() if "warning" in ln]
+    # one convergence warning (other warnings, e.g. the inertial share of this forced run, may be printed too)
+    warn = [ln for ln in cap.err.splitlines() if "warning" in ln and "tolerance" in ln]
     assert len(warn) == 1 and "NLGS solver" in warn[0] and f"{n} of 4 steps" in warn[0]
     assert "sweep limit" not in warn[0]
     assert (out / "force_displacement.png").stat().st_size > 0

@@ -52,7 +52,7 @@ part = 1
 history = {times = [0.0, 0.01, 1.0], values = [0.0, 0.0, -2e-3]}
 [contact]
 tol = 1e-8
-max_sweeps = 20000
+max_sweeps = 200000
 [[interfaces]]
 between = ["bricks", "bricks"]
 mu = 0.6
