@@ -96,9 +96,10 @@ def main(steps=2000, placement=None):
     top = max(b.y + b.height for b in blocks)
     uy = [bd.displacement_global()[np.abs(bd.reference_points[:, 1] - top) < 1e-9, 1]
           for bd in bodies if np.any(np.abs(bd.reference_points[:, 1] - top) < 1e-9)]
-    last = np.asarray(ry[1500:2000]) / weight  # steps 1501-2000
-    print(f"mean settlement of the top (vertical displacement of the top-edge nodes) {np.mean(np.concatenate(uy)):.3e} m; "
-          f"floor reaction / weight over steps 1501-{min(steps, 2000)}: mean {last.mean():.5f}, "
+    last = np.asarray(ry[1500:2000] if steps > 1500 else ry[steps // 2:]) / weight  # steps 1501-2000
+    print(f"mean settlement of the top (vertical displacement of the top-edge nodes) "
+          f"{np.mean(np.concatenate(uy)):.3e} m; floor reaction / weight over steps "
+          f"{1501 if steps > 1500 else steps // 2 + 1}-{min(steps, 2000)}: mean {last.mean():.5f}, "
           f"max - min {100 * (last.max() - last.min()):.3f} %, standard deviation {100 * last.std():.4f} %")
     print(f"floor reaction {floor.reaction[1]:.3f} N vs weight {weight:.3f} N (ratio {floor.reaction[1] / weight:.5f}); "
           f"peak RSS {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MB")
