@@ -356,7 +356,7 @@ def detect(bx, bnode_body, bnode_local, bedges, bedge_body, kind, body_group, ta
     nodes_pl = table.placement[itf] == 1
     ovl_pl = table.placement[itf] == 2
     # key: position points -> edge * P + k ; node points -> -(global boundary node index) - 1; overlap points at
-    # a candidate node -> as node points; at an antagonist node an inside candidate edge ce -> -(nbn(1 + ce) + an) - 1
+    # a candidate node -> as node points; at antagonist node `an` inside candidate edge ce -> -(nbn(1 + ce) + an) - 1
     nbn = len(bx)
     node_idx = np.where(pk == 1, bedges[ce, 1], bedges[ce, 0])
     ant_node = bedges[ae, np.clip(pk - 2, 0, 1)]
