@@ -6,7 +6,8 @@ Full bricks 0.10 x 0.05 m, half bricks 0.05 x 0.05 m, lintel 0.30 x 0.05 m, no j
 Q4 of 0.025 m, lumped mass; rigid fixed floor; mu = 0.3 between bricks, 0.5 on the floor; gravity 9.81;
 h = 1e-4 s, theta = 0.505, 2000 steps; Gauss-Seidel tolerance 1e-4.
 
-Usage: .venv/bin/python bench/bench_lmgc90_wall.py [steps]
+Usage: .venv/bin/python bench/bench_lmgc90_wall.py [steps [placement]]  (placement: overlap (default), nodes,
+positions)
 """
 import os
 import resource
@@ -27,7 +28,7 @@ ROWS = [[0.5, 1, 1, 1, 1, 0.5], [1] * 5, [0.5, 1, 1, 1, 1, 0.5], [1] * 5, [0.5, 
         [0.5, 1, G, 1, 0.5], [1, 3, 1], [0.5, 1, 1, 1, 1, 0.5]]
 
 
-def main(steps=2000):
+def main(steps=2000, placement=None):
     t0 = time.perf_counter()
     blocks = builders.courses(ROWS, 0.10, 0.05)
     mat = Material(E=1e10, nu=0.15, rho=1800.0, thickness=1.0, plane="strain")
@@ -38,7 +39,8 @@ def main(steps=2000):
         bodies.append(DeformableBody(types[b.size_key], (b.x, b.y)))
     floor = RigidBody([(-0.1, -0.1), (0.6, -0.1), (0.6, 0.0), (-0.1, 0.0)],
                       drivers={k: Driver("velocity", 0.0) for k in ("x", "y", "rz")})
-    cs = ContactStep([InterfaceSpec("bricks", ("b", "b"), mu=0.3), InterfaceSpec("floor", ("b", "f"), mu=0.5)],
+    cs = ContactStep([InterfaceSpec("bricks", ("b", "b"), mu=0.3, placement=placement),
+                      InterfaceSpec("floor", ("b", "f"), mu=0.5, placement=placement)],
                      ["b"] * len(bodies) + ["f"], ContactOptions(tol=1e-4, max_sweeps=10000))
     sim = Simulation(bodies + [floor], h=1e-4, theta=0.505, contact=cs, gravity=(0.0, -9.81))
     sim.step()
@@ -47,6 +49,7 @@ def main(steps=2000):
         cs.timers[k] = 0.0
     t_free = 0.0
     sweeps = []
+    ry = [floor.reaction[1]]  # floor reaction after steps 1, 2, ...
     t1 = time.perf_counter()
     orig = sim.free_velocities
 
@@ -68,6 +71,7 @@ def main(steps=2000):
     for k in range(1, steps):
         info = sim.step()
         sweeps.append(info.contact["sweeps"])
+        ry.append(floor.reaction[1])
         if k % 100 == 0 or k == steps - 1:
             c = time.perf_counter()
             pv.write(sim.time)
@@ -89,9 +93,17 @@ def main(steps=2000):
     print(f"whole run (setup + {steps} steps + output): {t_setup + wall:.2f} s")
     print(f"sweeps per step mean {np.mean(sweeps):.1f} max {np.max(sweeps)}; NLGS "
           f"{tm['nlgs'] / max(np.sum(sweeps) * info.contact['contacts'], 1) * 1e6:.3f} µs per contact update")
+    top = max(b.y + b.height for b in blocks)
+    uy = [bd.displacement_global()[np.abs(bd.reference_points[:, 1] - top) < 1e-9, 1]
+          for bd in bodies if np.any(np.abs(bd.reference_points[:, 1] - top) < 1e-9)]
+    last = np.asarray(ry[1500:2000] if steps > 1500 else ry[steps // 2:]) / weight  # steps 1501-2000
+    print(f"mean settlement of the top (vertical displacement of the top-edge nodes) "
+          f"{np.mean(np.concatenate(uy)):.3e} m; floor reaction / weight over steps "
+          f"{1501 if steps > 1500 else steps // 2 + 1}-{min(steps, 2000)}: mean {last.mean():.5f}, "
+          f"max - min {100 * (last.max() - last.min()):.3f} %, standard deviation {100 * last.std():.4f} %")
     print(f"floor reaction {floor.reaction[1]:.3f} N vs weight {weight:.3f} N (ratio {floor.reaction[1] / weight:.5f}); "
           f"peak RSS {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MB")
 
 
 if __name__ == "__main__":
-    main(int(sys.argv[1]) if len(sys.argv) > 1 else 2000)
+    main(int(sys.argv[1]) if len(sys.argv) > 1 else 2000, sys.argv[2] if len(sys.argv) > 2 else None)

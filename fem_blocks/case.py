@@ -328,7 +328,7 @@ class InterfaceCaseSpec:
     mu: float
     g0: float
     alert: float
-    placement: str
+    placement: str | None  # None: the default ("overlap" in 2D, "positions" in 3D)
     positions: tuple
     candidate: str | None
     orientation: str
@@ -792,6 +792,9 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
         if (not isinstance(pos, list) or not pos or
                 not all(isinstance(x, NUMBER) and not isinstance(x, bool) and 0 < x < 1 for x in pos)):
             raise t.error("positions", f"= {pos!r}: expected a list of relative positions strictly between 0 and 1")
+        placement = t.string("placement", None, choices=("overlap", "nodes", "positions"))
+        if placement == "overlap" and D == 3:
+            raise t.error("placement", "= 'overlap': expected 'positions' or 'nodes' in 3D")
         law = t.string("law", "coulomb", choices=("coulomb", "elastic", "brittle", "fremond", "mixed"))
         params = {}
         for key, dim in LAW_PARAM_UNITS.items():
@@ -812,7 +815,7 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
             name=iname, groups=tuple(between), law=law, mu=mu, params=params,
             g0=t.number("g0", 0.0, lo=0, dim="length"),
             alert=t.number("alert", 1e-3, lo=0, lo_open=True, dim="length"),
-            placement=t.string("placement", "positions", choices=("positions", "nodes")),
+            placement=placement,
             positions=tuple(float(x) for x in pos), candidate=cand,
             orientation=t.string("orientation", "any", choices=("any", "bed", "head", "crack")),
             reference=t.string("reference", "nominal", choices=("nominal", "as_built"))))

@@ -18,7 +18,8 @@ def joint(law, params, drivers=None, forces=None, rho=None, h=1e-2, positions=(0
     """Rigid block (driven or partly free) glued on a fixed rigid base by one interface law."""
     blk = RigidBody([(0, 0), (L, 0), (L, 0.1), (0, 0.1)], drivers=drivers, forces=forces, rho=rho, thickness=T)
     base = RigidBody([(-0.1, -0.1), (0.3, -0.1), (0.3, 0), (-0.1, 0)], drivers=FIX(), thickness=T)
-    cs = ContactStep([InterfaceSpec("j", ("b", "g"), law=law, params=params, positions=positions)], ["b", "g"],
+    cs = ContactStep([InterfaceSpec("j", ("b", "g"), law=law, params=params, placement="positions",
+                                    positions=positions)], ["b", "g"],
                      ContactOptions(tol=tol, max_sweeps=10000))
     sim = Simulation([blk, base], h=h, theta=1.0, contact=cs, gravity=(0.0, 0.0), velocity_reset=rho is not None)
     return blk, base, cs, sim
@@ -222,9 +223,9 @@ def deformable_joint_peak(h, positions):
     plate = RigidBody([(-0.05, 0.1), (0.25, 0.1), (0.25, 0.15), (-0.05, 0.15)], thickness=T,
                       drivers=driven({"y": ramp([0, 4 * uc], [0, 1])}))
     cs = ContactStep([InterfaceSpec("j", ("b", "g"), law="fremond", params=dict(c_N=CN, c_T=CT, w=W, mu=0.5),
-                                    positions=positions),
+                                    placement="positions", positions=positions),
                       InterfaceSpec("top", ("b", "p"), law="elastic", params=dict(c_N=1e14, c_T=1e14, mu=0.5),
-                                    positions=positions)],
+                                    placement="positions", positions=positions)],
                      ["b", "g", "p"], ContactOptions(tol=1e-10, max_sweeps=20000))
     sim = Simulation([blk, base, plate], h=h, theta=1.0, contact=cs, gravity=(0, 0), velocity_reset=True)
     peak = 0.0
@@ -294,7 +295,8 @@ def test_compliant_joint_in_compression(law, params):
     blk = RigidBody([(0, 0), (L, 0), (L, 0.1), (0, 0.1)], rho=2000.0, thickness=T,
                     drivers={"x": Driver("velocity", 0.0), "rz": Driver("velocity", 0.0)}, forces={"y": -F})
     base = RigidBody([(-0.1, -0.1), (0.3, -0.1), (0.3, 0), (-0.1, 0)], drivers=FIX(), thickness=T)
-    cs = ContactStep([InterfaceSpec("j", ("b", "g"), law=law, params=params, positions=(0.5,))], ["b", "g"],
+    cs = ContactStep([InterfaceSpec("j", ("b", "g"), law=law, params=params, placement="positions",
+                                    positions=(0.5,))], ["b", "g"],
                      ContactOptions(tol=1e-14, max_sweeps=100))
     sim = Simulation([blk, base], h=1e-2, theta=1.0, contact=cs, gravity=(0.0, 0.0), velocity_reset=True)
     for _ in range(3):

@@ -10,11 +10,20 @@ Candidate/antagonist (one side only, deterministic): the interface's `candidate`
 two bodies differ in group; else a deformable body is candidate against a rigid one; else the lower
 body index is candidate.
 
-Candidate points: on each candidate edge at relative positions (default 0.25, 0.75 — retreated from the
-corners, thesis §7.2.1.a), or at its FE nodes (one point per node, shared nodes counted once); each
-carries its tributary length x thickness (`area`). A point is paired with the nearest facing antagonist
-edge (angle between outward normals within `max_angle` of opposite) onto which it projects inside the
-edge, with -(reach) <= g <= g0 + alert.
+Candidate points (`placement`, per interface):
+* "overlap" (the default of InterfaceSpec in 2D): for each facing (candidate edge, antagonist edge) pair, the
+  two ends of the overlap [s_lo, s_hi] of the candidate edge with the antagonist edge projected on it (ends
+  within SNAP of a candidate node snap to it): candidate nodes where the meshes match, and the antagonist's
+  nodes (e.g. its corners) where they fall inside a candidate edge. Each end receives half of the overlap
+  length (trapezoidal rule), summed over the pairs ending at the same point with the same antagonist body, so
+  the points of a joint sum to its overlap length. Hinges can form at either body's corner whatever the mesh.
+* "nodes": the candidate's FE nodes (one point per node, shared nodes counted once; tributary = half of every
+  candidate edge producing it);
+* "positions": relative positions on each candidate edge (e.g. 0.25, 0.75 — retreated from the corners,
+  thesis §7.2.1.a; the hinge then sits a quarter of an edge inside the corner).
+Each point carries its tributary length x thickness (`area`). A point is paired with the nearest facing
+antagonist edge (angle between outward normals within `max_angle` of opposite) onto which it projects inside
+the edge, with -(reach) <= g <= g0 + alert.
 
 Broad phase: uniform grid over edge boxes enlarged by the search distance (numba, linear in the
 number of edges); each edge pair is examined once.
@@ -37,7 +46,7 @@ class InterfaceTable:
     pair_iface: np.ndarray  # (ng, ng) int64, symmetric
     g0: np.ndarray          # (ni,)
     alert: np.ndarray       # (ni,)
-    placement: np.ndarray   # (ni,) 0 positions, 1 nodes
+    placement: np.ndarray   # (ni,) 0 positions, 1 nodes, 2 overlap
     positions: np.ndarray   # (ni, P) padded with -1
     cand_group: np.ndarray  # (ni,) group id whose bodies are candidates, -1 default rule
     thickness: np.ndarray   # (ni,) out-of-plane thickness (tributary area = length x thickness)
@@ -82,7 +91,9 @@ class ContactSet:
     interface: np.ndarray
     cand_edge: np.ndarray
     ant_edge: np.ndarray
-    key: np.ndarray         # stable id of the candidate point (edge*P + k, or -(node index)-1 for nodes)
+    key: np.ndarray         # stable id of the candidate point: edge*P + k (positions); -(node index)-1 (nodes,
+    #                         overlap at a candidate node); -(nbn*(1 + edge) + antagonist node index)-1 (overlap
+    #                         at an antagonist node inside candidate edge `edge`; nbn = number of boundary nodes)
 
     def __len__(self):
         return len(self.gap)
@@ -166,6 +177,9 @@ def _grid_pairs(box, body, cell):
 
 
 # ----------------------------------------------------------------------------- narrow phase
+SNAP = 1e-6  # overlap placement: relative distance along a candidate edge below which an end snaps to its node
+
+
 @njit(cache=True)
 def _narrow(pairs, bx, bedges, bedge_body, kind, body_group, pair_iface, g0, alert, placement, positions,
             cand_group, cos_max, reach_frac):
@@ -180,7 +194,8 @@ def _narrow(pairs, bx, bedges, bedge_body, kind, body_group, pair_iface, g0, ale
     lam = np.empty(cap, dtype=np.float64)  # relative position on the antagonist edge
     gap = np.empty(cap, dtype=np.float64)
     itf = np.empty(cap, dtype=np.int64)
-    pk = np.empty(cap, dtype=np.int64)     # position index (or 0/1 = start/end node)
+    pk = np.empty(cap, dtype=np.int64)     # position index (or 0/1 = start/end node, 2/3 = antagonist node)
+    tr = np.empty(cap, dtype=np.float64)   # overlap: tributary length contributed by this match
     m = 0
     for p in range(npairs):
         e1 = pairs[p, 0]
@@ -219,6 +234,47 @@ def _narrow(pairs, bx, bedges, bedge_body, kind, body_group, pair_iface, g0, ale
         if -(nax * ncx + nay * ncy) < cos_max[i]:
             continue
         reach = reach_frac * min(la, lc) + alert[i]
+        if placement[i] == 2:
+            # overlap: the ends of the part of the candidate edge facing the antagonist edge (antagonist ends
+            # projected on the candidate edge, clipped to it; ends within SNAP of a candidate node snap to it)
+            sa0 = ((ax - cx) * ex + (ay - cy) * ey) / (lc * lc)
+            sa1 = ((ax + dx - cx) * ex + (ay + dy - cy) * ey) / (lc * lc)
+            lo = max(0.0, min(sa0, sa1))
+            hi = min(1.0, max(sa0, sa1))
+            if hi - lo <= SNAP:
+                continue
+            if lo <= SNAP:
+                lo = 0.0
+            if hi >= 1.0 - SNAP:
+                hi = 1.0
+            half = 0.5 * (hi - lo) * lc   # trapezoidal rule over the overlap: half its length to each end
+            for k in range(2):
+                s = lo if k == 0 else hi
+                if s == 0.0 or s == 1.0:
+                    code = 0 if s == 0.0 else 1              # candidate node (start / end)
+                else:
+                    code = 2 if (sa0 < sa1) == (k == 0) else 3  # antagonist node (start / end of ea)
+                px = cx + s * ex
+                py = cy + s * ey
+                l = ((px - ax) * tax + (py - ay) * tay) / la
+                g = (px - ax) * nax + (py - ay) * nay
+                if g > g0[i] + alert[i] or g < -reach:
+                    continue
+                if m == cap:
+                    cap *= 2
+                    ce = _grow_i(ce, cap); ae = _grow_i(ae, cap); itf = _grow_i(itf, cap); pk = _grow_i(pk, cap)
+                    sk = _grow_f(sk, cap); lam = _grow_f(lam, cap); gap = _grow_f(gap, cap)
+                    tr = _grow_f(tr, cap)
+                ce[m] = ec
+                ae[m] = ea
+                sk[m] = s
+                lam[m] = min(max(l, 0.0), 1.0)
+                gap[m] = g
+                itf[m] = i
+                pk[m] = code
+                tr[m] = half
+                m += 1
+            continue
         npts = 2 if placement[i] == 1 else 0
         if placement[i] == 0:
             for k in range(P):
@@ -238,6 +294,7 @@ def _narrow(pairs, bx, bedges, bedge_body, kind, body_group, pair_iface, g0, ale
                 cap *= 2
                 ce = _grow_i(ce, cap); ae = _grow_i(ae, cap); itf = _grow_i(itf, cap); pk = _grow_i(pk, cap)
                 sk = _grow_f(sk, cap); lam = _grow_f(lam, cap); gap = _grow_f(gap, cap)
+                tr = _grow_f(tr, cap)
             ce[m] = ec
             ae[m] = ea
             sk[m] = s
@@ -245,8 +302,9 @@ def _narrow(pairs, bx, bedges, bedge_body, kind, body_group, pair_iface, g0, ale
             gap[m] = g
             itf[m] = i
             pk[m] = k
+            tr[m] = 0.0
             m += 1
-    return ce[:m], ae[:m], sk[:m], lam[:m], gap[:m], itf[:m], pk[:m]
+    return ce[:m], ae[:m], sk[:m], lam[:m], gap[:m], itf[:m], pk[:m], tr[:m]
 
 
 @njit(cache=True)
@@ -287,7 +345,7 @@ def detect(bx, bnode_body, bnode_local, bedges, bedge_body, kind, body_group, ta
     box = np.column_stack([np.minimum(a, b) - search, np.maximum(a, b) + search])
     cell = max(float(np.median(L)) if len(L) else 1.0, 2 * search, 1e-12)
     pairs = _grid_pairs(box, bedge_body, cell) if len(L) > 1 else np.zeros((0, 2), dtype=np.int64)
-    ce, ae, sk, lam, gap, itf, pk = _narrow(pairs, bx, bedges, bedge_body, kind, body_group,
+    ce, ae, sk, lam, gap, itf, pk, tr = _narrow(pairs, bx, bedges, bedge_body, kind, body_group,
                                             np.ascontiguousarray(table.pair_iface, dtype=np.int64),
                                             table.g0.astype(float), table.alert.astype(float),
                                             table.placement.astype(np.int64),
@@ -296,9 +354,14 @@ def detect(bx, bnode_body, bnode_local, bedges, bedge_body, kind, body_group, ta
                                             float(reach_frac))
     P = table.positions.shape[1]
     nodes_pl = table.placement[itf] == 1
-    # key: position points -> edge * P + k ; node points -> -(global boundary node index) - 1
-    node_idx = np.where(pk == 0, bedges[ce, 0], bedges[ce, 1])
-    key = np.where(nodes_pl, -node_idx - 1, ce * P + pk)
+    ovl_pl = table.placement[itf] == 2
+    # key: position points -> edge * P + k ; node points -> -(global boundary node index) - 1; overlap points at
+    # a candidate node -> as node points; at antagonist node `an` inside candidate edge ce -> -(nbn(1 + ce) + an) - 1
+    nbn = len(bx)
+    node_idx = np.where(pk == 1, bedges[ce, 1], bedges[ce, 0])
+    ant_node = bedges[ae, np.clip(pk - 2, 0, 1)]
+    key = np.where(nodes_pl | (ovl_pl & (pk < 2)), -node_idx - 1,
+                   np.where(ovl_pl, -(nbn * (1 + ce) + ant_node) - 1, ce * P + pk))
     Lc = L[ce]
     trib = np.where(nodes_pl, 0.5 * Lc, Lc / np.maximum(1, (table.positions[itf] >= 0).sum(axis=1)))
     # keep, per key, the match with the smallest |g - g0| (ties: lower antagonist edge index)
@@ -318,6 +381,16 @@ def detect(bx, bnode_body, bnode_local, bedges, bedge_body, kind, body_group, ta
         trib_sel = np.where(nodes_pl[sel], tsum[np.searchsorted(uk, key[sel])], trib[sel])
     else:
         trib_sel = trib[sel]
+    # overlap points: tributary length = sum of the half overlaps of every match of this key with the kept
+    # antagonist body (the points of a joint sum to its overlap length)
+    if np.any(ovl_pl):
+        ks_sel = key[sel]
+        o = np.argsort(ks_sel, kind="stable")
+        pos = o[np.searchsorted(ks_sel[o], key)]  # index into sel of each raw match's key
+        same = ovl_pl & (bedge_body[ae] == bedge_body[ae[sel[pos]]])
+        tsum = np.zeros(len(sel))
+        np.add.at(tsum, pos[same], tr[same])
+        trib_sel = np.where(ovl_pl[sel], tsum, trib_sel)
     sel_order = np.argsort(key[sel], kind="stable")
     sel = sel[sel_order]
     trib_sel = trib_sel[sel_order]
@@ -439,6 +512,9 @@ def match(old: ContactSet, new: ContactSet) -> np.ndarray:
     return np.where(same_body, idx, -1).astype(np.int64)
 
 
+PLACEMENT_CODE = {"positions": 0, "nodes": 1, "overlap": 2, None: 2}  # None: the 2D default, "overlap"
+
+
 def build_table(interfaces, group_index: dict) -> InterfaceTable:
     """InterfaceTable from interface specs (objects with name, groups, g0, alert, placement, positions,
     candidate, orientation, and optional thickness / max_angle)."""
@@ -471,7 +547,7 @@ def build_table(interfaces, group_index: dict) -> InterfaceTable:
         pair_iface=pair,
         g0=np.array([i.g0 for i in interfaces], dtype=float),
         alert=np.array([i.alert for i in interfaces], dtype=float),
-        placement=np.array([0 if i.placement == "positions" else 1 for i in interfaces], dtype=np.int64),
+        placement=np.array([PLACEMENT_CODE[i.placement] for i in interfaces], dtype=np.int64),
         positions=positions,
         cand_group=np.array([group_index[i.candidate] if i.candidate else -1 for i in interfaces], dtype=np.int64),
         thickness=np.array([getattr(i, "thickness", 1.0) for i in interfaces], dtype=float),

@@ -50,8 +50,8 @@ class InterfaceSpec:
     mu: float = 0.5
     g0: float = 0.0
     alert: float = 1e-3
-    placement: str = "positions"
-    positions: tuple = (0.25, 0.75)
+    placement: str | None = None  # None: "overlap" in 2D, "positions" in 3D (docs/case-files.md)
+    positions: tuple = (0.25, 0.75)  # used by placement = "positions"
     candidate: str | None = None  # group name whose bodies are candidates
     orientation: str = "any"  # "any" | "bed" (normal within 45° of vertical) | "head"
     params: dict = field(default_factory=dict)
@@ -64,8 +64,8 @@ class InterfaceSpec:
         check_range(f"{n}.mu", self.mu, 0.0, expected="mu >= 0")
         check_range(f"{n}.g0", self.g0, 0.0, expected="g0 >= 0 [m] (joint thickness)")
         check_range(f"{n}.alert", self.alert, 0.0, lo_open=True, expected="alert > 0 [m]")
-        if self.placement not in ("positions", "nodes"):
-            raise InputError(f"{n}.placement = {self.placement!r}: expected 'positions' or 'nodes'")
+        if self.placement not in (None, "positions", "nodes", "overlap"):
+            raise InputError(f"{n}.placement = {self.placement!r}: expected 'overlap', 'nodes' or 'positions'")
         for p in self.positions:
             check_range(f"{n}.positions", p, 0.0, 1.0, lo_open=True, hi_open=True, expected="0 < position < 1")
         if self.orientation not in ("any", "bed", "head", "crack"):
@@ -174,7 +174,15 @@ class ContactStep:
     def _table(self):
         gid = {g: i for i, g in enumerate(self.group_names)}
         table = det.build_table(self.interfaces, gid)
-        return table if self.dim == 2 else det3.InterfaceTable3D.from_2d(table)
+        if self.dim == 2:
+            return table
+        for k, itf in enumerate(self.interfaces):  # 3D: no overlap placement; the default stays "positions"
+            if itf.placement == "overlap":
+                raise InputError(f"interfaces.{itf.name}.placement = 'overlap': expected 'positions' or 'nodes' "
+                                 f"in 3D")
+            if itf.placement is None:
+                table.placement[k] = 0
+        return det3.InterfaceTable3D.from_2d(table)
 
     def _detect(self, bx):
         s = self.scene
