@@ -447,6 +447,32 @@ def _weights(nvf, u, v, tol, w):
     return True
 
 
+@njit(cache=True)
+def _outside(coef, nv, f, out, tol, w):
+    """Distance d_out from the projection x_a = out[2:5] (reference coordinates out[0:2]) to the face f,
+    measured in the face's surface: 0 if x_a is inside (tolerance tol on the reference coordinates), else
+    |x_a - x(clamped coordinates)|. Writes the weights at the clamped coordinates (`_weights`) into w."""
+    if _weights(nv[f], out[0], out[1], tol, w):
+        return 0.0
+    _weights(nv[f], out[0], out[1], np.inf, w)
+    u = out[0]
+    v = out[1]
+    if nv[f] == 4:
+        uc = min(max(u, -1.0), 1.0)
+        vc = min(max(v, -1.0), 1.0)
+        x0, x1, x2, _a, _b, _c, _d, _e, _g = _bilinear_point(coef, f, uc, vc)
+    else:
+        uc = w[1]
+        vc = w[2]
+        x0 = coef[f, 0, 0] + uc * coef[f, 1, 0] + vc * coef[f, 2, 0]
+        x1 = coef[f, 0, 1] + uc * coef[f, 1, 1] + vc * coef[f, 2, 1]
+        x2 = coef[f, 0, 2] + uc * coef[f, 1, 2] + vc * coef[f, 2, 2]
+    d0 = out[2] - x0
+    d1 = out[3] - x1
+    d2 = out[4] - x2
+    return np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+
+
 # ----------------------------------------------------------------------------- broad phase
 @njit(cache=True)
 def _grid_pairs3(lo, hi, cell, origin, dims):
@@ -559,7 +585,7 @@ def _narrow3(bpairs, bx, bfaces, face_order, face_start, coef, nv, nrm, farea, f
     body, the nearest antagonist face of the other body (smallest |g - g0|, then lower face index)."""
     cap = 1024
     ri = np.empty((cap, 5), dtype=np.int64)    # cand face, k, ant face, key, interface
-    rf = np.empty((cap, 24))                   # gap, area, x(3), n(3), t(3), s(3), wc(4), wa(4), ref(2)
+    rf = np.empty((cap, 25))                   # gap, area, x(3), n(3), t(3), s(3), wc(4), wa(4), ref(2), d_out
     m = 0
     out = np.empty(15)
     wa = np.empty(4)
@@ -675,9 +701,10 @@ def _narrow3(bpairs, bx, bfaces, face_order, face_start, coef, nv, nrm, farea, f
                     g = out[14]
                     if g > srch or g < -reach:
                         continue
-                    if not _weights(nv[fa], out[0], out[1], tol, wa):
+                    dout = _outside(coef, nv, fa, out, tol, wa)
+                    if dout > alert[itf]:
                         continue
-                    sc = abs(g - g0[itf])
+                    sc = abs(g - g0[itf]) if dout == 0.0 else np.hypot(g - g0[itf], dout)
                     if sc < bscore or (sc == bscore and fa < best):
                         bscore = sc
                         best = fa
@@ -686,7 +713,7 @@ def _narrow3(bpairs, bx, bfaces, face_order, face_start, coef, nv, nrm, farea, f
                             ri2 = np.empty((cap, 5), dtype=np.int64)
                             ri2[:m] = ri[:m]
                             ri = ri2
-                            rf2 = np.empty((cap, 24))
+                            rf2 = np.empty((cap, 25))
                             rf2[:m] = rf[:m]
                             rf = rf2
                         ri[m, 0] = fc
@@ -706,6 +733,7 @@ def _narrow3(bpairs, bx, bfaces, face_order, face_start, coef, nv, nrm, farea, f
                             rf[m, 18 + j] = wa[j]
                         rf[m, 22] = out[0]
                         rf[m, 23] = out[1]
+                        rf[m, 24] = dout
                 if best >= 0:
                     m += 1
     return ri[:m], rf[:m]
@@ -828,7 +856,7 @@ def detect(bx, bnode_body, bnode_local, bfaces, bface_body, kind, body_group, ta
         return empty
     cf, ka, af, key, itf = ri.T
     ant_b = bface_body[af]
-    score = np.abs(rf[:, 0] - table.g0[itf])
+    score = np.hypot(rf[:, 0] - table.g0[itf], rf[:, 24])  # as in the kernel: |g - g0| and the distance outside
     # stage 1: one match per (key, candidate face) — the nearest over antagonist bodies
     o = np.lexsort((af, score, cf, key))
     first = np.ones(len(o), dtype=bool)
