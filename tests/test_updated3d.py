@@ -56,7 +56,7 @@ def force_on_upper_course(cst):
 @pytest.mark.parametrize("redetect_every", [1, 3])
 def test_small_wall_precompression_updated_agrees_with_frozen(redetect_every):
     """Gravity + beam weight, quasi-static (θ = 1, velocity reset), 8 steps: with updated geometry every contact of
-    the reference detection survives every re-detection (50 at every step, as frozen; before the fix the corner
+    the reference detection survives every re-detection (54 at every step, as frozen; before the fix the corner
     nodes of head joints and of the beam, pushed a few 1e-7 m past the antagonist face's edge by the Poisson
     expansion, were dropped: 3 different counts); the foundation carries the total weight and the bed joint the
     weight of the upper course and the beam (equilibrium, to 1e-9; horizontally the reaction of the beam's held
@@ -82,7 +82,7 @@ def test_small_wall_precompression_updated_agrees_with_frozen(redetect_every):
         runs[geometry] = (counts, found.reaction.copy(), beam.reaction.copy())
     cf, Rf, Rb = runs["frozen"]
     cu, Ru, Rbu = runs["updated"]
-    assert len(set(cu)) == 1 and cu[0] == cf[0] == cf[-1] == 50
+    assert len(set(cu)) == 1 and cu[0] == cf[0] == cf[-1] == 54
     assert np.max(np.abs(Ru[:3] - Rf[:3])) <= 1e-6 * Wt
     assert np.max(np.abs(Rbu[:3] - Rb[:3])) <= 1e-6 * Wt
 
@@ -144,3 +144,28 @@ def test_detect_keeps_points_past_an_edge_within_the_alert_distance(d, kept):
         y = cs.point[i, 1]
         assert np.allclose(cs.ant_w[i], [0.0, 1 - y, y, 0.0], atol=1e-12, rtol=0)  # on the edge x = 1
         assert abs(cs.ant_ref[i, 0] - (1 + 2 * d)) <= 1e-12
+
+
+@pytest.mark.parametrize("lift", [(0.0, 0.0), (1e-7, 0.0), (0.0, 1e-7)])
+def test_node_on_the_edge_between_two_antagonists_gives_each_its_share(lift):
+    """A candidate face [0, 1]² of two quads (nodes placement, normal +z) under two antagonist squares [0, .5] x
+    [0, 1] and [.5, 1] x [0, 1] (normal -z), the first lifted by lift[0], the second by lift[1]: the middle nodes
+    (x = 0.5) have a contact with each antagonist, each with the tributary area of the quad under it
+    (∫N_k dA = 1/8), so each antagonist gets its overlap area 1/2 whatever the lift. Before, the node went to the
+    antagonist with the lower face index (or the nearer one, so 1e-7 m of deformation moved it) with the area of
+    both quads: 3/4 and 1/4."""
+    cand_x = np.array([[0.0, 0.0, 0.0], [0.5, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.5, 1.0, 0.0],
+                       [0.0, 1.0, 0.0]])
+    cand_f = np.array([[0, 1, 4, 5], [1, 2, 3, 4]])
+    ant_f = np.array([[0, 3, 2, 1]])  # normal -z
+    ants = [np.array([[x0, 0.0, z], [x0 + 0.5, 0.0, z], [x0 + 0.5, 1.0, z], [x0, 1.0, z]])
+            for x0, z in ((0.0, lift[0]), (0.5, lift[1]))]
+    flat = det3.flatten_boundaries([cand_x] + ants, [cand_f, ant_f, ant_f])
+    bx, bnode_body, bnode_local, bfaces, bface_body = flat
+    cs = det3.detect(bx, bnode_body, bnode_local, bfaces, bface_body, np.zeros(3, np.int64), np.zeros(3, np.int64),
+                     det3.simple_table(alert=1e-3, placement="nodes"))
+    assert len(cs) == 8 and np.all(cs.cand_body == 0)
+    for b in (1, 2):
+        assert abs(cs.area[cs.ant_body == b].sum() - 0.5) <= 1e-14
+    mid = cs.point[:, 0] == 0.5
+    assert mid.sum() == 4 and np.allclose(cs.area[mid], 0.125, rtol=0, atol=1e-14)
