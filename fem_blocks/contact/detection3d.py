@@ -593,7 +593,8 @@ def _narrow3(bpairs, bx, bfaces, face_order, face_start, coef, nv, nrm, farea, f
              kind, body_group, pair_iface, g0, alert, placement, positions, npos, tri_rule, cand_group, cos_max,
              reach_frac, tol, KP, gx, gw):
     """Raw matches: for each body pair, each candidate point of the candidate body's faces near the other
-    body, the nearest antagonist face of the other body (smallest |g - g0|, then lower face index)."""
+    body, the nearest antagonist face of the other body (node points: smallest d_out of the probe first; then
+    smallest hypot(g - g0, d_out), then lower face index; module docstring)."""
     cap = 1024
     ri = np.empty((cap, 5), dtype=np.int64)    # cand face, k, ant face, key, interface
     rf = np.empty((cap, 26))                   # gap, area, x(3), n(3), t(3), s(3), wc(4), wa(4), ref(2), d_out,
