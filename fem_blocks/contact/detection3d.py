@@ -34,9 +34,18 @@ they are apart); t = x_ξ / |x_ξ| (quad, the tangent along the face's first edg
 t = (X_1 - X_0)/|X_1 - X_0| (triangle); s = n × t, so (n, t, s) is orthonormal and right-handed.
 Gap g = (x_c - x_a)·n; thick joint: g0 = joint thickness.
 
-A point is kept if it projects inside a facing antagonist face (outward normals at the face centres within
-`max_angle` of opposite) with -(reach) <= g <= g0 + alert, reach = reach_frac · min(√A_c, √A_a) + alert;
-among several faces the nearest is kept (smallest |g - g0|, then the lower face index).
+A point is kept if it projects on a facing antagonist face (outward normals at the face centres within
+`max_angle` of opposite) with -(reach) <= g <= g0 + alert, reach = reach_frac · min(√A_c, √A_a) + alert, and
+d_out <= alert, d_out = the distance from the projection x_a to the face measured in its surface (0 inside, to
+`inside_tol` on the reference coordinates; else |x_a - x(clamped coordinates)|): a point on an edge that the
+deformation (Poisson expansion, ~1e-7 m) or a slide moves just past it stays in contact, with the antagonist
+weights clamped onto the edge and g measured from the face's (bilinear) extension. Among several faces the
+nearest is kept: smallest hypot(g - g0, d_out) (= |g - g0| inside), then the lower face index. Node points
+("nodes") lie on edges of their candidate face, often on an edge between two antagonist faces (a head joint
+above or below, a face flush with a neighbour's): before that distance, the faces are ranked by d_out of a
+probe, the node moved PROBE = 1 % of the way toward its candidate face's centre, so that each candidate face
+gives the node's share of its area to the antagonist face it actually faces (and 1e-7 m of deformation does
+not swap the pairing, as the index tie-break did).
 
 Candidate/antagonist (as in 2D, deterministic): the interface's `candidate` group if given and the two bodies
 differ in group; else a deformable body is candidate against a rigid one; else the lower body index.
@@ -55,6 +64,8 @@ import numpy as np
 from numba import njit
 
 from ..errors import InputError
+
+PROBE = 1e-2  # node points: fraction of the way from the node toward its candidate face's centre (tie-break probe)
 
 # 4-point Gauss-Legendre rule on [-1, 1]
 _GX = np.array([-0.8611363115940526, -0.3399810435848563, 0.3399810435848563, 0.8611363115940526])
@@ -447,6 +458,32 @@ def _weights(nvf, u, v, tol, w):
     return True
 
 
+@njit(cache=True)
+def _outside(coef, nv, f, out, tol, w):
+    """Distance d_out from the projection x_a = out[2:5] (reference coordinates out[0:2]) to the face f,
+    measured in the face's surface: 0 if x_a is inside (tolerance tol on the reference coordinates), else
+    |x_a - x(clamped coordinates)|. Writes the weights at the clamped coordinates (`_weights`) into w."""
+    if _weights(nv[f], out[0], out[1], tol, w):
+        return 0.0
+    _weights(nv[f], out[0], out[1], np.inf, w)
+    u = out[0]
+    v = out[1]
+    if nv[f] == 4:
+        uc = min(max(u, -1.0), 1.0)
+        vc = min(max(v, -1.0), 1.0)
+        x0, x1, x2, _a, _b, _c, _d, _e, _g = _bilinear_point(coef, f, uc, vc)
+    else:
+        uc = w[1]
+        vc = w[2]
+        x0 = coef[f, 0, 0] + uc * coef[f, 1, 0] + vc * coef[f, 2, 0]
+        x1 = coef[f, 0, 1] + uc * coef[f, 1, 1] + vc * coef[f, 2, 1]
+        x2 = coef[f, 0, 2] + uc * coef[f, 1, 2] + vc * coef[f, 2, 2]
+    d0 = out[2] - x0
+    d1 = out[3] - x1
+    d2 = out[4] - x2
+    return np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+
+
 # ----------------------------------------------------------------------------- broad phase
 @njit(cache=True)
 def _grid_pairs3(lo, hi, cell, origin, dims):
@@ -556,13 +593,17 @@ def _narrow3(bpairs, bx, bfaces, face_order, face_start, coef, nv, nrm, farea, f
              kind, body_group, pair_iface, g0, alert, placement, positions, npos, tri_rule, cand_group, cos_max,
              reach_frac, tol, KP, gx, gw):
     """Raw matches: for each body pair, each candidate point of the candidate body's faces near the other
-    body, the nearest antagonist face of the other body (smallest |g - g0|, then lower face index)."""
+    body, the nearest antagonist face of the other body (node points: smallest d_out of the probe first; then
+    smallest hypot(g - g0, d_out), then lower face index; module docstring)."""
     cap = 1024
     ri = np.empty((cap, 5), dtype=np.int64)    # cand face, k, ant face, key, interface
-    rf = np.empty((cap, 24))                   # gap, area, x(3), n(3), t(3), s(3), wc(4), wa(4), ref(2)
+    rf = np.empty((cap, 26))                   # gap, area, x(3), n(3), t(3), s(3), wc(4), wa(4), ref(2), d_out,
+    #                                            d_out of the probe (node points)
     m = 0
     out = np.empty(15)
+    out2 = np.empty(15)
     wa = np.empty(4)
+    wp = np.empty(4)
     wc = np.empty(4)
     cfl = np.empty(0, dtype=np.int64)
     afl = np.empty(0, dtype=np.int64)
@@ -659,8 +700,16 @@ def _narrow3(bpairs, bx, bfaces, face_order, face_start, coef, nv, nrm, farea, f
                     px += wc[j] * bx[bfaces[fc, j], 0]
                     py += wc[j] * bx[bfaces[fc, j], 1]
                     pz += wc[j] * bx[bfaces[fc, j], 2]
+                # node points: a probe moved PROBE of the way toward the candidate face's centre tells which
+                # antagonist face the node's tributary region faces when the node lies on an edge of several
+                probe = placement[itf] == 1
+                if probe:
+                    qx = px + PROBE * (coef[fc, 0, 0] + (coef[fc, 1, 0] + coef[fc, 2, 0]) / 3.0 * (q == 3) - px)
+                    qy = py + PROBE * (coef[fc, 0, 1] + (coef[fc, 1, 1] + coef[fc, 2, 1]) / 3.0 * (q == 3) - py)
+                    qz = pz + PROBE * (coef[fc, 0, 2] + (coef[fc, 1, 2] + coef[fc, 2, 2]) / 3.0 * (q == 3) - pz)
                 best = -1
                 bscore = np.inf
+                bprobe = np.inf
                 for ia in range(na_):
                     fa = afl[ia]
                     if -(nrm[fa, 0] * nrm[fc, 0] + nrm[fa, 1] * nrm[fc, 1] + nrm[fa, 2] * nrm[fc, 2]) < cos_max[itf]:
@@ -675,10 +724,16 @@ def _narrow3(bpairs, bx, bfaces, face_order, face_start, coef, nv, nrm, farea, f
                     g = out[14]
                     if g > srch or g < -reach:
                         continue
-                    if not _weights(nv[fa], out[0], out[1], tol, wa):
+                    dout = _outside(coef, nv, fa, out, tol, wa)
+                    if dout > alert[itf]:
                         continue
-                    sc = abs(g - g0[itf])
-                    if sc < bscore or (sc == bscore and fa < best):
+                    sc = abs(g - g0[itf]) if dout == 0.0 else np.hypot(g - g0[itf], dout)
+                    dp = 0.0
+                    if probe:
+                        dp = _outside(coef, nv, fa, out2, tol, wp) if _project(coef, nv, fa, qx, qy, qz, out2) \
+                            else np.inf
+                    if dp < bprobe or (dp == bprobe and (sc < bscore or (sc == bscore and fa < best))):
+                        bprobe = dp
                         bscore = sc
                         best = fa
                         if m == cap:
@@ -686,7 +741,7 @@ def _narrow3(bpairs, bx, bfaces, face_order, face_start, coef, nv, nrm, farea, f
                             ri2 = np.empty((cap, 5), dtype=np.int64)
                             ri2[:m] = ri[:m]
                             ri = ri2
-                            rf2 = np.empty((cap, 24))
+                            rf2 = np.empty((cap, 26))
                             rf2[:m] = rf[:m]
                             rf = rf2
                         ri[m, 0] = fc
@@ -706,6 +761,8 @@ def _narrow3(bpairs, bx, bfaces, face_order, face_start, coef, nv, nrm, farea, f
                             rf[m, 18 + j] = wa[j]
                         rf[m, 22] = out[0]
                         rf[m, 23] = out[1]
+                        rf[m, 24] = dout
+                        rf[m, 25] = dp
                 if best >= 0:
                     m += 1
     return ri[:m], rf[:m]
@@ -828,14 +885,15 @@ def detect(bx, bnode_body, bnode_local, bfaces, bface_body, kind, body_group, ta
         return empty
     cf, ka, af, key, itf = ri.T
     ant_b = bface_body[af]
-    score = np.abs(rf[:, 0] - table.g0[itf])
+    score = np.hypot(rf[:, 0] - table.g0[itf], rf[:, 24])  # as in the kernel: |g - g0| and the distance outside
     # stage 1: one match per (key, candidate face) — the nearest over antagonist bodies
-    o = np.lexsort((af, score, cf, key))
+    probe = rf[:, 25]
+    o = np.lexsort((af, score, probe, cf, key))
     first = np.ones(len(o), dtype=bool)
     first[1:] = (key[o][1:] != key[o][:-1]) | (cf[o][1:] != cf[o][:-1])
     s1 = o[first]
     # stage 2: one contact per (key, antagonist body); area summed over the candidate faces (node points)
-    o2 = np.lexsort((af[s1], score[s1], ant_b[s1], key[s1]))
+    o2 = np.lexsort((af[s1], score[s1], probe[s1], ant_b[s1], key[s1]))
     s2 = s1[o2]
     head = np.ones(len(s2), dtype=bool)
     head[1:] = (key[s2][1:] != key[s2][:-1]) | (ant_b[s2][1:] != ant_b[s2][:-1])
