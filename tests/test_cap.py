@@ -25,7 +25,8 @@ def pressed(law, params, solver, fx=0.0, h=1e-2):
         drivers["x"] = Driver("velocity", 0.0)
     blk = RigidBody([(0, 0), (L, 0), (L, H_BLK), (0, H_BLK)], rho=RHO, thickness=T, drivers=drivers, forces=forces)
     base = RigidBody([(-0.1, -0.1), (0.3, -0.1), (0.3, 0), (-0.1, 0)], drivers=dict(FIX), thickness=T)
-    cs = ContactStep([InterfaceSpec("j", ("b", "g"), law=law, params=dict(params, f_c=FC), positions=(0.5,))],
+    cs = ContactStep([InterfaceSpec("j", ("b", "g"), law=law, params=dict(params, f_c=FC), placement="positions",
+                                   positions=(0.5,))],
                      ["b", "g"], ContactOptions(tol=1e-13, max_sweeps=1000, criterion="residual", solver=solver))
     sim = Simulation([blk, base], h=h, theta=1.0, contact=cs, gravity=(0.0, 0.0), velocity_reset=True)
     return blk, cs, sim
