@@ -84,6 +84,14 @@ MUTATIONS = [
     Mutation("von_mises_2d", "2D von Mises 3σxy² → σxy²", "fem_blocks/output/paraview.py",
              "                         + 3.0 * sig[:, 2] ** 2)", "                         + sig[:, 2] ** 2)",
              ("tests/test_stress2d.py",)),
+    Mutation("rotated_clamp_component", "single-component clamp on a block rotated by ±90°: global x/y not swapped "
+             "to the type frame", "fem_blocks/bodies.py",
+             "                    comp = 1 - comp\n", "                    comp = comp\n",
+             ("tests/test_clamps_split.py",)),
+    Mutation("bed_head_split", "bed/head split on |n_y| → on |n_x|", "fem_blocks/contact/detection.py",
+             "use_head = (head >= 0) & (np.abs(n[:, 1]) < np.sqrt(0.5))",
+             "use_head = (head >= 0) & (np.abs(n[:, 0]) < np.sqrt(0.5))",
+             ("tests/test_clamps_split.py",)),
     # the six the suite already killed
     Mutation("cone_projection_sign", "2D Coulomb cone projection c = (x_N + μ|x_T|)/(1+μ²) → (x_N − μ|x_T|)/(1+μ²)",
              "fem_blocks/solver/local.py",
