@@ -4,7 +4,7 @@ VPY    := $(VENV)/bin/python
 STAMP  := $(VENV)/.setup-stamp
 OUT    ?= out
 
-.PHONY: setup demo test test-fast bench clean pyvista
+.PHONY: setup demo test test-fast bench clean pyvista mutate
 
 setup: $(STAMP)
 
@@ -24,6 +24,10 @@ pyvista: $(STAMP)
 
 bench: $(STAMP)
 	$(VPY) bench/run_all.py
+
+# deliberate-bug run (docs/testing.md): one-line mutations, each with a fresh numba cache; slow, not in CI
+mutate: $(STAMP)
+	$(VPY) scripts/mutate.py
 
 clean:
 	rm -rf $(OUT) .pytest_cache

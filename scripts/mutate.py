@@ -1,0 +1,226 @@
+#!/usr/bin/env python3
+"""Deliberate-bug (mutation) run: apply hand-written one-line bugs, one at a time, and check that the tests fail.
+
+Each mutation is (id, where, file, old line, new line, test files). For each one the script copies the working
+tree (tracked and untracked files, no .git, no __pycache__) to a temporary directory, replaces the one line
+(the old text must occur exactly once: a stale mutation is an error, not a survivor), and runs the listed test
+files there with
+
+* PYTHONPATH = the copy (so the copy's fem_blocks is imported, not the installed one; checked before the run),
+* a fresh, empty NUMBA_CACHE_DIR: numba's on-disk cache does not recompile a cached caller when a jitted callee in
+  another module changes (e.g. `_proj_cone2`, inlined into solver/nlgs.py), so a stale cache can pass the tests
+  against the old code. Every mutation therefore recompiles the kernels its tests use (~1-5 min).
+
+Result per mutation: "killed" (pytest exit 1: at least one test failed; the failing tests are listed),
+"survived" (exit 0), "error" (collection error, timeout, stale mutation). Mutations run one after the other,
+never in parallel (the machine is shared and numba compiles on every core). Not part of CI (too slow); run it
+before a release and after changing tests (docs/testing.md has the kill table measured last).
+
+    python scripts/mutate.py                     # all mutations
+    python scripts/mutate.py --only theta_term gyroscopic_sign
+    python scripts/mutate.py --list
+    python scripts/mutate.py --baseline          # the listed tests on the unmutated copy (fresh cache): must pass
+    python scripts/mutate.py --json out.json --python /path/to/python
+
+Exit status: 0 when every mutation run was killed, 1 otherwise.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import re
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import dataclass
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+@dataclass(frozen=True)
+class Mutation:
+    id: str
+    title: str
+    file: str
+    old: str
+    new: str
+    tests: tuple
+
+
+MUTATIONS = [
+    # the ten bugs of issue 19's table that survived (or were caught only incidentally)
+    Mutation("theta_term", "θ term h²θ(1−θ)K u → h²θ²K u (free velocity)", "fem_blocks/dynamics.py",
+             "rhs -= h * h * th * (1 - th) * (bt.K @ gr.U)", "rhs -= h * h * th * th * (bt.K @ gr.U)",
+             ("tests/test_theta_scheme.py",)),
+    Mutation("rigid_force_weights", "rigid-body force weights (1−θ)F(t0) + θF(t1) swapped", "fem_blocks/dynamics.py",
+             "b.Ftheta = (1 - th) * b.applied_force(t0, self.g) + th * b.applied_force(t1, self.g)",
+             "b.Ftheta = th * b.applied_force(t0, self.g) + (1 - th) * b.applied_force(t1, self.g)",
+             ("tests/test_theta_scheme.py",)),
+    Mutation("fremond_exponent", "Frémond viscous exponent ^(1/p) → ^p", "fem_blocks/laws.py",
+             "max(mid * Y - w, 0.0) ** (1.0 / p)", "max(mid * Y - w, 0.0) ** p",
+             ("tests/test_law_closed_forms.py",)),
+    Mutation("damage_friction", "damage friction μ = (1−β)μ_r → βμ_r", "fem_blocks/laws.py",
+             "mu = (1.0 - x) * par[P_MUR]", "mu = x * par[P_MUR]",
+             ("tests/test_law_closed_forms.py",)),
+    Mutation("mm_mass_factor", "mm-N-MPa mass factor 1e3 → 1", "fem_blocks/case.py",
+             "time=1.0, mass=1e3),", "time=1.0, mass=1),",
+             ("tests/test_units_mm.py",)),
+    Mutation("mixed_mode_ratio", "mixed-mode ratio b²/λ² → |b|/λ", "fem_blocks/laws.py",
+             "m = (uT / dII) ** 2 / lam2  # mode ratio", "m = abs(uT / dII) / lam  # mode ratio",
+             ("tests/test_law_closed_forms.py",)),
+    Mutation("rayleigh_swap", "Rayleigh α and β swapped", "fem_blocks/bodies.py",
+             "self.C = (m.alpha * self.M + m.beta * self.K).tocsr()",
+             "self.C = (m.beta * self.M + m.alpha * self.K).tocsr()",
+             ("tests/test_theta_scheme.py",)),
+    Mutation("newton_direction", "Newton direction J⁻¹(−F) → J⁻¹F", "fem_blocks/solver/newton.py",
+             "dr = lu_solve(J, -F)", "dr = lu_solve(J, F)",
+             ("tests/test_newton_direction.py",)),
+    Mutation("stop_after_peak", "stop-after-peak threshold (1 − drop)·peak → drop·peak", "fem_blocks/runner.py",
+             "f < (1 - drop) * pk:", "f < drop * pk:",
+             ("tests/test_stop_after_peak.py",)),
+    Mutation("von_mises_2d", "2D von Mises 3σxy² → σxy²", "fem_blocks/output/paraview.py",
+             "                         + 3.0 * sig[:, 2] ** 2)", "                         + sig[:, 2] ** 2)",
+             ("tests/test_stress2d.py",)),
+    Mutation("rotated_clamp_component", "single-component clamp on a block rotated by ±90°: global x/y not swapped "
+             "to the type frame", "fem_blocks/bodies.py",
+             "                    comp = 1 - comp\n", "                    comp = comp\n",
+             ("tests/test_clamps_split.py",)),
+    Mutation("bed_head_split", "bed/head split on |n_y| → on |n_x|", "fem_blocks/contact/detection.py",
+             "use_head = (head >= 0) & (np.abs(n[:, 1]) < np.sqrt(0.5))",
+             "use_head = (head >= 0) & (np.abs(n[:, 0]) < np.sqrt(0.5))",
+             ("tests/test_clamps_split.py",)),
+    # the six the suite already killed
+    Mutation("cone_projection_sign", "2D Coulomb cone projection c = (x_N + μ|x_T|)/(1+μ²) → (x_N − μ|x_T|)/(1+μ²)",
+             "fem_blocks/solver/local.py",
+             "    c = (x0 + mu * ax1) / (1.0 + mu * mu)\n    return c, c * mu",
+             "    c = (x0 - mu * ax1) / (1.0 + mu * mu)\n    return c, c * mu",
+             ("tests/test_nlgs.py",)),
+    Mutation("softening_cap_exponent", "softening cap exp(−f_c|u_p|/G_fc) → exp(−|u_p|/G_fc)", "fem_blocks/laws.py",
+             "np.exp(-fc * abs(st[S_UP]) / par[P_GFC])", "np.exp(-abs(st[S_UP]) / par[P_GFC])",
+             ("tests/test_cap.py",)),
+    Mutation("checkpoint_law_state", "checkpointed law state not restored (zeros)", "fem_blocks/contact/step.py",
+             'self.P, self.state = np.array(d["contact.P"]), np.array(d["contact.state"])',
+             'self.P, self.state = np.array(d["contact.P"]), np.zeros_like(d["contact.state"])',
+             ("tests/test_resume.py",)),
+    Mutation("gap_sign_3d", "3D gap (x_c − x_a)·n → (x_a − x_c)·n", "fem_blocks/contact/detection3d.py",
+             "out[14] = (p0 - xx) * nx + (p1 - xy) * ny + (p2 - xz) * nz",
+             "out[14] = (xx - p0) * nx + (xy - p1) * ny + (xz - p2) * nz",
+             ("tests/test_detection3d.py", "tests/test_step3d.py")),
+    Mutation("gyroscopic_sign", "3D gyroscopic moment −ω × Iω → +ω × Iω", "fem_blocks/dynamics.py",
+             "F[3:] -= np.cross(w, b.inertia @ w)", "F[3:] += np.cross(w, b.inertia @ w)",
+             ("tests/test_step3d.py",)),
+    Mutation("gap_sign_2d", "2D gap (x_c − x_a)·n → (x_a − x_c)·n (detection)", "fem_blocks/contact/detection.py",
+             "g = (px - ax) * nax + (py - ay) * nay", "g = (ax - px) * nax + (ay - py) * nay",
+             ("tests/test_detection_delassus.py", "tests/test_contact.py")),
+]
+
+IGNORE = shutil.ignore_patterns(".git", "__pycache__", ".venv", "*.pyc", ".pytest_cache", "out", "*.egg-info")
+
+
+def copy_tree(dst: str) -> str:
+    """Copy the working tree to dst/repo; link dst/shared to the project's ../shared (FCLIB data, if any)."""
+    repo = os.path.join(dst, "repo")
+    shutil.copytree(ROOT, repo, ignore=IGNORE, symlinks=True)
+    shared = os.path.join(os.path.dirname(ROOT), "shared")
+    if os.path.isdir(shared):
+        os.symlink(shared, os.path.join(dst, "shared"))
+    return repo
+
+
+def apply(repo: str, m: Mutation) -> None:
+    path = os.path.join(repo, m.file)
+    with open(path, encoding="utf-8") as f:
+        text = f.read()
+    n = text.count(m.old)
+    if n != 1:
+        raise RuntimeError(f"{m.id}: the old text occurs {n} times in {m.file} (expected once): update the mutation")
+    with open(path, "w", encoding="utf-8") as f:
+        f.write(text.replace(m.old, m.new))
+
+
+def run_one(m: Mutation | None, tests, python: str, timeout: float, keep: bool) -> dict:
+    tmp = tempfile.mkdtemp(prefix=f"fem_blocks_mut_{m.id if m else 'baseline'}_")
+    t0 = time.perf_counter()
+    out = dict(id=m.id if m else "baseline", title=m.title if m else "no mutation", file=m.file if m else "",
+               tests=list(tests))
+    try:
+        repo = copy_tree(tmp)
+        if m is not None:
+            apply(repo, m)
+        cache = os.path.join(tmp, "numba_cache")
+        os.makedirs(cache)
+        env = dict(os.environ, PYTHONPATH=repo, NUMBA_CACHE_DIR=cache, PYTHONDONTWRITEBYTECODE="1")
+        where = subprocess.run([python, "-c", "import fem_blocks; print(fem_blocks.__file__)"], cwd=repo, env=env,
+                               capture_output=True, text=True, timeout=120)
+        if not where.stdout.strip().startswith(repo):
+            raise RuntimeError(f"fem_blocks imported from {where.stdout.strip() or where.stderr.strip()!r}, "
+                               f"not from the copy {repo}")
+        p = subprocess.run([python, "-m", "pytest", "-q", "-p", "no:cacheprovider", *tests], cwd=repo, env=env,
+                           capture_output=True, text=True, timeout=timeout)
+        failed = sorted(set(re.findall(r"^(?:FAILED|ERROR) (\S+)", p.stdout, flags=re.M)))
+        summary = (p.stdout.strip().splitlines() or [""])[-1]
+        out.update(returncode=p.returncode, failed=failed, summary=summary)
+        out["result"] = {0: "survived", 1: "killed"}.get(p.returncode, "error")
+        if out["result"] == "error":
+            out["output_tail"] = (p.stdout + p.stderr)[-3000:]
+    except subprocess.TimeoutExpired:
+        out.update(result="error", summary=f"timeout after {timeout:g} s")
+    except Exception as e:  # noqa: BLE001 - reported as an error row
+        out.update(result="error", summary=str(e))
+    finally:
+        out["seconds"] = round(time.perf_counter() - t0, 1)
+        if keep:
+            out["directory"] = tmp
+        else:
+            shutil.rmtree(tmp, ignore_errors=True)
+    return out
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--only", nargs="+", metavar="ID", help="run these mutations only")
+    ap.add_argument("--list", action="store_true", help="list the mutations and exit")
+    ap.add_argument("--baseline", action="store_true", help="run the tests of the selected mutations unmutated")
+    ap.add_argument("--python", default=sys.executable, help="interpreter with fem_blocks' dependencies")
+    ap.add_argument("--timeout", type=float, default=1800.0, help="seconds per mutation (default 1800)")
+    ap.add_argument("--json", help="write the results to this file (appended as they come)")
+    ap.add_argument("--keep", action="store_true", help="keep the temporary copies")
+    a = ap.parse_args(argv)
+    sel = MUTATIONS
+    if a.only:
+        known = {m.id for m in MUTATIONS}
+        bad = [x for x in a.only if x not in known]
+        if bad:
+            ap.error(f"unknown mutation {bad[0]!r}; expected one of {sorted(known)}")
+        sel = [m for m in MUTATIONS if m.id in a.only]
+    if a.list:
+        for m in sel:
+            print(f"{m.id:24s} {m.file:34s} {m.title}  [{' '.join(m.tests)}]")
+        return 0
+    results = []
+    if a.baseline:
+        tests = sorted({t for m in sel for t in m.tests})
+        r = run_one(None, tests, a.python, a.timeout, a.keep)
+        print(f"baseline: {'passed' if r.get('returncode') == 0 else 'FAILED'} ({r['summary']}, {r['seconds']} s)",
+              flush=True)
+        return 0 if r.get("returncode") == 0 else 1
+    for m in sel:
+        r = run_one(m, m.tests, a.python, a.timeout, a.keep)
+        results.append(r)
+        by = ", ".join(r.get("failed", [])[:4]) + (" ..." if len(r.get("failed", [])) > 4 else "")
+        print(f"{r['result']:8s} {m.id:24s} {r['seconds']:7.1f} s  {r['summary']}  {by}", flush=True)
+        if a.json:
+            with open(a.json, "w") as f:
+                json.dump(results, f, indent=1)
+    print("\n| deliberate bug | where | result | killed by |\n|---|---|---|---|")
+    for r in results:
+        print(f"| {r['title']} | `{r['file']}` | {r['result']} | "
+              f"{', '.join('`' + x.split('::')[-1] + '`' for x in r.get('failed', [])[:3])} |")
+    return 0 if all(r["result"] == "killed" for r in results) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
