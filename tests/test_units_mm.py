@@ -1,11 +1,12 @@
 """`units = "mm-N-MPa"`: the same model written in SI and in mm, N, MPa (mass unit the tonne = N s²/mm) runs the
 same history. Every converted quantity enters the run: lengths (vertices, block size, mesh size, position,
-thickness, alert), E, rho, rigid `mass` and `inertia`, a force history, a displacement-driver history, gravity,
-and the interface parameters c_N, c_T (stiffness), w (energy) and b (Frémond viscosity, decohesion under way).
+thickness, alert), E, rho, rigid `mass` and `inertia`, a force history, a moment history (N m / N mm), a
+displacement-driver history, gravity, and the interface parameters c_N, c_T (stiffness), w (energy) and b (Frémond viscosity, decohesion under way).
 
 The mm file is written from the SI values with the factors stated here (independent of case.py's table):
 length 1e3 mm/m, stress 1e-6 MPa/Pa, density 1e-12 (t/mm³)/(kg/m³), mass 1e-3 t/kg, inertia 1e3 t mm²/(kg m²),
-stiffness 1e-9 (MPa/mm)/(Pa/m), energy and viscosity 1e-3 (N/mm)/(N/m); forces in N and times in s unchanged.
+stiffness 1e-9 (MPa/mm)/(Pa/m), energy and viscosity 1e-3 (N/mm)/(N/m), moment 1e3 N mm/(N m); forces in N and
+times in s unchanged.
 The outputs (history.csv) are SI in both runs: every column agrees to 1e-9 of its largest value (measured: 3e-12;
 solver diagnostics excepted). Sensitivity (measured, SI run): doubling b moves the top block by 8e-5 relative,
 doubling its inertia by 8 %, its mass by 70 %, so a missing or wrong factor on any of them fails."""
@@ -59,6 +60,7 @@ mass = {mass}
 inertia = {inertia}
 [rigid_bodies.forces]
 x = {{times = [0.0, 0.01], values = [0.0, 1500.0]}}
+rz = {{times = [0.0, 0.01], values = [0.0, {mz}]}}
 [[interfaces]]
 name = "bed"
 between = ["blocks", "base"]
@@ -84,10 +86,10 @@ output_every = 100
 
 SI = dict(units="", g=-9.81, E=1e10, rho=2000.0, t=0.1, lx=0.4, ly=0.2, ms=0.2, x0=0.05, bx0=-0.1, by0=-0.1,
           bx1=0.6, settle=-2e-5, tx1=0.4, ty1=0.3, mass=40.0, inertia=0.5, alert=1e-3, cN=1e10, cT=5e9, w=0.01,
-          b=0.01)
+          b=0.01, mz=20.0)
 LENGTHS = ("g", "t", "lx", "ly", "ms", "x0", "bx0", "by0", "bx1", "settle", "tx1", "ty1", "alert")
 FACTORS = dict({k: 1e3 for k in LENGTHS}, E=1e-6, rho=1e-12, mass=1e-3, inertia=1e3, cN=1e-9, cT=1e-9, w=1e-3,
-               b=1e-3)
+               b=1e-3, mz=1e3)
 
 
 def run(tmp_path, name, values):
