@@ -1,7 +1,8 @@
 """`units = "mm-N-MPa"`: the same model written in SI and in mm, N, MPa (mass unit the tonne = N s²/mm) runs the
 same history. Every converted quantity enters the run: lengths (vertices, block size, mesh size, position,
 thickness, alert), E, rho, rigid `mass` and `inertia`, a force history, a moment history (N m / N mm), a
-displacement-driver history, gravity, and the interface parameters c_N, c_T (stiffness), w (energy) and b (Frémond viscosity, decohesion under way).
+displacement-driver history, gravity, and the interface parameters c_N, c_T (stiffness), w (energy) and b
+(Frémond viscosity, decohesion under way).
 
 The mm file is written from the SI values with the factors stated here (independent of case.py's table):
 length 1e3 mm/m, stress 1e-6 MPa/Pa, density 1e-12 (t/mm³)/(kg/m³), mass 1e-3 t/kg, inertia 1e3 t mm²/(kg m²),
