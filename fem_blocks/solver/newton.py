@@ -46,6 +46,13 @@ tension too so that F is continuous where u_N changes sign: at every solution P�
 solutions as the branch-wise natural map), J = D' + E' W by the chain rule. The mixed-mode damage is evaluated
 inside the iteration, D(u) = max(D_committed, D(λ(u))), with its derivative in J (consistent tangent, no outer
 staggered loop); Frémond's β is staggered (docs/laws.md, "Integration in the global Newton").
+Row scaling (docs/laws.md, "Residual of the transformed problem"): each row of F is divided by its gain on the
+contact's own impulse, σ_α,i = 1 + S_α,i W_αα,ii (S = h²θ A k of the adhesive part at the start of the solve). It
+leaves the Newton direction unchanged (J and F scaled alike) and measures F on P rather than on P̃ = P + S v + c; the
+line search accepts a step that decreases (Armijo) either ½‖F‖² of the scaled rows or the unscaled one. Unscaled
+alone, a stiff joint at μ = 0 (σ_T ~ 1e5: every closed joint slides, F_T = P̃_T) made the regularised direction
+fail the line search from the first iteration on a 2-brick prism (101 fallbacks, residual 1.2); scaled alone, the
+platen stick/slip kinks it exposes cost 62 instead of 5 iterations at μ = 0.001 on the issue-18 prism.
 
 Choosing the solver: `solve_newton` (20 NLGS sweeps, then Newton) where W couples contacts strongly (stacks,
 packings, stiff walls: Gauss–Seidel stalls or cycles there); `nlgs.solve(..., criterion="residual",
@@ -235,17 +242,38 @@ def _newton(W: BlockCSR, q, mu, r, tol, max_iter, gs, max_sweeps_total, coh=None
     def ac(r_, u_, jacobian=False):
         if dim == 3:
             return alart_curnier_3d(r_, u_, mue, rn, rt, jacobian=jacobian)
-        return alart_curnier(r_, u_, mue, rn, rt, jacobian=jacobian, cap=capv if coh is not None else None)
+        if coh is None:
+            return alart_curnier(r_, u_, mue, rn, rt, jacobian=jacobian)
+        out = alart_curnier(r_, u_, mue, rn, rt, jacobian=jacobian, cap=capv)
+        if not jacobian:  # rows divided by their gain σ (row scaling: the same Newton direction)
+            return out / sig.ravel()
+        F, D, E = out
+        return F / sig.ravel(), D / sig[:, :, None], E / sig[:, :, None]
+
+    def merits_of(F):
+        """(½‖F‖², ½‖σF‖²): with interface laws F is row-scaled and the second is the unscaled merit."""
+        f = 0.5 * float(F @ F)
+        if sig is None:
+            return f, f
+        Fu = F * sig.ravel()
+        return f, 0.5 * float(Fu @ Fu)
 
     def merit(r_, u_):
         Pt, vp = transformed(r_, u_)
-        F = ac(Pt, vp)
-        return 0.5 * float(F @ F)
+        return merits_of(ac(Pt, vp))
 
     u = Wsp @ r + q
+    sig = None
     if coh is not None:  # scale ρ on the transformed problem: P̃ ≈ (W⁻¹ + S) v, so ρ ≈ 1/W_αα + S_α
         transformed(r, u)
         rn, rt = rn + S[:, 0], rt + S[:, 1]
+        # gain of each row of F on the contact's own impulse, σ_α,i = 1 + S_α,i W_αα,ii (i = N, T; ρ W_αα in a
+        # stick row, ∂P̃/∂P in a slip or open row). The rows are divided by it: the same Newton direction, J better
+        # conditioned (2e12 -> 2e7 on a 2-brick prism) and a merit measured on P, like the residual
+        # (nlgs.residual_scale). The line search accepts a step that decreases either merit, scaled or not
+        # (module docstring, "Interface laws")
+        dg = W.blocks[W.diag_pos]
+        sig = 1.0 + S * np.column_stack([dg[:, 0, 0], dg[:, 1, 1]])
     res = residual(r, u)
     change = 0.0
     n_it = n_gs = n_fb = 0
@@ -267,7 +295,7 @@ def _newton(W: BlockCSR, q, mu, r, tol, max_iter, gs, max_sweeps_total, coh=None
             E = D * S[:, None, :] + E
             if inside:  # damage inside: dP̃/dv = diag(S) + T
                 E += np.einsum("kij,kjl->kil", D, T)
-        f0 = 0.5 * float(F @ F)
+        f0, f0u = merits_of(F)
         merits.append(f0)
         del merits[:-memory]
         fref = max(merits)
@@ -284,7 +312,8 @@ def _newton(W: BlockCSR, q, mu, r, tol, max_iter, gs, max_sweeps_total, coh=None
             for _ in range(30):
                 r_t, u_t = r + t * dr, u + t * du
                 thr = (1.0 - 2e-4 * t) * f0 if memory == 1 else fref - 2e-4 * t * f0
-                if merit(r_t, u_t) <= thr:
+                m_t, mu_t = merit(r_t, u_t)
+                if m_t <= thr or (sig is not None and mu_t <= (1.0 - 2e-4 * t) * f0u):
                     accepted = True
                     break
                 t *= 0.5
