@@ -865,7 +865,8 @@ def residual_scale(indptr, indices, blocks, a, kNA, kTA, h, theta):
 
 @njit(cache=True)
 def _natural_map_cohesive3(indptr, indices, blocks, q, mu, r, law, par, st, trial, ueff, area, h, theta):
-    """3D ‖F‖ of the transformed problem: F = P̃ - P_K(P̃ - (v + [μ‖v_T‖, 0, 0])), P̃ = P + P_adh(u(v)); at a cap
+    """3D ‖F‖ of the transformed problem: F = P̃/σ - P_K(P̃/σ - (v + [μ‖v_T‖, 0, 0])), P̃ = P + P_adh(u(v)), σ the
+    contact's gain (residual_scale); at a cap
     the Alart–Curnier residual (ρ = 1) with the normal projection onto [0, h f_c A] and the tangential one onto the
     disk of radius μ times it (zero exactly at the solutions)."""
     n = mu.shape[0]
@@ -935,8 +936,8 @@ def _check_cohesive3(n, r, law, par, st, ueff, area):
 
 @njit(cache=True)
 def natural_map_cohesive(indptr, indices, blocks, q, mu, r, law, par, st, trial, ueff, area, h, theta):
-    """‖F‖ of the transformed problem: F = P̃ - P_K(P̃ - (v + [μ|v_T|, 0])), P̃ = P + P_adh(u(v)) (2D or 3D by the
-    block size)."""
+    """‖F‖ of the transformed problem: F = P̃/σ - P_K(P̃/σ - (v + [μ|v_T|, 0])), P̃ = P + P_adh(u(v)), σ the contact's
+    gain (residual_scale; 1 for Coulomb contacts) (2D or 3D by the block size)."""
     if blocks.shape[1] == 3:
         return _natural_map_cohesive3(indptr, indices, blocks, q, mu, r, law, par, st, trial, ueff, area, h, theta)
     n = mu.shape[0]
