@@ -29,9 +29,10 @@ N_THETA = 48
 
 @njit(cache=True, inline="always")
 def _proj_cone2(x0, x1, mu):
-    """Projection of x on the 2D Coulomb cone K = {|x_T| <= mu x_N}."""
+    """Projection of x on the 2D Coulomb cone K = {|x_T| <= mu x_N}. μ = 0: K is the ray {x_T = 0, x_N >= 0}
+    (the test is written so that x_N < 0 with x_T = 0 is not taken as inside: 0 <= 0·x_N holds)."""
     ax1 = abs(x1)
-    if ax1 <= mu * x0:
+    if ax1 <= mu * x0 and x0 >= 0.0:
         return x0, x1
     if mu * ax1 <= -x0:
         return 0.0, 0.0
@@ -41,9 +42,9 @@ def _proj_cone2(x0, x1, mu):
 
 @njit(cache=True, inline="always")
 def _proj_cone3(x0, x1, x2, mu):
-    """Projection of x on the Coulomb cone K = {‖x_T‖ <= mu x_N}."""
+    """Projection of x on the Coulomb cone K = {‖x_T‖ <= mu x_N} (μ = 0: the ray x_T = 0, x_N >= 0)."""
     nt = np.sqrt(x1 * x1 + x2 * x2)
-    if nt <= mu * x0:
+    if nt <= mu * x0 and x0 >= 0.0:
         return x0, x1, x2
     if mu * nt <= -x0:
         return 0.0, 0.0, 0.0

@@ -138,7 +138,7 @@ def local_2d(w00, w01, w10, w11, q0, q1, mu):
             x0 = -(w11 * q0 - w01 * q1) / det
             x1 = -(-w10 * q0 + w00 * q1) / det
             ax1 = abs(x1)
-            if ax1 <= mu * x0:
+            if ax1 <= mu * x0 and x0 >= 0.0:
                 rn, rt = x0, x1
             elif mu * ax1 <= -x0:
                 continue
@@ -844,9 +844,29 @@ def _sweep_cohesive3(indptr, indices, blocks, diag_pos, q, mu, r, order, omega, 
     return dr2, r2
 
 
+@njit(cache=True, inline="always")
+def residual_scale(indptr, indices, blocks, a, kNA, kTA, h, theta):
+    """σ_α = 1 + h²θ max(k_N A W_αα,NN, k_T A W_αα,TT) (3D: the larger tangential diagonal entry), k_N, k_T the
+    adhesive stiffnesses of the branch in use: the gain of the transformed impulse P̃ = P + h A r_adh(u(v)),
+    v = W P + q, on the contact's own impulse (∂P̃_α/∂P_α = I + h²θ A K W_αα). The natural map of the transformed
+    problem measures its impulse components divided by σ_α, i.e. on P itself (σ = 1 without adhesive stiffness)."""
+    wn = 0.0
+    wt = 0.0
+    dd = blocks.shape[1]
+    for k in range(indptr[a], indptr[a + 1]):
+        if indices[k] == a:
+            wn = blocks[k, 0, 0]
+            for i in range(1, dd):
+                if blocks[k, i, i] > wt:
+                    wt = blocks[k, i, i]
+    g = h * h * theta * max(kNA * wn, kTA * wt)
+    return 1.0 + g if g > 0.0 else 1.0
+
+
 @njit(cache=True)
 def _natural_map_cohesive3(indptr, indices, blocks, q, mu, r, law, par, st, trial, ueff, area, h, theta):
-    """3D ‖F‖ of the transformed problem: F = P̃ - P_K(P̃ - (v + [μ‖v_T‖, 0, 0])), P̃ = P + P_adh(u(v)); at a cap
+    """3D ‖F‖ of the transformed problem: F = P̃/σ - P_K(P̃/σ - (v + [μ‖v_T‖, 0, 0])), P̃ = P + P_adh(u(v)), σ the
+    contact's gain (residual_scale); at a cap
     the Alart–Curnier residual (ρ = 1) with the normal projection onto [0, h f_c A] and the tangential one onto the
     disk of radius μ times it (zero exactly at the solutions)."""
     n = mu.shape[0]
@@ -861,17 +881,22 @@ def _natural_map_cohesive3(indptr, indices, blocks, q, mu, r, law, par, st, tria
         p1 = r[3 * a + 1]
         p2 = r[3 * a + 2]
         m = mu[a]
+        sig = 1.0
         if law[a] != 0:
             uN = ueff[a, 0] + h * theta * v0
             kN, kT, fN, fT, m = _linear_part(law[a], par[a], st[a], trial[a], uN > 0.0)
             p0 += h * area[a] * (kN * uN + fN)
             p1 += h * area[a] * kT * (ueff[a, 1] + h * theta * v1)
             p2 += h * area[a] * kT * (ueff[a, 2] + h * theta * v2)
+            sig = residual_scale(indptr, indices, blocks, a, kN * area[a], kT * area[a], h, theta)
             if uN <= 0.0:
                 kc = _kcomp(law[a], par[a]) * area[a]
                 if kc > 0.0:
                     v0 += p0 / (h * h * theta * kc)
-        capP = h * _cap_stress(par[a], st[a]) * area[a]
+        p0 /= sig  # impulse components relative to their gain ∂P̃/∂P (docs/laws.md, "Residual")
+        p1 /= sig
+        p2 /= sig
+        capP = h * _cap_stress(par[a], st[a]) * area[a] / sig
         if capP > 0.0:
             y0 = min(max(p0 - v0, 0.0), capP)
             x1 = p1 - v1
@@ -911,8 +936,8 @@ def _check_cohesive3(n, r, law, par, st, ueff, area):
 
 @njit(cache=True)
 def natural_map_cohesive(indptr, indices, blocks, q, mu, r, law, par, st, trial, ueff, area, h, theta):
-    """‖F‖ of the transformed problem: F = P̃ - P_K(P̃ - (v + [μ|v_T|, 0])), P̃ = P + P_adh(u(v)) (2D or 3D by the
-    block size)."""
+    """‖F‖ of the transformed problem: F = P̃/σ - P_K(P̃/σ - (v + [μ|v_T|, 0])), P̃ = P + P_adh(u(v)), σ the contact's
+    gain (residual_scale; 1 for Coulomb contacts) (2D or 3D by the block size)."""
     if blocks.shape[1] == 3:
         return _natural_map_cohesive3(indptr, indices, blocks, q, mu, r, law, par, st, trial, ueff, area, h, theta)
     n = mu.shape[0]
@@ -925,17 +950,21 @@ def natural_map_cohesive(indptr, indices, blocks, q, mu, r, law, par, st, trial,
         p0 = r[2 * a]
         p1 = r[2 * a + 1]
         m = mu[a]
+        sig = 1.0
         if law[a] != 0:
             uN = ueff[a, 0] + h * theta * v0
             uT = ueff[a, 1] + h * theta * v1
             kN, kT, fN, fT, m = _linear_part(law[a], par[a], st[a], trial[a], uN > 0.0)
             p0 += h * area[a] * (kN * uN + fN)
             p1 += h * area[a] * (kT * uT + fT)
+            sig = residual_scale(indptr, indices, blocks, a, kN * area[a], kT * area[a], h, theta)
         if law[a] != 0 and v0 * h * theta + ueff[a, 0] <= 0.0:
             kc = _kcomp(law[a], par[a]) * area[a]
             if kc > 0.0:
                 v0 += p0 / (h * h * theta * kc)
-        capP = h * _cap_stress(par[a], st[a]) * area[a]
+        p0 /= sig  # impulse components relative to their gain ∂P̃/∂P (docs/laws.md, "Residual")
+        p1 /= sig
+        capP = h * _cap_stress(par[a], st[a]) * area[a] / sig
         if capP > 0.0:  # capped cone: Alart–Curnier residual (rho = 1), zero exactly at the solutions
             y0 = min(max(p0 - v0, 0.0), capP)
             lim = m * y0
