@@ -58,9 +58,11 @@ def test_bed_head_split_by_joint_position():
               RigidBody(rect(0.0, 0.0, 0.2, 0.1), rho=2000.0, thickness=T, name="A"),
               RigidBody(rect(0.2, 0.0, 0.4, 0.1), rho=2000.0, thickness=T, name="B"),
               RigidBody(rect(0.1, 0.1, 0.3, 0.2), rho=2000.0, thickness=T, name="C")]
-    specs = [InterfaceSpec("bed", ("bricks", "bricks"), mu=0.8, orientation="bed"),
-             InterfaceSpec("head", ("bricks", "bricks"), mu=0.3, orientation="head"),
-             InterfaceSpec("base", ("bricks", "base"), mu=0.6)]
+    # placement "positions" (1/4 and 3/4 of each edge): points inside the joints, away from the corners where
+    # bed and head joints meet (the default "overlap" puts them at the corners)
+    specs = [InterfaceSpec("bed", ("bricks", "bricks"), mu=0.8, orientation="bed", placement="positions"),
+             InterfaceSpec("head", ("bricks", "bricks"), mu=0.3, orientation="head", placement="positions"),
+             InterfaceSpec("base", ("bricks", "base"), mu=0.6, placement="positions")]
     cs = ContactStep(specs, ["base", "bricks", "bricks", "bricks"], ContactOptions(tol=1e-10, max_sweeps=10000))
     sim = Simulation(bodies, h=1e-3, theta=1.0, contact=cs, velocity_reset=True)
     sim.step()
