@@ -286,15 +286,15 @@ def _toml(text):
 def test_wall3d_push_quick_through_the_cli(tmp_path):
     """demos/wall3d_push.toml --quick through the CLI: the push stops at its target displacement, the
     foundation carries the weight of the 14 bricks + the beam after the gravity stage (to 1e-6), outputs written.
-    Exit status 3 when some steps end above the tolerance (measured: 4 of the 30 push steps at ≈ 3e-6 > 1e-8,
-    Newton with NLGS fallbacks), 0 when all converge; the summary counts the history's unconverged rows."""
+    Every step converges (the demo redoes the first push steps, where sliding starts, as sub-steps: without it 4 of
+    the 30 push steps ended at ≈ 3e-6 > 1e-8), so the CLI exits 0."""
     from fem_blocks.cli import main
     out = tmp_path / "wp"
     rc = main(["run", os.path.join(ROOT, "demos", "wall3d_push.toml"), "--out", str(out), "--quick", "--quiet"])
     s = json.loads((out / "summary.json").read_text())
     h = read_history(str(out / "history.csv"))
     n_bad = int(np.sum(h["converged"][1:] == 0))
-    assert rc == (3 if n_bad else 0) and s["convergence"]["unconverged_steps"] == n_bad
+    assert rc == 0 and n_bad == 0 and s["convergence"]["unconverged_steps"] == 0
     assert s["status"].startswith("completed") and s["stages"][1]["stopped"].startswith("target displacement 0.003")
     g = int(np.flatnonzero(h["stage"] == 0)[-1])
     W = 9.81 * (2000.0 * 0.75 * 0.12 * 4 * 0.065 + 7800.0 * 0.75 * 0.12 * 0.1)
