@@ -238,3 +238,27 @@ def test_resume_refuses_a_changed_case_unless_forced(reference, tmp_path):
     assert p.returncode == UNCONVERGED, p.stderr
     p = _run(case, tmp_path / "empty", "--resume")
     assert p.returncode == 2 and "cannot resume" in p.stderr
+
+
+def test_checkpoint_npz_never_missing_while_a_new_one_is_written(tmp_path, monkeypatch):
+    """While a checkpoint is written, `checkpoint.npz` always names a complete checkpoint: at the final rename the
+    old newest is already `.prev` (hard link) and still `checkpoint.npz`; afterwards newest = new, prev = old.
+    (A kill between the old rename-first steps left only `.prev`: test_truncated_checkpoint_... read a missing file.)"""
+    import numpy as np
+    from fem_blocks.output import atomic
+    from fem_blocks.output.checkpoint import NAME, PREV, write_checkpoint
+    write_checkpoint(str(tmp_path), {"sim.step": np.int64(1)})
+    seen = []
+    real_replace = atomic.os.replace
+
+    def replace(src, dst):
+        if os.path.basename(dst) == NAME:  # the new checkpoint is about to replace the newest
+            seen.append((int(read_checkpoint(tmp_path / NAME)["sim.step"]),
+                         int(read_checkpoint(tmp_path / PREV)["sim.step"])))
+        return real_replace(src, dst)
+    monkeypatch.setattr(atomic.os, "replace", replace)
+    write_checkpoint(str(tmp_path), {"sim.step": np.int64(2)})
+    assert seen == [(1, 1)]
+    assert int(read_checkpoint(tmp_path / NAME)["sim.step"]) == 2
+    assert int(read_checkpoint(tmp_path / PREV)["sim.step"]) == 1
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted([NAME, PREV])  # no temporary or link file left

@@ -17,8 +17,9 @@ def _umask() -> int:
     return old
 
 
-def atomic_write_bytes(path, data: bytes) -> None:
-    """Replace `path` by `data` atomically (same-directory temporary + fsync + os.replace + directory fsync)."""
+def atomic_write_bytes(path, data: bytes, before_replace=None) -> None:
+    """Replace `path` by `data` atomically (same-directory temporary + fsync + os.replace + directory fsync).
+    `before_replace()`, if given, runs once the temporary file is complete and synced, just before the rename."""
     path = os.fspath(path)
     d = os.path.dirname(os.path.abspath(path))
     try:
@@ -32,6 +33,8 @@ def atomic_write_bytes(path, data: bytes) -> None:
             f.flush()
             os.fsync(f.fileno())
         os.chmod(tmp, mode)
+        if before_replace is not None:
+            before_replace()
         os.replace(tmp, path)
     except BaseException:
         try:

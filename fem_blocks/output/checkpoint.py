@@ -1,8 +1,10 @@
 """Checkpoints: the full state of a run in one .npz, written atomically (temporary file, fsync, rename).
 
-`DIR/checkpoint.npz` is the newest checkpoint and `DIR/checkpoint.prev.npz` the one before: a new checkpoint
-first renames the newest to `.prev`, then writes itself atomically, so at any instant at least one complete
-checkpoint exists. Every checkpoint carries a SHA-256 digest of its arrays (`_digest`) and the case file's
+`DIR/checkpoint.npz` is the newest checkpoint and `DIR/checkpoint.prev.npz` the one before: a new checkpoint is
+written to a temporary file and synced; then the newest becomes `.prev` (through a hard link, so `checkpoint.npz`
+never disappears) and the temporary file is renamed over `checkpoint.npz`. At any instant both names hold a
+complete checkpoint (where hard links are not available, the newest is renamed to `.prev` instead, leaving only
+`.prev` between the two renames). Every checkpoint carries a SHA-256 digest of its arrays (`_digest`) and the case file's
 fingerprint (`case_hash`); `latest_checkpoint` returns the newest one that opens and whose digest matches
 (a file truncated or corrupted after the fact is reported and skipped).
 
@@ -49,10 +51,21 @@ def write_checkpoint(directory: str, arrays: dict) -> str:
     buf = io.BytesIO()
     np.savez(buf, **arrays)
     path = os.path.join(directory, NAME)
-    if os.path.exists(path):
-        os.replace(path, os.path.join(directory, PREV))
+    prev = os.path.join(directory, PREV)
+
+    def keep_previous():  # called once the new checkpoint is complete on disk, before it replaces the newest
+        if not os.path.exists(path):
+            return
+        link = prev + ".link"
+        try:
+            if os.path.lexists(link):
+                os.unlink(link)
+            os.link(path, link)
+            os.replace(link, prev)
+        except OSError:  # no hard links here: rename (for an instant only .prev exists)
+            os.replace(path, prev)
         fsync_dir(directory)
-    atomic_write_bytes(path, buf.getvalue())
+    atomic_write_bytes(path, buf.getvalue(), before_replace=keep_previous)
     return path
 
 
