@@ -19,6 +19,13 @@ def _g(v: float) -> str:
     return f"{v:.6g}"
 
 
+def _placement(placement, dimension: int) -> str:
+    """The placement a run uses: the key's value, or the default of the dimension (contact/step.py)."""
+    if placement is not None:
+        return placement
+    return "overlap (default)" if dimension == 2 else "positions (default)"
+
+
 def check_case(path: str, quick: bool = False) -> tuple[list[str], list[str]]:
     """(report lines, warnings) for the case file at `path`; raises InputError as `fem-blocks run` would."""
     from .dynamics import Simulation
@@ -90,7 +97,7 @@ def _report(case: Case, model, per_interface: dict) -> list[str]:
         pars = ", ".join(f"{k} = {_g(v) if isinstance(v, float) else v}" for k, v in itf.params.items())
         L.append(f"interface {itf.name!r}: {itf.groups[0]} / {itf.groups[1]}, law {itf.law}, mu = {_g(itf.mu)}"
                  + (f", {pars}" if pars else "") + f", g0 = {_g(itf.g0)} m, alert = {_g(itf.alert)} m, "
-                 f"orientation {itf.orientation}, placement {itf.placement}; "
+                 f"orientation {itf.orientation}, placement {_placement(itf.placement, case.dimension)}; "
                  f"{per_interface.get(itf.name, 0)} contact points at the start")
     if case.allow_no_interface:
         L.append("allowed without interface: " + ", ".join(f"{a} / {b}" for a, b in case.allow_no_interface))

@@ -260,7 +260,8 @@ def test_check_demo_prints_what_would_be_built(capsys):
     # 76 bricks (test above: full 0.2, half 0.1, pieces 0.05 and 0.15 m long) + foundation0 + foundation1
     assert "bodies: 78 (76 deformable blocks of 4 block types, 2 rigid bodies)" in lines[1]
     assert "groups: 'bricks' 76 deformable; 'foundation' 2 rigid" in lines
-    assert any(ln.startswith("interface 'joints': bricks / bricks, law coulomb, mu = 0.7") for ln in lines)
+    assert any(ln.startswith("interface 'joints': bricks / bricks, law coulomb, mu = 0.7")
+               and "placement overlap (default)" in ln for ln in lines)  # the placement the run will use
     assert any(ln.startswith("opening: wall.openings[0] = [0.45, 0.2, 0.75, 0.4]: asked 0.3 x 0.2 m, built 0.3 x "
                              "0.2 m") for ln in lines)
     # nominal stage times: 0.3 s of gravity, then 0.8 s of settlement; the settlement history (absolute times)
