@@ -795,6 +795,11 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
         placement = t.string("placement", None, choices=("overlap", "nodes", "positions"))
         if placement == "overlap" and D == 3:
             raise t.error("placement", "= 'overlap': expected 'positions' or 'nodes' in 3D")
+        used = placement or ("overlap" if D == 2 else "positions")
+        if t.has("positions") and used != "positions":
+            warnings.append(f"{t.source}: {t.key('positions')} = {pos!r} is not used: the candidate points are placed "
+                            f"by placement = {used!r}" + (" (the 2D default)" if placement is None else "")
+                            + "; set placement = \"positions\" to use them")
         law = t.string("law", "coulomb", choices=("coulomb", "elastic", "brittle", "fremond", "mixed"))
         params = {}
         for key, dim in LAW_PARAM_UNITS.items():

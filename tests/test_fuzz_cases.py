@@ -122,6 +122,7 @@ friction = "damage"
 mu_r = 0.3
 g0 = 0.0
 alert = 1e-3
+placement = "positions"
 positions = [0.25, 0.75]
 
 [[interfaces]]

@@ -53,6 +53,7 @@ c_T = 1.0
 mu = 0.0
 [[interfaces]]
 between = ["platen", "block"]
+placement = "positions"
 positions = [0.5]
 mu = 0.0
 [contact]

@@ -352,3 +352,21 @@ def test_3d_beam_touching_wall_without_interface_warns():
          "stages": [{"h": 0.001, "duration": 0.002}]}
     w = _contact_warnings(parse_case(d, "case.toml"))
     assert len(w) == 1 and w[0].startswith("case.toml: groups 'beam' and 'bricks': 3 pair(s) of bodies"), w
+
+
+def test_positions_without_their_placement_are_reported(tmp_path):
+    """`positions` is read only by placement = "positions": given with the 2D default ("overlap") or with "nodes"
+    it would be ignored without a word, so the case says so; with placement = "positions" nothing is said."""
+    from fem_blocks.case import load_case
+    from test_run_contact import CASE
+    text = CASE.replace('name = "bed"\nbetween = ["bricks", "bricks"]\n',
+                        'name = "bed"\nbetween = ["bricks", "bricks"]\npositions = [0.5]\n')
+    assert text != CASE
+    for extra, expected in (("", "placement = 'overlap' (the 2D default)"), ('placement = "nodes"\n',
+                                                                            "placement = 'nodes';")):
+        p = tmp_path / "c.toml"
+        p.write_text(text.replace("positions = [0.5]\n", "positions = [0.5]\n" + extra))
+        w = [x for x in load_case(str(p)).warnings if "positions" in x]
+        assert len(w) == 1 and "interfaces[0].positions = [0.5] is not used" in w[0] and expected in w[0], w
+    p.write_text(text.replace("positions = [0.5]\n", 'positions = [0.5]\nplacement = "positions"\n'))
+    assert not [x for x in load_case(str(p)).warnings if "positions" in x]

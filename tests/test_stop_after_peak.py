@@ -54,6 +54,7 @@ mu = 0.5
 c_N = {CN!r}
 c_T = 5e9
 w = {W!r}
+placement = "positions"
 positions = [0.25, 0.75]
 [[stages]]
 name = "pull"
