@@ -196,6 +196,8 @@ def _narrow(pairs, bx, bedges, bedge_body, kind, body_group, pair_iface, g0, ale
     itf = np.empty(cap, dtype=np.int64)
     pk = np.empty(cap, dtype=np.int64)     # position index (or 0/1 = start/end node, 2/3 = antagonist node)
     tr = np.empty(cap, dtype=np.float64)   # overlap: tributary length contributed by this match
+    s_pt = np.empty(max(P, 2), dtype=np.float64)   # candidate points of one pair (relative positions)
+    code_pt = np.empty(max(P, 2), dtype=np.int64)  # and their codes (pk)
     m = 0
     for p in range(npairs):
         e1 = pairs[p, 0]
@@ -234,6 +236,10 @@ def _narrow(pairs, bx, bedges, bedge_body, kind, body_group, pair_iface, g0, ale
         if -(nax * ncx + nay * ncy) < cos_max[i]:
             continue
         reach = reach_frac * min(la, lc) + alert[i]
+        # the candidate points of this pair: relative positions s_pt on the candidate edge, their codes (pk) and the
+        # tributary length each match contributes (overlap only; the other placements set it after the search)
+        trib = 0.0
+        npts = 0
         if placement[i] == 2:
             # overlap: the ends of the part of the candidate edge facing the antagonist edge (antagonist ends
             # projected on the candidate edge, clipped to it; ends within SNAP of a candidate node snap to it)
@@ -247,45 +253,32 @@ def _narrow(pairs, bx, bedges, bedge_body, kind, body_group, pair_iface, g0, ale
                 lo = 0.0
             if hi >= 1.0 - SNAP:
                 hi = 1.0
-            half = 0.5 * (hi - lo) * lc   # trapezoidal rule over the overlap: half its length to each end
+            trib = 0.5 * (hi - lo) * lc   # trapezoidal rule over the overlap: half its length to each end
             for k in range(2):
                 s = lo if k == 0 else hi
+                s_pt[k] = s
                 if s == 0.0 or s == 1.0:
-                    code = 0 if s == 0.0 else 1              # candidate node (start / end)
+                    code_pt[k] = 0 if s == 0.0 else 1              # candidate node (start / end)
                 else:
-                    code = 2 if (sa0 < sa1) == (k == 0) else 3  # antagonist node (start / end of ea)
-                px = cx + s * ex
-                py = cy + s * ey
-                l = ((px - ax) * tax + (py - ay) * tay) / la
-                g = (px - ax) * nax + (py - ay) * nay
-                if g > g0[i] + alert[i] or g < -reach:
-                    continue
-                if m == cap:
-                    cap *= 2
-                    ce = _grow_i(ce, cap); ae = _grow_i(ae, cap); itf = _grow_i(itf, cap); pk = _grow_i(pk, cap)
-                    sk = _grow_f(sk, cap); lam = _grow_f(lam, cap); gap = _grow_f(gap, cap)
-                    tr = _grow_f(tr, cap)
-                ce[m] = ec
-                ae[m] = ea
-                sk[m] = s
-                lam[m] = min(max(l, 0.0), 1.0)
-                gap[m] = g
-                itf[m] = i
-                pk[m] = code
-                tr[m] = half
-                m += 1
-            continue
-        npts = 2 if placement[i] == 1 else 0
-        if placement[i] == 0:
+                    code_pt[k] = 2 if (sa0 < sa1) == (k == 0) else 3  # antagonist node (start / end of ea)
+            npts = 2
+        elif placement[i] == 1:  # nodes: both ends of the candidate edge
+            for k in range(2):
+                s_pt[k] = float(k)
+                code_pt[k] = k
+            npts = 2
+        else:  # positions (padded with -1 at the end)
             for k in range(P):
                 if positions[i, k] >= 0:
+                    s_pt[npts] = positions[i, k]
+                    code_pt[npts] = k
                     npts += 1
         for k in range(npts):
-            s = (0.0 if k == 0 else 1.0) if placement[i] == 1 else positions[i, k]
+            s = s_pt[k]
             px = cx + s * ex
             py = cy + s * ey
             l = ((px - ax) * tax + (py - ay) * tay) / la
-            if l < -1e-9 or l > 1.0 + 1e-9:
+            if placement[i] != 2 and (l < -1e-9 or l > 1.0 + 1e-9):  # overlap ends face the antagonist edge
                 continue
             g = (px - ax) * nax + (py - ay) * nay
             if g > g0[i] + alert[i] or g < -reach:
@@ -301,8 +294,8 @@ def _narrow(pairs, bx, bedges, bedge_body, kind, body_group, pair_iface, g0, ale
             lam[m] = min(max(l, 0.0), 1.0)
             gap[m] = g
             itf[m] = i
-            pk[m] = k
-            tr[m] = 0.0
+            pk[m] = code_pt[k]
+            tr[m] = trib
             m += 1
     return ce[:m], ae[:m], sk[:m], lam[:m], gap[:m], itf[:m], pk[:m], tr[:m]
 
