@@ -46,14 +46,24 @@ def _check_stopped_outputs(out, failed_step):
     assert s["status"].startswith("stopped:")
 
 
-def test_nan_in_a_velocity_stops_with_body_and_step(tmp_path, monkeypatch):
+def _poison_impulse(sim):
+    sim.contact.P[2, 0] = np.nan
+
+
+@pytest.mark.parametrize("step, action, what", [
+    (5, lambda sim: sim.bodies[1].u.__setitem__(0, np.nan), "velocity of body 'brick1'"),
+    (4, lambda sim: sim.bodies[2].q.__setitem__(3, np.inf), "displacement of body 'brick2'"),
+    (3, _poison_impulse, "contact impulse at contact 2"),
+], ids=["velocity", "displacement", "contact_impulse"])
+def test_nan_stops_with_the_quantity_and_step(tmp_path, monkeypatch, step, action, what):
+    """NaN/Inf in a velocity, a displacement or a contact impulse stops the run naming the step and where."""
     case = _case(tmp_path, CASE)
-    _inject(monkeypatch, 5, lambda sim: sim.bodies[1].u.__setitem__(0, np.nan))
+    _inject(monkeypatch, step, action)
     with pytest.raises(RunStopped) as e:
         run_case(case, str(tmp_path / "out"), progress=False)
     msg = str(e.value)
-    assert "step 5" in msg and "velocity of body 'brick1'" in msg and "NaN/Inf" in msg and "--resume" in msg
-    _check_stopped_outputs(tmp_path / "out", 5)
+    assert f"step {step}" in msg and what in msg and "NaN/Inf" in msg and "--resume" in msg
+    _check_stopped_outputs(tmp_path / "out", step)
 
 
 def test_energy_created_from_nothing_stops_the_run(tmp_path, monkeypatch):
