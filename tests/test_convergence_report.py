@@ -172,22 +172,24 @@ def test_converged_run_exits_0_with_a_converged_last_line(tmp_path, capsys):
 
 
 def test_solver_label_names_the_solver_and_its_fallback():
-    """The step info's `solver` (used by the warning, the summary and the last line) says which solver ran,
-    read from the solvers' own messages (solver/newton.py _result, solver/nlgs.py fallback = "newton")."""
-    from fem_blocks.contact.step import ContactStep
-
-    def label(solver, fallback, message):
-        fake = SimpleNamespace(opts=SimpleNamespace(solver=solver, fallback=fallback))
-        return ContactStep._solver_label(fake, SimpleNamespace(message=message))
-
-    nt = "not converged: 200 Newton iterations, 20 Gauss-Seidel sweeps ({} fallbacks), residual 3e3 (tolerance 1e-08)"
-    assert label("newton", "none", nt.format(0)) == "Newton"
-    assert label("newton", "none", nt.format(3)) == "Newton + NLGS fallback"
-    assert label("nlgs", "none", "not converged after 1 sweeps (change 1, residual 2, tolerance 1e-10 on the "
-                                 "residual)") == "NLGS"
-    assert label("nlgs", "newton", "converged in 40 sweeps (Gauss-Seidel alone)") == "NLGS"
-    assert label("nlgs", "newton", "Gauss-Seidel stagnated at residual 0.1 after 400 sweeps, then Newton: "
-                                   + nt.format(0)) == "NLGS + Newton fallback"
+    """The step info's `solver` (used by the warning, the summary and the last line) is the solver result's own
+    `solver`, set where each solver runs: Newton alone, Newton whose line search handed over to Gauss-Seidel,
+    Gauss-Seidel alone (also when fallback = "newton" was not needed), Gauss-Seidel then Newton."""
+    from fem_blocks.solver import newton, nlgs
+    from test_nlgs import random_problem
+    W, q = random_problem()
+    B = nlgs.to_block_csr(W, 2)
+    res = newton.solve_newton(B, q, 0.3, tol=1e-12)
+    assert res.converged and res.solver == "Newton"
+    assert newton._result(res.r, res.u, 5, 20, 0, 0.0, 1.0, 1e-8, q).solver == "Newton"
+    assert newton._result(res.r, res.u, 5, 20, 3, 0.0, 1.0, 1e-8, q).solver == "Newton + NLGS fallback"
+    assert nlgs.solve_block_csr(B, q, 0.3, tol=1e-10, criterion="residual").solver == "NLGS"
+    # fallback = "newton": windows of 200 sweeps that converge alone, or a window of 1 sweep with factor 0 (any
+    # residual left counts as stagnation) that hands over to Newton
+    alone = nlgs._solve_with_newton_fallback(B, q, 0.3, None, 1e-10, 100000, 1.0, "given", 0, 10, 200, 0.5, 50)
+    assert alone.converged and alone.solver == "NLGS" and "Gauss-Seidel alone" in alone.message
+    handed = nlgs._solve_with_newton_fallback(B, q, 0.3, None, 1e-12, 100000, 1.0, "given", 0, 10, 1, 0.0, 50)
+    assert handed.converged and handed.solver == "NLGS + Newton fallback" and "then Newton" in handed.message
 
 
 def test_fail_policy_message_names_the_solver(tmp_path, capsys):

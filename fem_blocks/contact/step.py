@@ -371,17 +371,6 @@ class ContactStep:
         self._rigid_W_restored = (np.array(d["contact.rigid_W"]) if "contact.rigid_W" in d
                                   and not bool(d["contact.W_dirty"]) else None)
 
-    def _solver_label(self, res) -> str:
-        """Which solver produced this step's answer, for reports: "Newton" (NLGS start; "+ NLGS fallback" when
-        its line search handed over to Gauss-Seidel), "NLGS", or "NLGS + Newton fallback" (fallback = "newton"
-        once Gauss-Seidel stagnated). Read from the solver's message, which says what ran."""
-        import re
-        msg = str(getattr(res, "message", ""))
-        if self.opts.solver == "newton":
-            m = re.search(r"\((\d+) fallbacks\)", msg)
-            return "Newton + NLGS fallback" if m and int(m.group(1)) > 0 else "Newton"
-        return "NLGS + Newton fallback" if "then Newton" in msg else "NLGS"
-
     # ------------------------------------------------------------------ the step
     def solve(self, sim, t0, t1):
         from time import perf_counter
@@ -479,7 +468,7 @@ class ContactStep:
             self.n_unconverged += 1
         self.last = dict(contacts=nc, active=int(closed.sum()), slip=int(slip.sum()), sweeps=int(res.sweeps),
                          change=float(res.change), residual=float(res.residual), converged=bool(res.converged),
-                         solver=self._solver_label(res), message=str(res.message))
+                         solver=res.solver, message=str(res.message))
         if not res.converged and self.opts.on_nonconvergence == "fail":
             from ..errors import ConvergenceError
             raise ConvergenceError(f"step {sim.step_count + 1} (t = {t1:.6g} s): {self.last['solver']} did not "

@@ -364,7 +364,7 @@ def solve_newton(W: BlockCSR, q, mu, r0=None, tol: float = 1e-8, max_iter: int =
         if int(v) != v or v < lo:
             raise InputError(f"{name} = {v!r}: expected an integer >= {lo}")
     if W.n == 0:
-        return NLGSResult(r, q.copy(), 0, True, 0.0, 0.0, 0.0, "no contact")
+        return NLGSResult(r, q.copy(), 0, True, 0.0, 0.0, 0.0, "no contact", solver="Newton")
 
     def gs(r_, k):
         res = nlgs.solve_block_csr(W, q, mu, r0=r_, tol=tol, max_sweeps=k, criterion="residual", check_every=k)
@@ -407,7 +407,7 @@ def solve_cohesive_newton(W: BlockCSR, q, mu, law, par, st, ueff, area, h: float
     ueff = np.ascontiguousarray(ueff, dtype=np.float64)
     area = np.ascontiguousarray(area, dtype=np.float64)
     if W.n == 0:
-        return NLGSResult(r, q.copy(), 0, True, 0.0, 0.0, 0.0, "no contact"), x
+        return NLGSResult(r, q.copy(), 0, True, 0.0, 0.0, 0.0, "no contact", solver="Newton"), x
     from ..laws import FREMOND
     inside = bool(damage_inside) and bool(np.any(law == MIXED))
     n = W.n
@@ -506,4 +506,5 @@ def _result(r, u, n_it, n_gs, n_fb, change, res, tol, q):
     msg = (f"{'converged' if converged else 'not converged'}: {n_it} Newton iterations, {n_gs} Gauss-Seidel "
            f"sweeps ({n_fb} fallbacks), residual {res:.3g} (tolerance {tol:g})")
     qnorm = float(np.linalg.norm(q)) or 1.0
-    return NLGSResult(r, u, n_it + n_gs, bool(converged), change, res, res * qnorm, msg)
+    return NLGSResult(r, u, n_it + n_gs, bool(converged), change, res, res * qnorm, msg,
+                      solver="Newton + NLGS fallback" if n_fb > 0 else "Newton")

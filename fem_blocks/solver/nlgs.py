@@ -372,6 +372,7 @@ class NLGSResult:
     residual_abs: float  # ‖F‖
     message: str
     local_cases: np.ndarray | None = None  # 3D: counts of local cases (failed, open, stick, Newton, search, proj.)
+    solver: str = "NLGS"  # what produced r: "NLGS", "Newton", "Newton + NLGS fallback", "NLGS + Newton fallback"
 
 
 def _check(bcsr: BlockCSR, q, mu, tol, max_sweeps, omega, order, check_every):
@@ -516,6 +517,7 @@ def _solve_with_newton_fallback(W, q, mu, r0, tol, max_sweeps, omega, order, see
                   f"{nt.message}")
     nt.sweeps += total
     nt.local_cases = cases
+    nt.solver = "NLGS + Newton fallback"
     return nt
 
 
