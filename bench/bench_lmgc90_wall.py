@@ -6,8 +6,9 @@ Full bricks 0.10 x 0.05 m, half bricks 0.05 x 0.05 m, lintel 0.30 x 0.05 m, no j
 Q4 of 0.025 m, lumped mass; rigid fixed floor; mu = 0.3 between bricks, 0.5 on the floor; gravity 9.81;
 h = 1e-4 s, theta = 0.505, 2000 steps; Gauss-Seidel tolerance 1e-4.
 
-Usage: .venv/bin/python bench/bench_lmgc90_wall.py [steps [placement]]  (placement: overlap (default), nodes,
-positions)
+Usage: .venv/bin/python bench/bench_lmgc90_wall.py [steps [placement [history.csv]]]  (placement: overlap
+(default), nodes, positions; history.csv: per step, the floor reaction and the mean settlement of the top at full
+precision, for bench/compare_outputs.py)
 """
 import os
 import resource
@@ -28,7 +29,7 @@ ROWS = [[0.5, 1, 1, 1, 1, 0.5], [1] * 5, [0.5, 1, 1, 1, 1, 0.5], [1] * 5, [0.5, 
         [0.5, 1, G, 1, 0.5], [1, 3, 1], [0.5, 1, 1, 1, 1, 0.5]]
 
 
-def main(steps=2000, placement=None):
+def main(steps=2000, placement=None, history=None):
     t0 = time.perf_counter()
     blocks = builders.courses(ROWS, 0.10, 0.05)
     mat = Material(E=1e10, nu=0.15, rho=1800.0, thickness=1.0, plane="strain")
@@ -43,13 +44,20 @@ def main(steps=2000, placement=None):
                       InterfaceSpec("floor", ("b", "f"), mu=0.5, placement=placement)],
                      ["b"] * len(bodies) + ["f"], ContactOptions(tol=1e-4, max_sweeps=10000))
     sim = Simulation(bodies + [floor], h=1e-4, theta=0.505, contact=cs, gravity=(0.0, -9.81))
-    sim.step()
+    info0 = sim.step()
     t_setup = time.perf_counter() - t0
     for k in cs.timers:
         cs.timers[k] = 0.0
     t_free = 0.0
     sweeps = []
     ry = [floor.reaction[1]]  # floor reaction after steps 1, 2, ...
+    top = max(b.y + b.height for b in blocks)
+    on_top = [np.abs(bd.reference_points[:, 1] - top) < 1e-9 for bd in bodies]
+
+    def settlement():
+        return float(np.mean(np.concatenate([bd.displacement_global()[m, 1] for bd, m in zip(bodies, on_top)
+                                             if np.any(m)])))
+    rows = [(1, sim.time, ry[0], settlement(), info0.contact["contacts"], info0.contact["sweeps"])]
     t1 = time.perf_counter()
     orig = sim.free_velocities
 
@@ -72,6 +80,8 @@ def main(steps=2000, placement=None):
         info = sim.step()
         sweeps.append(info.contact["sweeps"])
         ry.append(floor.reaction[1])
+        if history:
+            rows.append((k + 1, sim.time, ry[-1], settlement(), info.contact["contacts"], info.contact["sweeps"]))
         if k % 100 == 0 or k == steps - 1:
             c = time.perf_counter()
             pv.write(sim.time)
@@ -93,7 +103,10 @@ def main(steps=2000, placement=None):
     print(f"whole run (setup + {steps} steps + output): {t_setup + wall:.2f} s")
     print(f"sweeps per step mean {np.mean(sweeps):.1f} max {np.max(sweeps)}; NLGS "
           f"{tm['nlgs'] / max(np.sum(sweeps) * info.contact['contacts'], 1) * 1e6:.3f} µs per contact update")
-    top = max(b.y + b.height for b in blocks)
+    if history:
+        with open(history, "w") as f:
+            f.write("step,time,floor_Ry,top_uy_mean,contacts,sweeps\n")
+            f.writelines(",".join(repr(v) for v in r) + "\n" for r in rows)
     uy = [bd.displacement_global()[np.abs(bd.reference_points[:, 1] - top) < 1e-9, 1]
           for bd in bodies if np.any(np.abs(bd.reference_points[:, 1] - top) < 1e-9)]
     last = np.asarray(ry[1500:2000] if steps > 1500 else ry[steps // 2:]) / weight  # steps 1501-2000
@@ -106,4 +119,5 @@ def main(steps=2000, placement=None):
 
 
 if __name__ == "__main__":
-    main(int(sys.argv[1]) if len(sys.argv) > 1 else 2000, sys.argv[2] if len(sys.argv) > 2 else None)
+    main(int(sys.argv[1]) if len(sys.argv) > 1 else 2000, sys.argv[2] if len(sys.argv) > 2 else None,
+         sys.argv[3] if len(sys.argv) > 3 else None)
