@@ -15,12 +15,12 @@ import difflib
 import hashlib
 import math
 import os
-import tomllib
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
+from . import casefile
 from .errors import InputError
 
 NUMBER = (int, float)
@@ -48,15 +48,15 @@ class Table:
         return f"{self.path}.{k}" if self.path else k
 
     def error(self, k: str, msg: str) -> InputError:
-        return InputError(f"{self.source}: {self.key(k)}: {msg}")
+        return InputError(f"{casefile.origin(self.source, self.key(k))}: {self.key(k)}: {msg}")
 
     def missing(self, k: str, expected: str) -> InputError:
         """The error for a required key `k` that is absent: "KEY: missing; EXPECTED", or, when the table holds an
         unknown key close to `k` (a misspelling, difflib), an error naming that key and suggesting `k`."""
         close = self.misspelt(k)
         if close is not None:
-            return InputError(f"{self.source}: {self.key(close)}: unknown key {close!r} — did you mean {k!r}? "
-                              f"({self.key(k)} is required: {expected})")
+            return InputError(f"{casefile.origin(self.source, self.key(close))}: {self.key(close)}: unknown key "
+                              f"{close!r} — did you mean {k!r}? ({self.key(k)} is required: {expected})")
         return self.error(k, f"missing; {expected}")
 
     def misspelt(self, k: str) -> str | None:
@@ -490,8 +490,9 @@ def _warn_extent(warnings: list, t, key, points, units: str):
 
 
 def fingerprint(case: Case) -> str:
-    """SHA-256 of what determines a run: the case file's bytes, the mesh files it names and the variant
-    (--quick). A resumed run compares it with the checkpoint's."""
+    """SHA-256 of what determines a run: the case file's bytes, the mesh files it names, the variant (--quick)
+    and the base files it extends (none: a file without `extends` keeps its digest). A resumed run compares it
+    with the checkpoint's."""
     h = hashlib.sha256()
     for path in [case.source] + sorted({bt.file for bt in case.block_types.values() if bt.file}):
         h.update(os.path.abspath(path).encode() if path != case.source else b"case")
@@ -500,30 +501,28 @@ def fingerprint(case: Case) -> str:
                 h.update(f.read())
         except OSError:
             h.update(b"<unreadable>")
+    for path in getattr(case.source, "files", ())[1:]:  # the base files it extends (casefile.Source)
+        try:
+            with open(path, "rb") as f:
+                h.update(b"base" + f.read())
+        except OSError:
+            h.update(b"<unreadable>")
     h.update(case.variant.encode())
     return h.hexdigest()
 
 
 def load_case(path: str) -> Case:
-    """Read and validate a TOML case file; raise InputError naming the file and the key."""
-    src = os.fspath(path)
-    try:
-        with open(src, "rb") as f:
-            data = tomllib.load(f)
-    except FileNotFoundError:
-        raise InputError(f"{src}: case file not found") from None
-    except IsADirectoryError:
-        raise InputError(f"{src}: expected a TOML case file, got a directory") from None
-    except PermissionError:
-        raise InputError(f"{src}: case file not readable (permission denied)") from None
-    except tomllib.TOMLDecodeError as e:
-        raise InputError(f"{src}: invalid TOML: {e}") from None
-    except UnicodeDecodeError:
-        raise InputError(f"{src}: invalid TOML: not UTF-8 text") from None
-    return parse_case(data, src)
+    """Read and validate a TOML case file (with its bases and named laws: casefile.read); raise InputError naming
+    the file and the key."""
+    from .laws import LAW_KEYS
+    data, source = casefile.read(path, LAW_KEYS)
+    return parse_case(data, source)
 
 
 def parse_case(data: dict, source: str = "<case>") -> Case:
+    if any(k in data for k in casefile.KEYS):  # a table as written (extends, unset, [laws]): compose it first
+        from .laws import LAW_KEYS
+        data, source = casefile.compose(data, source, LAW_KEYS)
     base = os.path.dirname(os.path.abspath(source)) if os.path.exists(source) else os.getcwd()
     root = Table(data, "", source, UNIT_SYSTEMS["SI"])
     units = root.string("units", "SI", choices=list(UNIT_SYSTEMS))
@@ -815,7 +814,7 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
             from .laws import law_parameters
             law_parameters(law, dict(params, **({} if law == "mixed" else {"mu": mu})), t.path)
         except InputError as e:
-            raise InputError(f"{source}: {e}") from None
+            raise InputError(f"{casefile.origin_of_message(source, e)}: {e}") from None
         interfaces.append(InterfaceCaseSpec(
             name=iname, groups=tuple(between), law=law, mu=mu, params=params,
             g0=t.number("g0", 0.0, lo=0, dim="length"),

@@ -15,7 +15,6 @@ import os
 import sys
 import tempfile
 import time
-import tomllib
 
 # Demos chosen for the kernels they reach: Frémond-Cangémi joints with the global Newton (shear_wall),
 # the mixed-mode law with its softening cap and viscous damage, brick cracks (shear_wall_p030_mixed_split),
@@ -30,7 +29,7 @@ def _demo_dir() -> str:
 
 def warm(demos=DEMOS, out=None, verbose: bool = True) -> float:
     """Run each demo for STEPS_PER_STAGE steps per stage (``--quick`` resolution); return the seconds taken."""
-    from .case import parse_case, quick
+    from .case import load_case, quick
     from .runner import run_case
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix="fem_blocks_warmup_") as tmp:
@@ -38,9 +37,7 @@ def warm(demos=DEMOS, out=None, verbose: bool = True) -> float:
             path = os.path.join(_demo_dir(), name)
             if not os.path.exists(path):
                 continue
-            with open(path, "rb") as f:
-                data = tomllib.load(f)
-            case = quick(parse_case(data, path))
+            case = quick(load_case(path))
             for st in case.stages:
                 st.duration = min(st.duration, STEPS_PER_STAGE * st.h)
                 st.output_every = STEPS_PER_STAGE
