@@ -26,7 +26,7 @@ def reduced_case(text: str) -> str:
 
 def test_reduced_shear_wall_protocol(tmp_path):
     case = tmp_path / "sw.toml"
-    case.write_text(reduced_case(open(os.path.join(ROOT, "demos", "shear_wall.toml")).read()))
+    case.write_text(reduced_case(open(os.path.join(ROOT, "demos", "base", "shear_wall.toml")).read()))
     out = tmp_path / "out"
     p = subprocess.run([sys.executable, "-m", "fem_blocks.cli", "run", str(case), "--out", str(out), "--quiet"],
                        capture_output=True, text=True, cwd=ROOT, timeout=900)

@@ -2,17 +2,17 @@
 the applied force history when it is free (force control, e.g. a pre-compression held constant while pushing)."""
 import copy
 import os
-import tomllib
 
 import numpy as np
 import pytest
 
+from fem_blocks import casefile
 from fem_blocks.case import parse_case
+from fem_blocks.laws import LAW_KEYS
 from fem_blocks.runner import _dof_control, _vertical_force
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-with open(os.path.join(ROOT, "demos", "shear_wall.toml"), "rb") as f:
-    DEMO = tomllib.load(f)
+DEMO = casefile.read(os.path.join(ROOT, "demos", "shear_wall.toml"), LAW_KEYS)[0]  # with its base, laws resolved
 
 
 def fake_history(stage, time, ry):

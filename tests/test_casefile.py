@@ -1,0 +1,342 @@
+"""Case files that say a thing once (issue #20): `extends` (bases merged key-wise), `unset`, named joint laws
+([laws.NAME] referred to by an interface's `law`), and the file a bad value came from in the message.
+
+The expectations are written by hand from the rule in docs/case-files.md ("Bases and named laws"): tables merge key
+by key, anything else (arrays of tables included) is replaced whole; the old flat shear-wall files kept in
+tests/data/shear_wall_flat/ (as they were before the demos became variants) give the same Case as the variants.
+"""
+import dataclasses
+import hashlib
+import os
+import tomllib
+
+import numpy as np
+import pytest
+
+from fem_blocks import casefile
+from fem_blocks.case import fingerprint, load_case, parse_case
+from fem_blocks.errors import InputError
+from fem_blocks.laws import LAW_KEYS
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+BASE = """
+name = "base"
+gravity = [0.0, -9.81]
+[materials.m]
+E = 1e9
+nu = 0.2
+rho = 1000.0
+[block_types.t]
+geometry = "rectangle"
+lx = 1.0
+ly = 0.2
+mesh_size = 0.2
+material = "m"
+[[blocks]]
+type = "t"
+name = "a"
+[[blocks]]
+type = "t"
+name = "b"
+position = [0.0, 0.2]
+[[stages]]
+name = "one"
+duration = 0.002
+h = 0.001
+[[stages]]
+name = "two"
+duration = 0.004
+h = 0.002
+"""
+
+
+def write(tmp_path, name, text):
+    p = tmp_path / name
+    p.parent.mkdir(parents=True, exist_ok=True)
+    p.write_text(text)
+    return str(p)
+
+
+def read(path):
+    return casefile.read(path, LAW_KEYS)
+
+
+# ----------------------------------------------------------------------------- merge rule
+def test_scalars_override_tables_merge_key_wise(tmp_path):
+    """Bug caught: a table of the extending file replacing the base's table (E, rho lost) or the base winning."""
+    write(tmp_path, "base.toml", BASE)
+    top = write(tmp_path, "top.toml", 'extends = "base.toml"\nname = "top"\n[materials.m]\nnu = 0.3\n')
+    data, src = read(top)
+    assert data["name"] == "top"
+    assert data["materials"] == {"m": {"E": 1e9, "nu": 0.3, "rho": 1000.0}}
+    assert data["gravity"] == [0.0, -9.81] and "extends" not in data
+    assert src == top and src.files == (top, str(tmp_path / "base.toml"))
+
+
+def test_nested_tables_merge_at_every_depth(tmp_path):
+    """Bug caught: the merge recursing one level only (block_types.t.lx kept from the base must survive)."""
+    write(tmp_path, "base.toml", BASE)
+    top = write(tmp_path, "top.toml", 'extends = "base.toml"\n[block_types.t]\nly = 0.3\n'
+                                      '[output.curve]\nbody = "b"\n')
+    data, _ = read(top)
+    assert data["block_types"]["t"] == {"geometry": "rectangle", "lx": 1.0, "ly": 0.3, "mesh_size": 0.2,
+                                        "material": "m"}
+    assert data["output"] == {"curve": {"body": "b"}}
+
+
+def test_arrays_and_arrays_of_tables_are_replaced_whole(tmp_path):
+    """Bug caught: [[stages]] merged element by element (a base stage 'two' left over) or appended."""
+    write(tmp_path, "base.toml", BASE)
+    top = write(tmp_path, "top.toml", 'extends = "base.toml"\ngravity = [0.0, -1.0]\n'
+                                      '[[stages]]\nname = "only"\nduration = 0.1\nh = 0.05\n')
+    data, _ = read(top)
+    assert data["stages"] == [{"name": "only", "duration": 0.1, "h": 0.05}]
+    assert data["gravity"] == [0.0, -1.0]
+    assert [b["name"] for b in data["blocks"]] == ["a", "b"]
+
+
+def test_a_list_of_bases_merges_in_order_then_the_file(tmp_path):
+    """Bug caught: bases applied in reverse order, or the file's own keys applied before its bases."""
+    write(tmp_path, "base.toml", BASE)
+    write(tmp_path, "sub/second.toml", 'name = "second"\n[materials.m]\nE = 2e9\nnu = 0.25\n')
+    top = write(tmp_path, "top.toml", 'extends = ["base.toml", "sub/second.toml"]\n[materials.m]\nnu = 0.1\n')
+    data, src = read(top)
+    assert data["name"] == "second" and data["materials"]["m"] == {"E": 2e9, "nu": 0.1, "rho": 1000.0}
+    assert src.files == (top, str(tmp_path / "base.toml"), str(tmp_path / "sub" / "second.toml"))
+
+
+def test_base_paths_are_relative_to_the_file_that_names_them(tmp_path):
+    """Bug caught: a base's own `extends` resolved against the top file's folder (or the working directory)."""
+    write(tmp_path, "a/base.toml", BASE)
+    write(tmp_path, "a/mid.toml", 'extends = "base.toml"\nname = "mid"\n')
+    top = write(tmp_path, "b/top.toml", 'extends = "../a/mid.toml"\n')
+    assert read(top)[0]["name"] == "mid"
+
+
+def test_unset_deletes_base_keys_before_the_file_merges(tmp_path):
+    """Bug caught: unset ignored, applied after the file (deleting the file's own new value), or unchecked."""
+    write(tmp_path, "base.toml", BASE + '[stages.drivers.b]\ny = {kind = "velocity", history = 0.0}\n'
+                                        'x = {kind = "velocity", history = 0.0}\n')
+    top = write(tmp_path, "top.toml", 'extends = "base.toml"\nunset = ["stages[1].drivers.b.y", "materials.m"]\n'
+                                      '[materials.m]\nE = 3e9\nnu = 0.3\nrho = 900.0\n')
+    data, _ = read(top)
+    assert data["stages"][1]["drivers"] == {"b": {"x": {"kind": "velocity", "history": 0.0}}}
+    assert data["materials"]["m"] == {"E": 3e9, "nu": 0.3, "rho": 900.0}
+    bad = write(tmp_path, "bad.toml", 'extends = "base.toml"\nunset = ["stages[2].h"]\n')
+    with pytest.raises(InputError, match=r"bad.toml: unset\[0\] = 'stages\[2\].h': no such key"):
+        read(bad)
+    alone = write(tmp_path, "alone.toml", 'unset = ["name"]\n')
+    with pytest.raises(InputError, match=r"alone.toml: unset: needs extends"):
+        read(alone)
+
+
+# ----------------------------------------------------------------------------- extends errors
+def test_cycles_are_rejected_naming_extends(tmp_path):
+    """Bug caught: infinite recursion (RecursionError) instead of an InputError, for a -> a and a -> b -> a."""
+    a = write(tmp_path, "a.toml", 'extends = "a.toml"\n')
+    with pytest.raises(InputError, match=r"a.toml: extends: 'a.toml' extends itself through a.toml -> a.toml"):
+        read(a)
+    a = write(tmp_path, "a2.toml", 'extends = "b2.toml"\n')
+    write(tmp_path, "b2.toml", 'extends = "a2.toml"\n')
+    with pytest.raises(InputError, match=r"b2.toml: extends: 'a2.toml' extends itself through "
+                                         r"a2.toml -> b2.toml -> a2.toml"):
+        read(a)
+
+
+def test_a_base_used_twice_is_not_a_cycle(tmp_path):
+    """Bug caught: every file seen before counted as a cycle (a diamond a -> [b, c], b -> d, c -> d is fine)."""
+    write(tmp_path, "d.toml", BASE)
+    write(tmp_path, "b.toml", 'extends = "d.toml"\n[materials.m]\nE = 2e9\n')
+    write(tmp_path, "c.toml", 'extends = "d.toml"\n[materials.m]\nnu = 0.3\n')
+    a = write(tmp_path, "a.toml", 'extends = ["b.toml", "c.toml"]\n')
+    # c's composition (d + nu) merged over b's (d + E): d's E = 1e9 from c wins over b's E
+    assert read(a)[0]["materials"]["m"] == {"E": 1e9, "nu": 0.3, "rho": 1000.0}
+
+
+@pytest.mark.parametrize("text, expected", [
+    ('extends = "missing.toml"\n', r"top.toml: extends: base file '.*missing.toml' not found"),
+    ('extends = 3\n', r"top.toml: extends: expected a file name or a list of file names"),
+    ('extends = []\n', r"top.toml: extends: expected a file name or a list of file names"),
+    ('extends = "sub"\n', r"top.toml: extends: base file '.*sub': expected a TOML case file, got a directory"),
+    ('extends = "broken.toml"\n', r"broken.toml: invalid TOML"),
+    ('Extends = "base.toml"\n', r"top.toml: Extends: unknown key 'Extends' — did you mean 'extends'\?"),
+    ('[law.bed]\nlaw = "coulomb"\n', r"top.toml: law: unknown key 'law' — did you mean 'laws'\?"),
+])
+def test_bad_extends(tmp_path, text, expected):
+    """Bug caught: a missing/unreadable/malformed base escaping as OSError/TOMLDecodeError or naming no key."""
+    write(tmp_path, "base.toml", BASE)
+    (tmp_path / "sub").mkdir()
+    write(tmp_path, "broken.toml", "[materials\n")
+    with pytest.raises(InputError, match=expected):
+        read(write(tmp_path, "top.toml", text))
+
+
+# ----------------------------------------------------------------------------- named laws
+LAWS = """
+[laws.bed]
+law = "elastic"
+c_N = 1e10
+c_T = 5e9
+mu = 0.6
+"""
+
+
+def flat_interface(**over):
+    d = dict(between=["blocks", "blocks"], law="elastic", c_N=1e10, c_T=5e9, mu=0.6)
+    d.update(over)
+    return d
+
+
+def test_named_law_gives_the_same_case_as_the_flat_block(tmp_path):
+    """Bug caught: the law kind or a parameter of [laws.bed] not reaching the interface."""
+    write(tmp_path, "base.toml", BASE)
+    top = write(tmp_path, "top.toml", 'extends = "base.toml"\n' + LAWS +
+                '[[interfaces]]\nbetween = ["blocks", "blocks"]\nlaw = "bed"\n')
+    data, _ = read(top)
+    assert data["interfaces"] == [flat_interface()] and "laws" not in data
+    with open(tmp_path / "base.toml", "rb") as f:
+        flat = tomllib.load(f)
+    flat["interfaces"] = [flat_interface()]
+    assert load_case(top).interfaces == parse_case(flat, top).interfaces
+
+
+def test_interface_keys_override_the_named_law(tmp_path):
+    """Bug caught: the law block overriding the interface's own value (mu = 0.6 instead of 0.4)."""
+    write(tmp_path, "base.toml", BASE)
+    top = write(tmp_path, "top.toml", 'extends = "base.toml"\n' + LAWS +
+                '[[interfaces]]\nbetween = ["blocks", "blocks"]\nlaw = "bed"\nmu = 0.4\nname = "j"\n')
+    assert read(top)[0]["interfaces"] == [flat_interface(mu=0.4, name="j")]
+
+
+def test_a_law_named_in_a_base_can_be_changed_by_one_key(tmp_path):
+    """Bug caught: laws resolved per file (before the merge), so the variant's c_N never reaches the interface."""
+    write(tmp_path, "base.toml", BASE + LAWS +
+          '[[interfaces]]\nbetween = ["blocks", "blocks"]\nlaw = "bed"\n')
+    top = write(tmp_path, "top.toml", 'extends = "base.toml"\n[laws.bed]\nc_N = 2e10\n')
+    assert read(top)[0]["interfaces"] == [flat_interface(c_N=2e10)]
+
+
+def test_parse_case_resolves_a_table_as_written(tmp_path):
+    """Bug caught: parse_case (the Python API) rejecting [laws] as an unknown key."""
+    data = tomllib.loads(BASE + LAWS + '[[interfaces]]\nbetween = ["blocks", "blocks"]\nlaw = "bed"\n')
+    case = parse_case(data, str(tmp_path / "x.toml"))
+    assert case.interfaces[0].law == "elastic" and case.interfaces[0].mu == 0.6
+    assert "laws" in data  # the caller's dict is not modified
+
+
+@pytest.mark.parametrize("laws, law, expected", [
+    (LAWS, "bedd", r"top.toml: interfaces\[0\].law = 'bedd': expected a law kind \[.*\] or a \[laws\] name \['bed'\]"),
+    ('[laws.mixed]\nlaw = "coulomb"\nmu = 0.5\n', "mixed", r"top.toml: laws.mixed: the name 'mixed' is a law kind"),
+    ('[laws.bed]\nmu = 0.5\n', "bed", r"top.toml: laws.bed.law: missing; expected a law kind"),
+    (LAWS + '[laws.head]\nlaw = "bed"\n', "head", r"laws.head.law: = 'bed'; .*cannot refer to another"),
+    (LAWS.replace('law = "elastic"', 'law = "elastic"\nbetween = ["a", "b"]'), "bed",
+     r"laws.bed.between: a key of the interface, not of the law"),
+    ('laws = 3\n', "coulomb", r"top.toml: laws: expected tables \[laws.NAME\]"),
+])
+def test_bad_law_names(tmp_path, laws, law, expected):
+    """Bug caught: an undefined or clashing law name passed on silently (or reported without file and key)."""
+    write(tmp_path, "base.toml", BASE)
+    top = write(tmp_path, "top.toml", f'extends = "base.toml"\n{laws}\n[[interfaces]]\nbetween = ["blocks", '
+                                      f'"blocks"]\nlaw = "{law}"\nmu = 0.5\n')
+    with pytest.raises(InputError, match=expected):
+        load_case(top)
+
+
+# ----------------------------------------------------------------------------- provenance
+def test_a_bad_value_from_a_base_names_the_base(tmp_path):
+    """Bug caught: a base's bad value reported as if it were in the file being run (the user edits the wrong file);
+    a value the file itself overrides reported with the base's name."""
+    base = write(tmp_path, "base.toml", BASE.replace("nu = 0.2", "nu = 0.7"))
+    top = write(tmp_path, "top.toml", 'extends = "base.toml"\n')
+    with pytest.raises(InputError) as e:
+        load_case(top)
+    assert str(e.value).startswith(f"{base} (via {top}): materials.m.nu: = 0.7")
+    top2 = write(tmp_path, "top2.toml", 'extends = "base.toml"\n[block_types.t]\nlx = -1.0\n')
+    with pytest.raises(InputError) as e:  # first error: nu from the base (materials are parsed first)
+        load_case(top2)
+    assert str(e.value).startswith(f"{base} (via {top2}): materials.m.nu")
+    write(tmp_path, "base.toml", BASE)
+    with pytest.raises(InputError) as e:
+        load_case(top2)
+    assert str(e.value).startswith(f"{top2}: block_types.t.lx: = -1.0")
+
+
+def test_a_bad_law_parameter_names_the_law_and_its_file(tmp_path):
+    """Bug caught: a named law's bad parameter reported at the interface's file, with no hint of [laws.bed]."""
+    lawfile = write(tmp_path, "laws.toml", LAWS.replace("c_N = 1e10", "c_N = -1.0"))
+    write(tmp_path, "base.toml", BASE)
+    top = write(tmp_path, "top.toml", 'extends = ["base.toml", "laws.toml"]\n'
+                                      '[[interfaces]]\nbetween = ["blocks", "blocks"]\nlaw = "bed"\n')
+    with pytest.raises(InputError) as e:
+        load_case(top)
+    assert str(e.value).startswith(f"{lawfile} (laws.bed; via {top}): interfaces[0].c_N = -1.0")
+
+
+def test_messages_of_a_file_without_bases_are_unchanged(tmp_path):
+    """Bug caught: the provenance label added to every message (a plain file must read 'FILE: KEY: ...')."""
+    top = write(tmp_path, "plain.toml", BASE.replace("nu = 0.2", "nu = 0.7"))
+    with pytest.raises(InputError) as e:
+        load_case(top)
+    assert str(e.value).startswith(f"{top}: materials.m.nu: = 0.7")
+
+
+# ----------------------------------------------------------------------------- fingerprint (checkpoint resume)
+def test_fingerprint_covers_the_bases_and_keeps_plain_files_digest(tmp_path):
+    """Bug caught: a base edited after a checkpoint and the run resumed as if nothing changed; old checkpoints of
+    plain files refused because their digest changed."""
+    plain = write(tmp_path, "plain.toml", BASE)
+    with open(plain, "rb") as f:
+        by_hand = hashlib.sha256(b"case" + f.read() + b"").hexdigest()
+    assert fingerprint(load_case(plain)) == by_hand
+    write(tmp_path, "base.toml", BASE)
+    top = write(tmp_path, "top.toml", 'extends = "base.toml"\n')
+    fp = fingerprint(load_case(top))
+    assert fingerprint(load_case(top)) == fp
+    write(tmp_path, "base.toml", BASE.replace("rho = 1000.0", "rho = 1001.0"))
+    assert fingerprint(load_case(top)) != fp
+
+
+# ----------------------------------------------------------------------------- the shear-wall demos
+def _diff(a, b, where=""):
+    """Field-by-field equality of Case objects (numpy arrays by value and dtype)."""
+    if dataclasses.is_dataclass(a):
+        assert type(a) is type(b), where
+        return [d for f in dataclasses.fields(a) for d in _diff(getattr(a, f.name), getattr(b, f.name),
+                                                                   f"{where}.{f.name}")]
+    if isinstance(a, dict):
+        if not isinstance(b, dict) or list(a) != list(b):
+            return [f"{where}: keys {a!r} vs {b!r}"]
+        return [d for k in a for d in _diff(a[k], b[k], f"{where}[{k!r}]")]
+    if isinstance(a, (list, tuple)):
+        if type(a) is not type(b) or len(a) != len(b):
+            return [f"{where}: {a!r} vs {b!r}"]
+        return [d for i, (x, y) in enumerate(zip(a, b)) for d in _diff(x, y, f"{where}[{i}]")]
+    if isinstance(a, np.ndarray):
+        ok = isinstance(b, np.ndarray) and a.dtype == b.dtype and np.array_equal(a, b)
+        return [] if ok else [f"{where}: arrays differ"]
+    if type(a) is not type(b) and not (isinstance(a, str) and isinstance(b, str)):
+        return [f"{where}: {type(a).__name__} vs {type(b).__name__}"]
+    return [] if a == b else [f"{where}: {a!r} vs {b!r}"]
+
+
+@pytest.mark.parametrize("name", ["shear_wall_p121_mixed_split", "shear_wall_p030_nconst"])
+def test_shear_wall_variants_equal_the_old_flat_files(name):
+    """Bug caught: a variant that differs from the file it replaces (a law key lost in the merge, the crack
+    interface in the wrong place, the wrong stage driver unset). p121_mixed_split goes through two bases, a chain
+    (p121_mixed -> base/shear_wall_mixed -> base/shear_wall), an unset law, a named-law override and the split part;
+    p030_nconst through an unset inside [[stages]]."""
+    path = os.path.join(ROOT, "demos", f"{name}.toml")
+    with open(os.path.join(ROOT, "tests", "data", "shear_wall_flat", f"{name}.toml"), "rb") as f:
+        old = parse_case(tomllib.load(f), path)
+    new = load_case(path)
+    assert _diff(old, new) == []
+    assert len(new.source.files) > 1
+
+
+def test_demo_bases_are_not_listed_as_demos():
+    """Bug caught: demos/base/*.toml (partial cases) offered by `fem-blocks demo --list`."""
+    from fem_blocks.cli import list_demos
+    demos = list_demos()
+    assert "shear_wall_p121_mixed_split" in demos
+    assert not any(os.sep + "base" + os.sep in p for p in demos.values())
