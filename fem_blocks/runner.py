@@ -416,8 +416,8 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
     if resume:
         ck_path, ck = latest_checkpoint(out_dir)
         if str(ck["case_hash"]) != fp and not force:
-            raise InputError(f"{ck_path}: the case file {case.source} (or a mesh file it names, or --quick) changed "
-                             "since this checkpoint was written; run without --resume to start again, or add "
+            raise InputError(f"{ck_path}: the case file {case.source} (or a base or mesh file it names, or --quick) "
+                             "changed since this checkpoint was written; run without --resume to start again, or add "
                              "--force to resume anyway")
     model = build_model(case)
     t_setup = _time.perf_counter() - t_start
