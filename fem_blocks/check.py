@@ -30,11 +30,13 @@ def check_case(path: str, quick: bool = False) -> tuple[list[str], list[str]]:
     """(report lines, warnings) for the case file at `path`; raises InputError as `fem-blocks run` would."""
     from .dynamics import Simulation
     from .errors import InputError
+    from .expand import expand
     from .model import build_model, groups_without_interface
     case = load_case(path)
     if quick:
         case = make_quick(case)
     try:
+        case = expand(case)  # the generated geometry, its notes (openings as built) and warnings
         model = build_model(case)
         st0 = case.stages[0]
         sim = Simulation(model.bodies, h=st0.h, theta=st0.theta, gravity=model.gravity,
