@@ -1,7 +1,7 @@
 """`fem-blocks check CASE.toml`: validate a case and say what would be built, without running it.
 
-Everything a run checks before its first step is done (the case file, the meshes, the bodies, the contact
-detection at the start with its overlap checks); the report lists the bodies, groups, block types, interfaces
+Everything a run checks before its first step is done (the case file, the generated geometry (expand.py), the
+meshes, the bodies, the contact detection at the start with its overlap checks); the report lists the bodies, groups, block types, interfaces
 (with the contact points found at the start), the openings as built, the stages with their nominal times and the
 histories they apply, and every warning a run would print at its start (docs/case-files.md "Checking a case").
 """
