@@ -20,6 +20,7 @@ import numpy as np
 
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
 from fem_blocks.case import parse_case  # noqa: E402
+from fem_blocks.expand import expand  # noqa: E402
 from fem_blocks.dynamics import Simulation  # noqa: E402
 from fem_blocks.model import build_model  # noqa: E402
 
@@ -36,7 +37,7 @@ def arch_stands(t, divisor, placement=None, duration=0.6):
     if placement is not None:
         for itf in doc["interfaces"]:
             itf["placement"] = placement
-    case = parse_case(doc, "arch.toml")
+    case = expand(parse_case(doc, "arch.toml"))
     model = build_model(case)
     st = case.stages[0]
     sim = Simulation(model.bodies, h=st.h, theta=st.theta, gravity=model.gravity,

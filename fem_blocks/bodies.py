@@ -27,6 +27,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .errors import InputError, check_range
+from .geometry import rotation3d  # noqa: F401 (re-exported)
 
 
 # ----------------------------------------------------------------------------- load histories
@@ -501,23 +502,6 @@ class RigidBody(_DrivenDofs):
 
 
 # ============================================================================= 3D
-def rotation3d(axis, angle: float | None = None) -> np.ndarray:
-    """Rotation matrix exp([w]x) (Rodrigues): `rotation3d(w)` for a rotation vector w (angle |w| about w/|w|),
-    or `rotation3d(axis, angle)`."""
-    w = np.asarray(axis, dtype=float).reshape(3)
-    if angle is not None:
-        nrm = np.linalg.norm(w)
-        if nrm == 0.0:
-            raise InputError(f"rotation axis = {axis!r}: expected a non-zero vector")
-        w = w / nrm * float(angle)
-    th = np.linalg.norm(w)
-    if th == 0.0:
-        return np.eye(3)
-    k = w / th
-    Kx = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
-    return np.eye(3) + np.sin(th) * Kx + (1.0 - np.cos(th)) * (Kx @ Kx)
-
-
 def check_rotation3d(R, name: str = "rotation") -> np.ndarray:
     R = np.asarray(R, dtype=float)
     if R.shape != (3, 3) or not np.all(np.isfinite(R)) or not np.allclose(R @ R.T, np.eye(3), atol=1e-10) \

@@ -22,6 +22,7 @@ import numpy as np
 
 from . import casefile
 from .errors import InputError
+from .geometry import box_corners, check_hex_corners, rotation3d
 
 NUMBER = (int, float)
 
@@ -336,6 +337,119 @@ class InterfaceCaseSpec:
     reference: str = "nominal"
 
 
+# ----------------------------------------------------------------------------- generated geometry (expand.py)
+@dataclass(kw_only=True)
+class GeneratorSpec:
+    """A [wall], [arch], [wall3d] or [dome] section as given in the file (SI, validated): expand.py turns it into
+    block types, blocks and rigid bodies. `key` is the section's key path (errors and notes of expand name
+    "SOURCE: KEY.FIELD"). `rigid` lists the rigid bodies it makes (name, group, mass, drivers, forces) with
+    vertices None: expand adds their geometry, so their names and drivers are known before it (stage checks)."""
+    key: str
+    material: str
+    group: str
+    mesh_size: float | None      # element size [m] (2D; 3D: or divisions)
+    cell: str
+    mass: str
+    divisions: tuple | None = None
+
+    @property
+    def rigid(self) -> list:
+        return []
+
+
+@dataclass
+class SlabSpec:
+    """A rigid foundation or top beam under/over a generated wall: `bodies` its RigidSpec(s) without vertices
+    (a 2D foundation cut at `cuts` [m, absolute x] is one body per part)."""
+    depth: float
+    overhang: float
+    bodies: list
+    cuts: list = field(default_factory=list)
+
+
+@dataclass(kw_only=True)
+class WallSpec(GeneratorSpec):
+    """[wall] (2D): running bond, explicit courses or a stacked prism (builders), optionally split bricks."""
+    kind: str                          # running_bond | courses | prism
+    brick_length: float
+    brick_height: float
+    joint: float
+    expanded: bool
+    position: tuple
+    courses: int | None = None         # running_bond
+    bricks_per_course: int | None = None
+    half_bricks: bool = True
+    openings: list = field(default_factory=list)  # [x0, y0, x1, y1] [m]
+    rows: list | None = None           # courses: items (brick lengths or {"gap": w [m]})
+    bricks: int | None = None          # prism
+    split_bricks: bool = False
+    foundation: SlabSpec | None = None
+    beam: SlabSpec | None = None
+
+    @property
+    def rigid(self) -> list:
+        return [r for s in (self.foundation, self.beam) if s is not None for r in s.bodies]
+
+
+@dataclass(kw_only=True)
+class ArchSpec(GeneratorSpec):
+    """[arch] (2D): semicircular arch of identical voussoirs on two fixed rigid piers."""
+    span: float
+    ring_depth: float
+    voussoirs: int
+    pier_height: float
+    pier_width: float
+    joint: float
+    piers: list = field(default_factory=list)  # the two pier RigidSpecs (no vertices)
+
+    @property
+    def rigid(self) -> list:
+        return list(self.piers)
+
+
+@dataclass(kw_only=True)
+class Wall3DSpec(GeneratorSpec):
+    """[wall3d]: running-bond wall of hexahedral bricks (builders3d), optional foundation and top beam."""
+    brick_length: float
+    brick_height: float
+    brick_width: float
+    joint: float
+    position: tuple
+    angle: float                       # [rad] about z
+    leaves: int
+    openings: list                     # [x0, z0, x1, z1] [m], wall frame
+    courses: int
+    bricks_per_course: int
+    half_bricks: bool
+    stagger_leaves: bool
+    foundation: SlabSpec | None = None
+    beam: SlabSpec | None = None
+
+    @property
+    def rigid(self) -> list:
+        return [r for s in (self.foundation, self.beam) if s is not None for r in s.bodies]
+
+
+@dataclass(kw_only=True)
+class DomeSpec(GeneratorSpec):
+    """[dome]: spherical dome of hexahedral voussoirs (builders3d.dome), optional fixed rigid piers."""
+    span: float
+    thickness: float
+    courses: int
+    blocks_per_course: int
+    joint: float
+    top_elevation: float | None        # [rad]
+    running_bond: bool
+    piers: int
+    pier_blocks: int
+    pier_height: float
+    pier_bodies: list = field(default_factory=list)
+
+    @property
+    def rigid(self) -> list:
+        return list(self.pier_bodies)
+
+
 # interface-law parameters and their physical dimension (for unit conversion)
 LAW_PARAM_UNITS = {"c_N": "stiffness", "c_T": "stiffness", "k_n": "stiffness", "k_s": "stiffness",
                    "r_c": "stress", "s_c": "stress", "f_t": "stress", "c": "stress", "f_c": "stress", "l_c": "length",
@@ -394,6 +508,8 @@ class Case:
     allow_no_interface: list = field(default_factory=list)  # group pairs (sorted tuples) meant to have no interface
     history_times: str = "absolute"  # stage driver/force history times: "absolute" (run time) or "stage" (from the
     #                                  stage's actual start)
+    generators: list = field(default_factory=list)  # WallSpec, ArchSpec, Wall3DSpec, DomeSpec: expand.py
+    expanded: bool = False  # True once expand() has added the generated block types, blocks and rigid bodies
 
     @property
     def dofs(self) -> tuple:
@@ -422,7 +538,6 @@ def _dof_error(t, dof, D):
 def rotation_matrix(axis, angle: float) -> np.ndarray:
     """R = exp(angle [a]x), a = axis/|axis| (right-hand rule, angle in radians): Rodrigues' formula
     R = I + sin(angle) [a]x + (1 - cos(angle)) [a]x^2."""
-    from .bodies import rotation3d
     return rotation3d(np.asarray(axis, dtype=float), float(angle))
 
 
@@ -537,8 +652,7 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
     gravity = ((0.0, -9.81) if D == 2 else (0.0, 0.0, -9.81)) if gravity is None else \
         tuple(g * U["length"] / U["time"] ** 2 for g in gravity)
 
-    warnings: list = []  # plausibility and "what was built" warnings, one line each
-    notes: list = []
+    warnings: list = []  # plausibility warnings, one line each (expand.py adds those of what was built)
     materials = {}
     for mname, t in root.named_tables("materials").items():
         t.dimension_keys(D, dict(thickness=2, plane=2))
@@ -646,23 +760,14 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
         r.group = t.string("group", "rigid")
         rigid.append(r)
         t.done()
-    wall = root.table("wall")
-    if wall is not None:
-        _parse_wall(wall, U, materials, block_types, blocks, rigid, names, warnings, notes, units)
-        wall.done()
-    arch = root.table("arch")
-    if arch is not None:
-        _parse_arch(arch, U, materials, block_types, blocks, rigid, names)
-        arch.done()
-    for key, parse in (("wall3d", _parse_wall3d), ("dome", _parse_dome)):
+    generators = []  # generated geometry, as given; expand.py makes its block types, blocks and rigid bodies
+    for key, parse in (("wall", _parse_wall), ("arch", _parse_arch), ("wall3d", _parse_wall3d), ("dome", _parse_dome)):
         tb = root.table(key)
         if tb is not None:
-            if key == "wall3d":
-                parse(tb, U, materials, block_types, blocks, rigid, names, warnings, units, notes)
-            else:
-                parse(tb, U, materials, block_types, blocks, rigid, names)
+            generators.append(parse(tb, U, materials, warnings, units))
             tb.done()
-    if not blocks and not rigid:
+    rigid_all = rigid + [r for g in generators for r in g.rigid]  # with the generated ones (names, drivers, mass)
+    if not blocks and not rigid and not generators:
         raise root.error("blocks", "missing; expected at least one [[blocks]] or [[rigid_bodies]] entry")
 
     stages = []
@@ -768,7 +873,7 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
         except InputError as e:
             raise InputError(f"{source}: {e}") from None
         ct.done()
-    all_groups = {b.group for b in blocks} | {r.group for r in rigid}
+    all_groups = {b.group for b in blocks} | {g.group for g in generators} | {r.group for r in rigid_all}
     interfaces = []
     seen_if = set()
     for i, t in enumerate(root.tables("interfaces")):
@@ -848,9 +953,6 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
             raise InputError(f"{source}: interfaces {[x.name for x in lst]}: a 'crack' interface (between the halves "
                              f"of split bricks) needs the joint interface(s) of the same group pair, and one "
                              f"crack interface per pair")
-        if n_crack and not any(b.parent >= 0 for b in blocks):
-            raise InputError(f"{source}: interfaces {[x.name for x in lst if x.orientation == 'crack']}: "
-                             "orientation 'crack' needs split bricks ([wall] split_bricks = true)")
         if not (orients == ["any"] or orients == ["bed", "head"]):
             raise InputError(f"{source}: interfaces {[x.name for x in lst]}: the group pair {list(key)} takes one "
                              f"interface (orientation 'any') or two ('bed' and 'head'), got {orients}")
@@ -883,7 +985,7 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
         output["crack_pattern"] = out.boolean("crack_pattern", True)
         out.done()
     root.done()
-    rigid_names = {r.name: r for r in rigid}
+    rigid_names = {r.name: r for r in rigid_all}
     driven_now: dict = {}  # body -> driven dofs after the stages so far (stages accumulate)
     for i, st in enumerate(stages):
         for key in ("drivers", "forces"):
@@ -917,7 +1019,6 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
         if cb not in rigid_names:
             raise InputError(f"{source}: output.curve.body = {cb!r}: expected a rigid body among {sorted(rigid_names)}")
     if D == 3:
-        _check_overlaps_3d(source, block_types, blocks, rigid)
         if "curve" not in output:  # 3D: the force-displacement curve of the first dof a stage drives
             for st in stages:
                 drv = [(b, d) for b, dofs in st.drivers.items() for d, spec in dofs.items() if spec is not None]
@@ -930,8 +1031,8 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
                              f"'frozen' (joints closed as built are a small-displacement model)")
     case = Case(source=source, name=name, units=units, gravity=gravity, materials=materials,
                 block_types=block_types, blocks=blocks, rigid_bodies=rigid, stages=stages, output=output,
-                contact=contact, interfaces=interfaces, checks=checks, dimension=D, warnings=warnings, notes=notes,
-                allow_no_interface=allow_pairs, history_times=history_times)
+                contact=contact, interfaces=interfaces, checks=checks, dimension=D, warnings=warnings,
+                allow_no_interface=allow_pairs, history_times=history_times, generators=generators)
     case.warnings += stage_history_warnings(case)
     return case
 
@@ -947,12 +1048,18 @@ def nominal_stage_times(case: Case) -> list:
     return out
 
 
+def rigid_specs(case: Case) -> list:
+    """The rigid bodies of a case: its [[rigid_bodies]], then those its generators make (before expand.py: without
+    vertices; after it, in case.rigid_bodies)."""
+    return list(case.rigid_bodies) + [r for g in case.generators for r in g.rigid]
+
+
 def active_histories(case: Case, si: int) -> dict:
     """Driver and force histories in force during stage `si` (stages accumulate in order, as the runner applies
     them): (body, dof) -> (label, kind, history, stage) with kind "displacement", "velocity" or "force", stage the
     index of the stage that set it (-1: the body's own [rigid_bodies] drivers/forces, times from the run start)."""
     act = {}
-    for r in case.rigid_bodies:
+    for r in rigid_specs(case):
         for dof, (kind, hist) in r.drivers.items():
             act[(r.name, dof)] = (f"rigid_bodies.{r.name}.drivers.{dof}", kind, hist, -1)
         for dof, hist in r.forces.items():
@@ -1061,78 +1168,52 @@ def _parse_rigid(t: Table, U: dict, rname: str, vertices, D: int = 2) -> RigidSp
 FIXED = {k: ("velocity", 0.0) for k in ("x", "y", "rz")}
 
 
-def _parse_wall(w: Table, U: dict, materials, block_types, blocks, rigid, names, warnings=None, notes=None,
-                units: str = "SI"):
-    """[wall]: a masonry wall built by `builders`, its block types, optional rigid foundation and top beam."""
-    from . import builders
+def _openings(w: Table, U: dict, what: str) -> list:
+    """`openings`: a list of [x0, y0, x1, y1] rectangles (2D; [x0, z0, x1, z1] in the wall frame in 3D), in SI;
+    `what` is the expected form for the error."""
+    ops = w.raw("openings", [])
+    if not isinstance(ops, list) or not all(isinstance(o, list) and len(o) == 4 and all(
+            isinstance(v, NUMBER) and not isinstance(v, bool) and math.isfinite(v) for v in o) for o in ops):
+        raise w.error("openings", f"expected a list of {what}")
+    return [[float(v) * U["length"] for v in o] for o in ops]
+
+
+def _parse_wall(w: Table, U: dict, materials, warnings: list, units: str = "SI") -> WallSpec:
+    """[wall]: a masonry wall (expand.py builds it with `builders`), optional rigid foundation and top beam."""
     kind = w.string("type", "running_bond", choices=("running_bond", "courses", "prism"))
-    mat = w.string("material", required=True)
-    if mat not in materials:
-        raise w.error("material", f"= {mat!r}: expected one of the [materials] {sorted(materials)}")
+    mat = _material(w, materials)
     L = w.number("brick_length", required=True, lo=0, lo_open=True, dim="length")
     H = w.number("brick_height", required=True, lo=0, lo_open=True, dim="length")
-    if warnings is not None:
-        for k, v in (("brick_length", L), ("brick_height", H)):
-            _warn_implausible(warnings, w, k, v, "length", units)
+    for k, v in (("brick_length", L), ("brick_height", H)):
+        _warn_implausible(warnings, w, k, v, "length", units)
     joint = w.number("joint", 0.0, lo=0, dim="length")
     expanded = w.boolean("expanded", False)
-    size = w.number("mesh_size", required=True, lo=0, lo_open=True, dim="length")
-    cell = w.string("cell", "quad", choices=("quad", "triangle"))
-    mass = w.string("mass", "lumped", choices=("lumped", "consistent"))
-    x0, y0 = w.vector("position", 2, (0.0, 0.0), dim="length")
-    group = w.string("group", "bricks")
-    name = f"{w.source}: wall"
-    try:
-        if kind == "running_bond":
-            ops = w.raw("openings", [])
-            if not isinstance(ops, list) or not all(isinstance(o, list) and len(o) == 4 and all(
-                    isinstance(v, NUMBER) and not isinstance(v, bool) and math.isfinite(v) for v in o) for o in ops):
-                raise w.error("openings", "expected a list of [x0, y0, x1, y1] rectangles [m]")
-            ops = [[float(v) * U["length"] for v in o] for o in ops]
-            lay = builders.running_bond(w.integer("courses", required=True, lo=1, hi=2000),
-                                        w.integer("bricks_per_course", required=True, lo=1, hi=2000), L, H, joint, expanded,
-                                        w.boolean("half_bricks", True), openings=ops, name=name)
-            if notes is not None:
-                for i, op in enumerate(ops):
-                    _opening_report(w, i, op, builders.opening_extent(lay, op, joint, expanded), U, units,
-                                    notes, warnings)
-        elif kind == "courses":
-            rows = w.raw("rows")
-            if rows is None:
-                raise w.missing("rows", "a list of courses, e.g. [[0.5, 1, 1, 0.5], [1, 1, 1]]")
-            if not isinstance(rows, list) or not rows:
-                raise w.error("rows", "expected a list of courses, e.g. [[0.5, 1, 1, 0.5], [1, 1, 1]]")
-            rows = [[({"gap": float(it["gap"]) * U["length"]} if isinstance(it, dict) and "gap" in it else it)
-                     for it in row] if isinstance(row, list) else row for row in rows]
-            lay = builders.courses(rows, L, H, joint, expanded, name=f"{w.source}: wall.rows")
-        else:
-            lay = builders.stack_prism(w.integer("bricks", required=True, lo=1, hi=10000), L, H, joint, expanded, name=name)
-    except InputError:
-        raise
-    if w.boolean("split_bricks", False):
-        if not expanded:
-            raise w.error("split_bricks", "needs expanded = true (the crack between two halves has no joint "
-                                          "thickness; thick joints would give the crack the joint's g0)")
-        lay = builders.split_bricks(lay, L)
-    builders.Layout(lay).check_no_overlap(name)
-    sizes = {}
-    for k, b in enumerate(lay):
-        if b.size_key not in sizes:
-            tname = f"wall_{len(sizes)}"
-            sizes[b.size_key] = tname
-            block_types[tname] = BlockTypeSpec(name=tname, geometry="rectangle", material=mat, mesh_size=size,
-                                               cell=cell, mass=mass, lx=b.length, ly=b.height)
-        bname = f"brick{k}"
-        if bname in names:
-            raise w.error("group", f"body name {bname!r} already used")
-        names.add(bname)
-        blocks.append(BlockSpec(name=bname, type=sizes[b.size_key], position=(b.x + x0, b.y + y0), angle=0.0,
-                                group=group, parent=b.parent))
-    xs0 = min(b.x for b in lay) + x0
-    xs1 = max(b.x + b.length for b in lay) + x0
-    ybot = min(b.y for b in lay) + y0
-    ytop = max(b.y + b.height for b in lay) + y0
-    gap = 0.0 if expanded else joint
+    g = WallSpec(key=w.path, kind=kind, material=mat, brick_length=L, brick_height=H, joint=joint, expanded=expanded,
+                 mesh_size=w.number("mesh_size", required=True, lo=0, lo_open=True, dim="length"),
+                 cell=w.string("cell", "quad", choices=("quad", "triangle")),
+                 mass=w.string("mass", "lumped", choices=("lumped", "consistent")),
+                 position=w.vector("position", 2, (0.0, 0.0), dim="length"),
+                 group=w.string("group", "bricks"))
+    x0 = g.position[0]
+    if kind == "running_bond":
+        g.openings = _openings(w, U, "[x0, y0, x1, y1] rectangles [m]")
+        g.courses = w.integer("courses", required=True, lo=1, hi=2000)
+        g.bricks_per_course = w.integer("bricks_per_course", required=True, lo=1, hi=2000)
+        g.half_bricks = w.boolean("half_bricks", True)
+    elif kind == "courses":
+        rows = w.raw("rows")
+        if rows is None:
+            raise w.missing("rows", "a list of courses, e.g. [[0.5, 1, 1, 0.5], [1, 1, 1]]")
+        if not isinstance(rows, list) or not rows:
+            raise w.error("rows", "expected a list of courses, e.g. [[0.5, 1, 1, 0.5], [1, 1, 1]]")
+        g.rows = [[({"gap": float(it["gap"]) * U["length"]} if isinstance(it, dict) and "gap" in it else it)
+                   for it in row] if isinstance(row, list) else row for row in rows]
+    else:
+        g.bricks = w.integer("bricks", required=True, lo=1, hi=10000)
+    g.split_bricks = w.boolean("split_bricks", False)
+    if g.split_bricks and not expanded:
+        raise w.error("split_bricks", "needs expanded = true (the crack between two halves has no joint "
+                                      "thickness; thick joints would give the crack the joint's g0)")
     f = w.table("foundation")
     if f is not None:
         depth = f.number("depth", 0.1, lo=0, lo_open=True, dim="length")
@@ -1140,73 +1221,49 @@ def _parse_wall(w: Table, U: dict, materials, block_types, blocks, rigid, names,
         splits = f.raw("split", [])
         if not isinstance(splits, list) or not all(isinstance(v, NUMBER) for v in splits):
             raise f.error("split", "expected a list of x positions [m] where the foundation is cut")
-        cuts = sorted(float(v) * U["length"] + x0 for v in splits)
-        for c in cuts:
-            if not (xs0 - over < c < xs1 + over):
-                raise f.error("split", f"cut at x = {c:g} m outside the foundation [{xs0 - over:g}, {xs1 + over:g}]")
-        edges = [xs0 - over] + cuts + [xs1 + over]
+        cuts = sorted(float(v) * U["length"] + x0 for v in splits)  # range checked by expand (needs the wall)
         sett = f.table("settlement")
         part, hist = None, None
         if sett is not None:
-            part = sett.integer("part", required=True, lo=0, hi=len(edges) - 2)
+            part = sett.integer("part", required=True, lo=0, hi=len(cuts))
             hist = sett.history("history", "length", required=True)
             sett.done()
-        for k in range(len(edges) - 1):
-            top = ybot - gap
-            verts = [(edges[k], top - depth), (edges[k + 1], top - depth), (edges[k + 1], top), (edges[k], top)]
+        bodies = []
+        for k in range(len(cuts) + 1):
             drv = dict(FIXED)
             if k == part:
                 drv["y"] = ("displacement", hist)
-            rname = "foundation" if len(edges) == 2 else f"foundation{k}"
-            names.add(rname)
-            rigid.append(RigidSpec(name=rname, vertices=verts, rho=None, mass=None, inertia=None, thickness=1.0,
-                                   drivers=drv, forces={}, group="foundation"))
+            bodies.append(RigidSpec(name="foundation" if not cuts else f"foundation{k}", vertices=None, rho=None,
+                                    mass=None, inertia=None, thickness=1.0, drivers=drv, forces={},
+                                    group="foundation"))
+        g.foundation = SlabSpec(depth, over, bodies, cuts)
         f.done()
+    g.beam = _parse_beam(w, U, 2, materials[mat].thickness)
+    return g
+
+
+def _parse_beam(w: Table, U: dict, D: int, thickness: float | None = None) -> SlabSpec | None:
+    """[wall.beam] / [wall3d.beam]: a rigid body (mass, drivers, forces) on top of the wall, `depth` high; a 2D
+    beam is as thick as the wall's material unless it gives its own thickness."""
     bt = w.table("beam")
-    if bt is not None:
-        depth = bt.number("depth", required=True, lo=0, lo_open=True, dim="length")
-        over = bt.number("overhang", 0.0, lo=0, dim="length")
-        bot = ytop + gap
-        verts = [(xs0 - over, bot), (xs1 + over, bot), (xs1 + over, bot + depth), (xs0 - over, bot + depth)]
-        if "thickness" not in bt.data:  # the beam is as thick as the wall
-            bt.data = dict(bt.data, thickness=materials[mat].thickness / U["length"])
-        r = _parse_rigid(bt, U, "beam", verts)
-        r.group = "beam"
-        names.add("beam")
-        rigid.append(r)
-        bt.done()
-
-
-OPENING_TOL = 1e-3  # [m]: a built opening that differs from the asked one by more than this is reported
-
-
-def _opening_report(w: Table, i: int, op, ext: dict, U: dict, units: str, notes: list, warnings: list):
-    """One line saying what opening i became (builders.opening_extent), in the file's length unit: a note always
-    (`fem-blocks check`), a warning too when the clear opening differs from the asked one by more than
-    OPENING_TOL or its jambs are toothed."""
-    f = U["length"]
-    unit = "m" if units == "SI" else "mm"
-    aw, ah = ext["asked"]
-    cx0, cy0, cx1, cy1 = ext["clear"]
-    toothed = ext["width_max"] - ext["width_min"] > OPENING_TOL
-    c0, c1 = ext["courses"]
-    text = (f"{w.source}: {w.key('openings')}[{i}] = {[round(v / f, 9) for v in op]}: asked {aw / f:.4g} x "
-            f"{ah / f:.4g} {unit}, built {(cx1 - cx0) / f:.4g} x {ext['height'] / f:.4g} {unit} (clear opening "
-            f"[{cx0 / f:.4g}, {cy0 / f:.4g}, {cx1 / f:.4g}, {cy1 / f:.4g}] between brick faces; courses {c0} to {c1} "
-            "cut" + (f"; toothed jambs: course widths {ext['width_min'] / f:.4g} to {ext['width_max'] / f:.4g} {unit}"
-                     if toothed else "") + ")")
-    notes.append(text)
-    g2 = 2 * ext["gap"]  # bricks are cut a joint away from the asked sides: clear = asked + 2 joints when it fits
-    if toothed or abs(cx1 - cx0 - aw - g2) > OPENING_TOL or abs(ext["height"] - ah - g2) > OPENING_TOL:
-        warnings.append(text + "; openings snap to whole courses and bricks (pieces < brick_length/4 dropped): "
-                               "give its sides on brick faces to build it as asked")
+    if bt is None:
+        return None
+    depth = bt.number("depth", required=True, lo=0, lo_open=True, dim="length")
+    over = bt.number("overhang", 0.0, lo=0, dim="length")
+    r = _parse_rigid(bt, U, "beam", None, D)
+    if D == 2 and "thickness" not in bt.data:  # the wall's thickness, read as if given in the file's unit
+        r.thickness = float(thickness / U["length"]) * U["length"]
+    r.group = "beam"
+    bt.done()
+    return SlabSpec(depth, over, [r])
 
 
 def quick(case: Case, factor: float = 2.0) -> Case:
     """Reduced-resolution variant of a case (`--quick`): element sizes and time steps multiplied by `factor`
-    (durations, loads and stop criteria unchanged). For smoke tests and a first look."""
-    for bt in case.block_types.values():
-        if bt.mesh_size is not None and bt.geometry != "file":
+    (durations, loads and stop criteria unchanged). For smoke tests and a first look. The generated block types
+    (case.generators, before expand) take the same change."""
+    for bt in list(case.block_types.values()) + list(case.generators):
+        if bt.mesh_size is not None and getattr(bt, "geometry", None) != "file":
             bt.mesh_size *= factor
         if bt.divisions is not None:  # 3D: fewer elements along each edge, n / factor rounded up
             bt.divisions = tuple(max(1, math.ceil(n / factor)) for n in bt.divisions)
@@ -1222,38 +1279,22 @@ def quick(case: Case, factor: float = 2.0) -> Case:
     return case
 
 
-def _parse_arch(a: Table, U: dict, materials, block_types, blocks, rigid, names):
+def _parse_arch(a: Table, U: dict, materials, warnings: list = None, units: str = "SI") -> ArchSpec:
     """[arch]: semicircular arch of identical voussoirs (one block type, rotated instances) on two rigid piers."""
-    from . import builders
-    mat = a.string("material", required=True)
-    if mat not in materials:
-        raise a.error("material", f"= {mat!r}: expected one of the [materials] {sorted(materials)}")
-    span = a.number("span", required=True, lo=0, lo_open=True, dim="length")
-    depth = a.number("ring_depth", required=True, lo=0, lo_open=True, dim="length")
-    n = a.integer("voussoirs", required=True, lo=3, hi=10000)
-    ph = a.number("pier_height", required=True, lo=0, lo_open=True, dim="length")
-    pw = a.number("pier_width", required=True, lo=0, lo_open=True, dim="length")
-    joint = a.number("joint", 0.0, lo=0, dim="length")
-    size = a.number("mesh_size", required=True, lo=0, lo_open=True, dim="length")
-    cell = a.string("cell", "triangle", choices=("quad", "triangle"))
-    mass = a.string("mass", "lumped", choices=("lumped", "consistent"))
-    group = a.string("group", "voussoirs")
-    polys, piers = builders.semicircular_arch(span, depth, n, ph, pw, joint, name=f"{a.source}: arch")
-    c = np.array([0.5 * span, ph])
-    tname = "arch_voussoir"
-    block_types[tname] = BlockTypeSpec(name=tname, geometry="polygon", material=mat, mesh_size=size, cell=cell,
-                                       mass=mass, vertices=[tuple(p) for p in (polys[0] - c)])
-    dth = math.pi / n
-    for k in range(n):
-        bname = f"voussoir{k}"
-        names.add(bname)
-        blocks.append(BlockSpec(name=bname, type=tname, position=(float(c[0]), float(c[1])), angle=-k * dth,
-                                group=group))
-    for k, P in enumerate(piers):
-        pname = f"pier{k}"
-        names.add(pname)
-        rigid.append(RigidSpec(name=pname, vertices=[tuple(p) for p in P], rho=None, mass=None, inertia=None,
-                               thickness=1.0, drivers=dict(FIXED), forces={}, group="piers"))
+    mat = _material(a, materials)
+    return ArchSpec(key=a.path, material=mat,
+                    span=a.number("span", required=True, lo=0, lo_open=True, dim="length"),
+                    ring_depth=a.number("ring_depth", required=True, lo=0, lo_open=True, dim="length"),
+                    voussoirs=a.integer("voussoirs", required=True, lo=3, hi=10000),
+                    pier_height=a.number("pier_height", required=True, lo=0, lo_open=True, dim="length"),
+                    pier_width=a.number("pier_width", required=True, lo=0, lo_open=True, dim="length"),
+                    joint=a.number("joint", 0.0, lo=0, dim="length"),
+                    mesh_size=a.number("mesh_size", required=True, lo=0, lo_open=True, dim="length"),
+                    cell=a.string("cell", "triangle", choices=("quad", "triangle")),
+                    mass=a.string("mass", "lumped", choices=("lumped", "consistent")),
+                    group=a.string("group", "voussoirs"),
+                    piers=[RigidSpec(name=f"pier{k}", vertices=None, rho=None, mass=None, inertia=None, thickness=1.0,
+                                     drivers=dict(FIXED), forces={}, group="piers") for k in range(2)])
 
 
 # ----------------------------------------------------------------------------- dimension 3
@@ -1304,8 +1345,7 @@ def _mesh_resolution(t: Table, geom: str):
 
 
 def _check_corners(t: Table, C):
-    """`corners` (or a box's) of table t: a proper hexahedron in the gmsh order (meshing.check_hex_corners)."""
-    from .meshing import check_hex_corners
+    """`corners` (or a box's) of table t: a proper hexahedron in the gmsh order (geometry.check_hex_corners)."""
     try:
         check_hex_corners(np.asarray(C, dtype=float), t.path)
     except InputError as e:
@@ -1350,7 +1390,6 @@ def _rotation(t: Table) -> np.ndarray:
 
 def _solid_corners(t: Table) -> list:
     """A 3D rigid body's 8 corners: a box (size [lx, ly, lz] from origin [x, y, z]) or corners (gmsh order)."""
-    from .meshing import box_corners
     size = t.vector("size", 3, dim="length")
     corners = t.points("corners", n=3, min_count=8, exact=True, required=False)
     if (size is None) == (corners is None):
@@ -1368,34 +1407,11 @@ def _solid_corners(t: Table) -> list:
 
 def type_corners(bt: BlockTypeSpec):
     """(8, 3) corners of a 3D box/hexahedron block type in its own frame (None for a mesh file)."""
-    from .meshing import box_corners
     if bt.geometry == "box":
         return box_corners(bt.lx, bt.ly, bt.lz)
     if bt.geometry == "hexahedron":
         return np.asarray(bt.corners, dtype=float)
     return None
-
-
-def _check_overlaps_3d(source: str, block_types: dict, blocks: list, rigid: list):
-    """Hexahedral blocks and rigid bodies must not overlap at the start (separating-axis test,
-    builders3d.overlapping_pairs; touching is fine). Blocks meshed from a file are not checked here."""
-    from .builders3d import overlapping_pairs
-    C, who = [], []
-    for b in blocks:
-        P = type_corners(block_types[b.type])
-        if P is not None:
-            C.append(P @ b.R.T + np.asarray(b.position))
-            who.append(b.name)
-    for r in rigid:
-        C.append(np.asarray(r.vertices, dtype=float))
-        who.append(r.name)
-    if len(C) < 2:
-        return
-    bad = overlapping_pairs(np.array(C))
-    if len(bad):
-        i, j = bad[0]
-        raise InputError(f"{source}: blocks: bodies {who[i]!r} and {who[j]!r} overlap at the start "
-                         f"({len(bad)} overlapping pair(s)); expected blocks that at most touch")
 
 
 def _resolution_3d(t: Table):
@@ -1413,113 +1429,56 @@ def _material(t: Table, materials: dict) -> str:
     return mat
 
 
-def _add_layout_blocks(lay, prefix: str, mat: str, res: dict, block_types, blocks, names, group, t: Table):
-    """Block types (one per prototype, 'hexahedron' from its corners) and blocks of a builders3d.Layout3D."""
-    types = {}
-    for key, C in lay.prototypes.items():
-        tname = f"{prefix}_{len(types)}"
-        types[key] = tname
-        block_types[tname] = BlockTypeSpec(name=tname, geometry="hexahedron", material=mat,
-                                           corners=[tuple(float(x) for x in c) for c in C], **res)
-    for k, b in enumerate(lay.blocks):
-        bname = f"{prefix}_c{b.course}_{b.index}" + (f"_l{b.leaf}" if b.leaf else "")
-        if bname in names:
-            raise t.error("group", f"body name {bname!r} already used")
-        names.add(bname)
-        blocks.append(BlockSpec(name=bname, type=types[b.key], position=tuple(float(x) for x in b.position),
-                                angle=0.0, group=group, R=np.array(b.R)))
-
-
-def _parse_wall3d(w: Table, U: dict, materials, block_types, blocks, rigid, names, warnings=None, U_name="SI",
-                  notes=None):
-    """[wall3d]: running-bond wall of bricks (builders3d.running_bond_wall), its block types, optional rigid
-    foundation (fixed) and top beam (rigid body with drivers/forces) in the wall's frame."""
-    from . import builders3d
-    from .meshing import box_corners
+def _parse_wall3d(w: Table, U: dict, materials, warnings: list, units: str = "SI") -> Wall3DSpec:
+    """[wall3d]: running-bond wall of bricks (expand.py: builders3d.running_bond_wall), optional rigid foundation
+    (fixed) and top beam (rigid body with drivers/forces) in the wall's frame."""
     mat = _material(w, materials)
     L = w.number("brick_length", required=True, lo=0, lo_open=True, dim="length")
     H = w.number("brick_height", required=True, lo=0, lo_open=True, dim="length")
     W = w.number("brick_width", required=True, lo=0, lo_open=True, dim="length")
-    if warnings is not None:
-        for k, v in (("brick_length", L), ("brick_height", H), ("brick_width", W)):
-            _warn_implausible(warnings, w, k, v, "length", U_name)
+    for k, v in (("brick_length", L), ("brick_height", H), ("brick_width", W)):
+        _warn_implausible(warnings, w, k, v, "length", units)
     joint = w.number("joint", 0.0, lo=0, dim="length")
     origin = w.vector("position", 3, (0.0, 0.0, 0.0), dim="length")
     angle = math.radians(w.number("angle", 0.0))
     leaves = w.integer("leaves", 1, lo=1, hi=2)
-    ops = w.raw("openings", [])
-    if not isinstance(ops, list) or not all(isinstance(o, list) and len(o) == 4 and all(
-            isinstance(v, NUMBER) and not isinstance(v, bool) and math.isfinite(v) for v in o) for o in ops):
-        raise w.error("openings", "expected a list of [x0, z0, x1, z1] rectangles [m] (wall frame)")
-    ops = [[float(v) * U["length"] for v in o] for o in ops]
-    res = _resolution_3d(w)
-    group = w.string("group", "bricks")
-    name = f"{w.source}: wall3d"
-    nc = w.integer("courses", required=True, lo=1, hi=2000)
-    nb = w.integer("bricks_per_course", required=True, lo=1, hi=2000)
-    half = w.boolean("half_bricks", True)
-    lay = builders3d.running_bond_wall(nc, nb, L, H, W, joint, half_bricks=half, openings=ops, leaves=leaves,
-                                       stagger_leaves=w.boolean("stagger_leaves", False), origin=origin,
-                                       angle=angle, name=name)
-    if notes is not None and ops:  # openings as built, in the wall frame (x, z) of the first leaf
-        from . import builders
-        lay2 = builders.running_bond(nc, nb, L, H, joint, False, half, openings=ops, name=name)
-        for i, op in enumerate(ops):
-            _opening_report(w, i, op, builders.opening_extent(lay2, op, joint), U, U_name, notes, warnings)
-    lay.check_no_overlap(name)
-    _add_layout_blocks(lay, "brick", mat, res, block_types, blocks, names, group, w)
-    R = builders3d.rot_z(angle)
-    o = np.asarray(origin)
-    local = (lay.corners() - o) @ R  # wall frame
-    x0, x1 = local[..., 0].min(), local[..., 0].max()
-    y0, y1 = local[..., 1].min(), local[..., 1].max()
-    z0, z1 = local[..., 2].min(), local[..., 2].max()
-
-    def slab(over, zb, depth):
-        C = box_corners(x1 - x0 + 2 * over, y1 - y0 + 2 * over, depth, (x0 - over, y0 - over, zb))
-        return [tuple(float(v) for v in c) for c in C @ R.T + o]
+    ops = _openings(w, U, "[x0, z0, x1, z1] rectangles [m] (wall frame)")
+    g = Wall3DSpec(key=w.path, material=mat, brick_length=L, brick_height=H, brick_width=W, joint=joint,
+                   position=origin, angle=angle, leaves=leaves, openings=ops, **_resolution_3d(w),
+                   group=w.string("group", "bricks"),
+                   courses=w.integer("courses", required=True, lo=1, hi=2000),
+                   bricks_per_course=w.integer("bricks_per_course", required=True, lo=1, hi=2000),
+                   half_bricks=w.boolean("half_bricks", True), stagger_leaves=w.boolean("stagger_leaves", False))
     f = w.table("foundation")
     if f is not None:
         depth = f.number("depth", 0.1, lo=0, lo_open=True, dim="length")
         over = f.number("overhang", 0.0, lo=0, dim="length")
-        names.add("foundation")
-        rigid.append(RigidSpec(name="foundation", vertices=slab(over, z0 - joint - depth, depth), rho=None,
-                               mass=None, inertia=None, thickness=1.0, drivers=dict(FIXED_3D), forces={},
-                               group="foundation"))
+        g.foundation = SlabSpec(depth, over, [RigidSpec(name="foundation", vertices=None, rho=None, mass=None,
+                                                        inertia=None, thickness=1.0, drivers=dict(FIXED_3D),
+                                                        forces={}, group="foundation")])
         f.done()
-    bt = w.table("beam")
-    if bt is not None:
-        depth = bt.number("depth", required=True, lo=0, lo_open=True, dim="length")
-        over = bt.number("overhang", 0.0, lo=0, dim="length")
-        r = _parse_rigid(bt, U, "beam", slab(over, z1 + joint, depth), 3)
-        r.group = "beam"
-        names.add("beam")
-        rigid.append(r)
-        bt.done()
+    g.beam = _parse_beam(w, U, 3)
+    return g
 
 
-def _parse_dome(a: Table, U: dict, materials, block_types, blocks, rigid, names):
-    """[dome]: spherical dome of hexahedral voussoirs (builders3d.dome, thesis §7.2.1.c), one block type per
-    course (instances rotated about z), optional fixed rigid piers under the bed course (§7.2.2.a)."""
-    from . import builders3d
+def _parse_dome(a: Table, U: dict, materials, warnings: list = None, units: str = "SI") -> DomeSpec:
+    """[dome]: spherical dome of hexahedral voussoirs (expand.py: builders3d.dome, thesis §7.2.1.c), one block
+    type per course (instances rotated about z), optional fixed rigid piers under the bed course (§7.2.2.a)."""
     mat = _material(a, materials)
     top = a.number("top_elevation", None, lo=0, hi=90, lo_open=True, hi_open=True)
     res = _resolution_3d(a)
     group = a.string("group", "dome")
     pier_group = a.string("pier_group", "piers")
-    lay = builders3d.dome(span=a.number("span", 4.0, lo=0, lo_open=True, dim="length"),
-                          thickness=a.number("thickness", 0.48, lo=0, lo_open=True, dim="length"),
-                          n_courses=a.integer("courses", 12, lo=1, hi=1000),
-                          blocks_per_course=a.integer("blocks_per_course", 22, lo=3, hi=10000),
-                          joint=a.number("joint", 0.03, lo=0, dim="length"),
-                          top_elevation=None if top is None else math.radians(top),
-                          running_bond=a.boolean("running_bond", True),
-                          piers=a.integer("piers", 0, lo=0), pier_blocks=a.integer("pier_blocks", 3, lo=1),
-                          pier_height=a.number("pier_height", 0.5, lo=0, lo_open=True, dim="length"),
-                          name=f"{a.source}: dome")
-    _add_layout_blocks(lay, "voussoir", mat, res, block_types, blocks, names, group, a)
-    for p in lay.rigid:
-        names.add(p.name)
-        rigid.append(RigidSpec(name=p.name, vertices=[tuple(float(v) for v in c) for c in p.corners], rho=None,
-                               mass=None, inertia=None, thickness=1.0, drivers=dict(FIXED_3D), forces={},
-                               group=pier_group))
+    g = DomeSpec(key=a.path, material=mat, **res, group=group,
+                 span=a.number("span", 4.0, lo=0, lo_open=True, dim="length"),
+                 thickness=a.number("thickness", 0.48, lo=0, lo_open=True, dim="length"),
+                 courses=a.integer("courses", 12, lo=1, hi=1000),
+                 blocks_per_course=a.integer("blocks_per_course", 22, lo=3, hi=10000),
+                 joint=a.number("joint", 0.03, lo=0, dim="length"),
+                 top_elevation=None if top is None else math.radians(top),
+                 running_bond=a.boolean("running_bond", True),
+                 piers=a.integer("piers", 0, lo=0), pier_blocks=a.integer("pier_blocks", 3, lo=1),
+                 pier_height=a.number("pier_height", 0.5, lo=0, lo_open=True, dim="length"))
+    g.pier_bodies = [RigidSpec(name=f"pier{p}", vertices=None, rho=None, mass=None, inertia=None, thickness=1.0,
+                               drivers=dict(FIXED_3D), forces={}, group=pier_group) for p in range(g.piers)]
+    return g

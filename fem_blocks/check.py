@@ -1,7 +1,7 @@
 """`fem-blocks check CASE.toml`: validate a case and say what would be built, without running it.
 
-Everything a run checks before its first step is done (the case file, the meshes, the bodies, the contact
-detection at the start with its overlap checks); the report lists the bodies, groups, block types, interfaces
+Everything a run checks before its first step is done (the case file, the generated geometry (expand.py), the
+meshes, the bodies, the contact detection at the start with its overlap checks); the report lists the bodies, groups, block types, interfaces
 (with the contact points found at the start), the openings as built, the stages with their nominal times and the
 histories they apply, and every warning a run would print at its start (docs/case-files.md "Checking a case").
 """
@@ -30,11 +30,13 @@ def check_case(path: str, quick: bool = False) -> tuple[list[str], list[str]]:
     """(report lines, warnings) for the case file at `path`; raises InputError as `fem-blocks run` would."""
     from .dynamics import Simulation
     from .errors import InputError
+    from .expand import expand
     from .model import build_model, groups_without_interface
     case = load_case(path)
     if quick:
         case = make_quick(case)
     try:
+        case = expand(case)  # the generated geometry, its notes (openings as built) and warnings
         model = build_model(case)
         st0 = case.stages[0]
         sim = Simulation(model.bodies, h=st0.h, theta=st0.theta, gravity=model.gravity,

@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .errors import InputError
+from .geometry import HEX_XI, box_corners, check_hex_corners, hex_shape_gradients  # noqa: F401 (re-exported)
 
 GMSH_LINEAR = {2: "triangle", 3: "quad"}
 GMSH_NAMES = {1: "2-node line", 2: "3-node triangle", 3: "4-node quadrangle", 4: "4-node tetrahedron",
@@ -541,22 +542,8 @@ HEX_FACES = np.array([[0, 3, 2, 1], [4, 5, 6, 7], [0, 1, 5, 4], [1, 2, 6, 5], [2
                      dtype=np.int64)
 # sides of a hexahedral block given by its 8 corners, in the order of HEX_FACES (names for a box [0,lx]x[0,ly]x[0,lz])
 HEX_SIDES = ("bottom", "top", "front", "right", "back", "left")
-# reference coordinates of the gmsh hexahedron nodes
-HEX_XI = np.array([[-1, -1, -1], [1, -1, -1], [1, 1, -1], [-1, 1, -1],
-                   [-1, -1, 1], [1, -1, 1], [1, 1, 1], [-1, 1, 1]], dtype=np.float64)
 # tetrahedron / hexahedron that mirrors a cell (reverses its orientation) keeping its faces
 _FLIP_3D = {"tetrahedron": np.array([0, 2, 1, 3]), "hexahedron": np.array([0, 3, 2, 1, 4, 7, 6, 5])}
-
-
-def hex_shape_gradients(xi: np.ndarray) -> np.ndarray:
-    """dN_a/dxi_j of the trilinear hexahedron at reference points xi (k,3): (k, 8, 3),
-    N_a = prod_j (1 + xi_a,j xi_j) / 8."""
-    xi = np.atleast_2d(xi)
-    f = 1.0 + HEX_XI[None, :, :] * xi[:, None, :]  # (k, 8, 3)
-    dN = np.empty_like(f)
-    for j in range(3):
-        dN[:, :, j] = HEX_XI[None, :, j] / 8.0 * np.prod(np.delete(f, j, axis=2), axis=2)
-    return dN
 
 
 def hex_shape_functions(xi: np.ndarray) -> np.ndarray:
@@ -809,26 +796,6 @@ def _split_hexes(hexmesh: BlockMesh3D, source: str) -> BlockMesh3D:
                        dict(hexmesh.tag_names), source, node_ids=hexmesh.node_ids, cell_ids=None)
 
 
-def check_hex_corners(corners, name: str = "hexahedron") -> np.ndarray:
-    """(8,3) float corners of a hexahedral block in the gmsh order (0-3 the bottom face, counter-clockwise
-    seen from the top face 4-7, corner 4+i above corner i); InputError if the trilinear block is inverted,
-    folded or flat (det J checked on a 5x5x5 grid of the reference cube)."""
-    C = np.asarray(corners, dtype=np.float64)
-    if C.shape != (8, 3) or not np.all(np.isfinite(C)):
-        raise InputError(f"{name}.corners: expected 8 finite (x, y, z) points, got shape {np.shape(corners)}")
-    g = np.linspace(-1, 1, 5)
-    xi = np.stack(np.meshgrid(g, g, g, indexing="ij"), axis=-1).reshape(-1, 3)
-    d = np.linalg.det(np.einsum("ai,kaj->kij", C, hex_shape_gradients(xi)))
-    scale = np.ptp(C, axis=0).max() ** 3
-    if np.all(d < 0):
-        raise InputError(f"{name}.corners: the block is inverted (corners 0-3 run clockwise seen from corners "
-                         f"4-7); expected the bottom face 0-3 counter-clockwise seen from the top face 4-7")
-    if np.any(d <= 1e-10 * scale):
-        raise InputError(f"{name}.corners: the hexahedral block is folded or flat (det J <= 0 inside); expected "
-                         f"a convex-like block with corners in the gmsh order")
-    return C
-
-
 def mesh_hexahedron(corners, size: float | None = None, divisions=None, cell: str = "hexahedron",
                     structured: bool = True, name: str = "hexahedron") -> BlockMesh3D:
     """Mesh of the trilinear block spanned by 8 corners (gmsh hexahedron order, see check_hex_corners).
@@ -897,11 +864,6 @@ def mesh_hexahedron(corners, size: float | None = None, divisions=None, cell: st
         mesh = _split_hexes(mesh, name)
     validate3d(mesh, name)
     return mesh
-
-
-def box_corners(lx: float, ly: float, lz: float, origin=(0.0, 0.0, 0.0)) -> np.ndarray:
-    """Corners of [0,lx]x[0,ly]x[0,lz] + origin in the gmsh hexahedron order."""
-    return np.asarray(origin, dtype=np.float64).reshape(3) + HEX_XI.clip(0, 1) * np.array([lx, ly, lz], float)
 
 
 def mesh_box(lx: float, ly: float, lz: float, size: float | None = None, divisions=None,

@@ -1,4 +1,5 @@
-"""From a validated Case to bodies: mesh each block type once, build its operators once, place instances."""
+"""From a validated Case to bodies: expand its generated geometry (expand.py), mesh each block type once, build
+its operators once, place instances."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -7,8 +8,9 @@ import numpy as np
 
 from .bodies import (BlockType, BlockType3D, Clamp, Clamp3D, DeformableBody, DeformableBody3D, Driver, Material,
                      RigidBody, RigidBody3D, Traction)
-from .case import Case, BlockTypeSpec, dofs_of
+from .case import Case, BlockTypeSpec, dofs_of, rigid_specs
 from .errors import InputError
+from .expand import expand
 
 
 @dataclass
@@ -61,7 +63,8 @@ def mesh_block_type(spec: BlockTypeSpec, dimension: int = 2):
 
 def build_model(case: Case) -> Model:
     """Bodies of dimension case.dimension (2: BlockType/DeformableBody/RigidBody; 3: the *3D classes) and the
-    ContactStep of the interfaces (the same for both dimensions)."""
+    ContactStep of the interfaces (the same for both dimensions). A case not yet expanded is expanded first."""
+    case = expand(case)
     D = case.dimension
     Type, Body, ClampCls = ((BlockType, DeformableBody, Clamp) if D == 2 else
                             (BlockType3D, DeformableBody3D, Clamp3D))
@@ -136,7 +139,7 @@ def groups_without_interface(case: Case, model: Model, sim) -> list[str]:
     have = {tuple(sorted(i.groups)) for i in case.interfaces} | set(case.allow_no_interface)
     groups = sorted(set(model.groups))
     gid = {g: k for k, g in enumerate(groups)}
-    massless = {r.name for r in case.rigid_bodies if r.rho is None and r.mass is None}
+    massless = {r.name for r in rigid_specs(case) if r.rho is None and r.mass is None}
     fixed = np.array([n in massless for n in model.names])  # massless rigid bodies: fully driven, never pushed
     body_group = np.array([gid[g] for g in model.groups], dtype=np.int64)
     all_fixed = np.array([fixed[body_group == k].all() for k in range(len(groups))])

@@ -16,6 +16,7 @@ from .case import Case
 from .errors import InputError
 from .bodies import Driver
 from .dynamics import Simulation
+from .expand import expand
 from .model import Model, build_model
 from .output.history import HistoryWriter
 from .output.checkpoint import write_checkpoint
@@ -419,6 +420,7 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
             raise InputError(f"{ck_path}: the case file {case.source} (or a base or mesh file it names, or --quick) "
                              "changed since this checkpoint was written; run without --resume to start again, or add "
                              "--force to resume anyway")
+    case = expand(case)  # the generated bodies, and the warnings of what was built (expand.py)
     model = build_model(case)
     t_setup = _time.perf_counter() - t_start
     st0 = case.stages[0]

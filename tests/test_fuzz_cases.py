@@ -5,7 +5,8 @@ demos/wall_settlement.toml, demos/arch.toml and a small inline case with rigid b
 drivers, stop criteria, a cohesive interface and a force curve), applies one or two random
 mutations (delete / rename a key, change a value's type, negative / zero / huge / NaN / inf values,
 empty lists, duplicated table entries, values swapped between keys), writes the result as TOML
-with the small serializer below and calls `load_case` only (validation; nothing is simulated).
+with the small serializer below and calls `load_case` and `expand` (validation and the generated geometry;
+nothing is meshed or simulated).
 Any exception other than InputError, or a variant taking more than a few seconds, is a failure
 reported with the mutation.
 """
@@ -23,6 +24,7 @@ import pytest
 
 from fem_blocks.case import load_case
 from fem_blocks.errors import InputError
+from fem_blocks.expand import expand
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 DEMOS = ["vibrating_block.toml", "wall_settlement.toml", "arch.toml"]
@@ -335,7 +337,7 @@ def test_writer_round_trip_and_base_valid(tmp_path, name, base):
     assert tomllib.loads(text) == base
     p = tmp_path / "base.toml"
     p.write_text(text, encoding="utf-8")
-    load_case(str(p))
+    expand(load_case(str(p)))
 
 
 def test_writer_special_values():
@@ -358,7 +360,7 @@ def test_fuzz_load_case(tmp_path, name, base):
             path.write_text(dumps(doc), encoding="utf-8")
             signal.alarm(TIME_LIMIT)
             try:
-                load_case(str(path))
+                expand(load_case(str(path)))
                 counts["accepted"] += 1
             except InputError as e:
                 counts["rejected"] += 1
@@ -409,7 +411,7 @@ def test_former_gaps_rejected(tmp_path, name, make):
     signal.alarm(TIME_LIMIT)
     try:
         with pytest.raises(InputError):
-            load_case(str(path))
+            expand(load_case(str(path)))
     except _Timeout:
         pytest.fail(f"{name}: load_case took more than {TIME_LIMIT} s")
     finally:

@@ -15,6 +15,7 @@ from fem_blocks.bodies import BlockType, DeformableBody, Material, RigidBody
 from fem_blocks.case import load_case, parse_case
 from fem_blocks.contact.step import ContactOptions, ContactStep, InterfaceSpec
 from fem_blocks.dynamics import Simulation
+from fem_blocks.expand import expand
 from fem_blocks.meshing import mesh_rectangle
 from fem_blocks.model import build_model
 from fem_blocks.output.history import read_history
@@ -73,7 +74,7 @@ def test_foundation_overhang_split_and_settlement(tmp_path):
     under the wall, top face at the wall's base; the settling part follows its history exactly, the other stays."""
     p = tmp_path / "settle.toml"
     p.write_text(SETTLE)
-    case = load_case(str(p))
+    case = expand(load_case(str(p)))
     rigid = {r.name: np.asarray(r.vertices) for r in case.rigid_bodies}
     assert sorted(rigid) == ["foundation0", "foundation1"]
     f0, f1 = rigid["foundation0"], rigid["foundation1"]
@@ -102,7 +103,7 @@ def test_dome_pier_group_names_the_piers():
         itf["between"] = ["supports" if g == old else g for g in itf["between"]]
         if itf.get("candidate") == old:
             itf["candidate"] = "supports"
-    case = parse_case(data, path)
+    case = expand(parse_case(data, path))
     piers = [r for r in case.rigid_bodies if r.group == "supports"]
     assert len(piers) >= 1 and not [r for r in case.rigid_bodies if r.group == old]
     assert any("supports" in i.groups for i in case.interfaces)

@@ -158,7 +158,10 @@ def test_cohesive_case_writes_law_state_to_paraview_and_checkpoint(tmp_path):
 def test_arch_case_stands_under_gravity(tmp_path):
     """[arch] builder: 15 voussoirs of one block type (rotated instances) on rigid piers; t/R = 0.26 stands."""
     from fem_blocks.case import load_case
+    from fem_blocks.expand import expand
     c = load_case(os.path.join(ROOT, "demos", "arch.toml"))
+    assert c.blocks == [] and c.rigid_bodies == [] and len(c.generators) == 1  # parsed: the [arch] as given
+    c = expand(c)
     assert len(c.blocks) == 15 and len(c.block_types) == 1 and [r.name for r in c.rigid_bodies] == ["pier0", "pier1"]
     assert len({b.angle for b in c.blocks}) == 15
     out = tmp_path / "arch"

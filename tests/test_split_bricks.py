@@ -8,6 +8,7 @@ import pytest
 
 from fem_blocks import builders
 from fem_blocks.case import load_case
+from fem_blocks.expand import expand
 from fem_blocks.errors import InputError
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -87,7 +88,7 @@ def test_crack_contacts_take_the_crack_law_and_statics_hold(tmp_path):
     from fem_blocks.runner import run_case
     case_path = tmp_path / "c.toml"
     case_path.write_text(CASE)
-    case = load_case(str(case_path))
+    case = expand(load_case(str(case_path)))  # the bricks and their halves: expand
     s = run_case(case, str(tmp_path / "out"), progress=False)
     assert s["status"] == "completed"
     from fem_blocks.output.history import read_history
@@ -118,4 +119,4 @@ def test_split_brick_case_errors(tmp_path, change, match):
     p = tmp_path / "c.toml"
     p.write_text(CASE.replace(*change))
     with pytest.raises(InputError, match=match):
-        load_case(str(p))
+        expand(load_case(str(p)))  # the crack interface is checked on the generated blocks

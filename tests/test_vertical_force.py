@@ -9,6 +9,7 @@ import pytest
 from fem_blocks import casefile
 from fem_blocks.case import parse_case
 from fem_blocks.laws import LAW_KEYS
+from fem_blocks.expand import expand
 from fem_blocks.runner import _dof_control, _vertical_force
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -20,7 +21,7 @@ def fake_history(stage, time, ry):
 
 
 def test_blocked_vertical_dof_reports_the_reaction():
-    case = parse_case(copy.deepcopy(DEMO), "shear_wall.toml")
+    case = expand(parse_case(copy.deepcopy(DEMO), "shear_wall.toml"))
     hist = fake_history([0, 0, 1, 1], [0.15, 0.4, 0.5, 0.9], [0.0, 0.0, -41234.5, -81234.5])
     # pre-compression: y free under the ramp 0 -> -29.7 kN over [0, 0.3] s (applied force, reaction column 0)
     assert _vertical_force(case, hist, "beam", 0) == pytest.approx(-14.85, rel=1e-12)
@@ -39,7 +40,7 @@ def test_free_vertical_dof_reports_the_held_force():
                            "drivers": {"beam": {"y": {"kind": "velocity", "history": 0.0}}}})
     data["stages"].append({"name": "freed", "duration": 0.1, "h": 0.01, "theta": 1.0,
                            "drivers": {"beam": {"y": "free"}}})
-    case = parse_case(data, "variant.toml")
+    case = expand(parse_case(data, "variant.toml"))
     hist = fake_history([1, 2, 3, 4], [0.9, 1.45, 1.55, 1.65], [0.0, 0.0, -12345.0, 0.0])
     assert _dof_control(case, "beam", "y", 1)[0] == "force"
     assert _vertical_force(case, hist, "beam", 0) == pytest.approx(-29.7, rel=1e-12)   # held after the ramp
