@@ -59,7 +59,7 @@ def main(out_dir: str, quick: bool = False, argv=None) -> dict:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from fem_blocks.output.contacts import ContactsWriter3D
+    from fem_blocks.output.contacts import ContactsWriter
     from fem_blocks.output.figures import write_blocks_3d
     from fem_blocks.output.history import HistoryWriter
     from fem_blocks.output.paraview import BodiesWriter3D
@@ -76,7 +76,7 @@ def main(out_dir: str, quick: bool = False, argv=None) -> dict:
     weight = sum(b.type.M.diagonal().sum() / 3 for b in bricks) * G
     alpha_tip, alpha_slide = math.atan(T / H), math.atan(MU)
     pv = os.path.join(out_dir, "paraview")
-    bw, cw = BodiesWriter3D(sim, pv), ContactsWriter3D(pv)
+    bw, cw = BodiesWriter3D(sim, pv), ContactsWriter(pv, 3)
     cols = ["step", "time", "tilt_deg", "top_uy", "top_uz", "base_N", "base_T", "base_T_over_N", "tan_tilt",
             "resultant_y_over_t", "base_contacts_closed", "sweeps"]
     hist = HistoryWriter(os.path.join(out_dir, "history.csv"), cols, flush_every=50)
@@ -90,7 +90,8 @@ def main(out_dir: str, quick: bool = False, argv=None) -> dict:
         if not info.contact["converged"]:
             print(f"wall3d_tilt: step {k}: NLGS not converged (residual {info.contact['residual']:.2g})",
                   file=sys.stderr)
-        cs, r = cst.cs, cst.r
+        res = sim.last_contact  # the step's contact record (contact/result.py)
+        cs, r = res.cs, res.r
         on_base = cs.ant_body == len(bricks)
         F = r[:, :1] * cs.n + r[:, 1:2] * cs.t + r[:, 2:] * cs.s  # force of the antagonist on the candidate
         Fb = F[on_base].sum(axis=0)  # base on the wall
@@ -105,7 +106,7 @@ def main(out_dir: str, quick: bool = False, argv=None) -> dict:
         collapsed = -uy > THRESHOLD * T
         if k % every == 0 or collapsed:
             bw.write(sim.time)
-            cw.write(sim.time, cs, r, cst.law, cst.state, cst.status)
+            cw.write(sim.time, res)
             n_frames += 1
         if collapsed:
             break
