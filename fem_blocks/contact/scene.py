@@ -22,7 +22,7 @@ class ContactScene:
         bodies = sim.bodies
         nb = len(bodies)
         self.nb = nb
-        d = self.dim = getattr(sim, "dim", 2)
+        d = self.dim = sim.dim
         self.rigid_ndof = 3 if d == 2 else 6
         self.kind = np.array([b.kind for b in bodies], dtype=np.int64)
         self.rot = np.zeros((nb, d, d))

@@ -306,7 +306,7 @@ class ContactStep:
         return np.array([itf.reference == "as_built" for itf in self.interfaces], dtype=bool)
 
     def _setup(self, sim):
-        self.dim = getattr(sim, "dim", 2)
+        self.dim = sim.dim
         self._det, self._kin = (det, kin) if self.dim == 2 else (det3, kin3)
         self._cs_cls = det.ContactSet if self.dim == 2 else det3.ContactSet3D
         self._g_cls = kin.GBlocks if self.dim == 2 else kin3.GBlocks3D

@@ -24,12 +24,12 @@ def _loop(edges: np.ndarray) -> np.ndarray:
 
 
 def body_outlines(sim, amplification: float):
-    polys = []
+    polys, loops = [], {}  # boundary loop per block type (computed once per call, not cached on the type)
     for b in sim.bodies:
         if b.kind == 0:
-            loop = getattr(b.type, "_outline_loop", None)
+            loop = loops.get(id(b.type))
             if loop is None:
-                loop = b.type._outline_loop = _loop(b.type.mesh.boundary_edges)
+                loop = loops[id(b.type)] = _loop(b.type.mesh.boundary_edges)
             X = b.reference_points[loop]
             D = b.displacement_global()[loop]
             polys.append(X + amplification * D)
