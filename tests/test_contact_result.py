@@ -128,3 +128,20 @@ def test_history_in_memory_equals_the_file(tmp_path):
     mem = w2.columns_dict()
     assert list(mem["step"]) == [0, 1, 2] and mem["x"][2] == 7.0
     same(mem, read_history(p))
+
+
+def test_record_of_a_step_without_contacts():
+    """No contact detected (a block 1 m above the floor): the record still carries the (empty) law state, so the
+    summary's dissipated energy is 0 rather than missing, no correction for the group, and zero rigid impulses."""
+    bt = BlockType(mesh_rectangle(0.4, 0.2, 0.1), Material(E=1e9, nu=0.2, rho=1000.0, thickness=1.0))
+    blk = DeformableBody(bt, position=(0.0, 1.0))
+    floor = RigidBody(np.array([[-1.0, -0.5], [2.0, -0.5], [2.0, 0.0], [-1.0, 0.0]]),
+                      drivers={k: Driver("velocity", 0.0) for k in ("x", "y", "rz")})
+    cst = ContactStep([InterfaceSpec("i", ("block", "ground"), mu=0.5)], ["block", "ground"])
+    sim = Simulation([blk, floor], h=1e-3, theta=0.5, contact=cst)
+    info = sim.step()
+    res = sim.last_contact
+    assert info.contact["contacts"] == 0 and info.contact["solver"] == "none"
+    assert res.state is not None and res.state.shape[0] == 0 and float(res.state.sum()) == 0.0
+    assert res.group_corr == [None] and not res.has_contacts()
+    assert res.rigid_impulse.shape == (1, 3) and not np.any(res.rigid_impulse)

@@ -403,8 +403,9 @@ class ContactStep:
         if nc == 0:
             gc, rc, ri = s.corrections(np.zeros(s.n_udof))
             return ContactResult(d, dict(contacts=0, active=0, sweeps=0, change=0.0, residual=0.0, converged=True,
-                                         solver="none", message="no contact"), cs=cs,
-                                 group_corr=gc, rigid_corr=rc, rigid_impulse=ri)
+                                         solver="none", message="no contact"), cs=cs, P=self.P.copy(),
+                                 law=self.law.copy(), state=self.state.copy(), group_corr=gc, rigid_corr=rc,
+                                 rigid_impulse=ri)
         ufree = s.gather("ufree")
         K = self._kin
         vfree = K.local_velocity(self.G, ufree, s.U_offset)
