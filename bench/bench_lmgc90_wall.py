@@ -74,7 +74,7 @@ def main(steps=2000, placement=None, history=None):
     t_out = 0.0
     c = time.perf_counter()
     pv = BodiesWriter(sim, tmp.name)  # ParaView output every 100 steps (blocks with stresses, contact points)
-    pc = ContactsWriter(cs, tmp.name)
+    pc = ContactsWriter(tmp.name, 2, locate=cs.contact_points)
     t_out += time.perf_counter() - c
     for k in range(1, steps):
         info = sim.step()
@@ -85,7 +85,7 @@ def main(steps=2000, placement=None, history=None):
         if k % 100 == 0 or k == steps - 1:
             c = time.perf_counter()
             pv.write(sim.time)
-            pc.write(sim.time)
+            pc.write(sim.time, sim.last_contact)
             t_out += time.perf_counter() - c
     wall = time.perf_counter() - t1
     frames = pv.frame

@@ -1,4 +1,5 @@
 """3D tilting table: a dry running-bond wall of deformable bricks on a rigid base tilted about the wall's long axis until it overturns; tilt at collapse vs tan(alpha) = t/H."""
+import dataclasses
 import math
 import os
 import sys
@@ -59,7 +60,7 @@ def main(out_dir: str, quick: bool = False, argv=None) -> dict:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from fem_blocks.output.contacts import ContactsWriter3D
+    from fem_blocks.output.contacts import ContactsWriter
     from fem_blocks.output.figures import write_blocks_3d
     from fem_blocks.output.history import HistoryWriter
     from fem_blocks.output.paraview import BodiesWriter3D
@@ -76,7 +77,7 @@ def main(out_dir: str, quick: bool = False, argv=None) -> dict:
     weight = sum(b.type.M.diagonal().sum() / 3 for b in bricks) * G
     alpha_tip, alpha_slide = math.atan(T / H), math.atan(MU)
     pv = os.path.join(out_dir, "paraview")
-    bw, cw = BodiesWriter3D(sim, pv), ContactsWriter3D(pv)
+    bw, cw = BodiesWriter3D(sim, pv), ContactsWriter(pv, 3)
     cols = ["step", "time", "tilt_deg", "top_uy", "top_uz", "base_N", "base_T", "base_T_over_N", "tan_tilt",
             "resultant_y_over_t", "base_contacts_closed", "sweeps"]
     hist = HistoryWriter(os.path.join(out_dir, "history.csv"), cols, flush_every=50)
@@ -90,7 +91,8 @@ def main(out_dir: str, quick: bool = False, argv=None) -> dict:
         if not info.contact["converged"]:
             print(f"wall3d_tilt: step {k}: NLGS not converged (residual {info.contact['residual']:.2g})",
                   file=sys.stderr)
-        cs, r = cst.cs, cst.r
+        res = sim.last_contact  # the step's contact record (contact/result.py)
+        cs, r = res.cs, res.r
         on_base = cs.ant_body == len(bricks)
         F = r[:, :1] * cs.n + r[:, 1:2] * cs.t + r[:, 2:] * cs.s  # force of the antagonist on the candidate
         Fb = F[on_base].sum(axis=0)  # base on the wall
@@ -105,7 +107,9 @@ def main(out_dir: str, quick: bool = False, argv=None) -> dict:
         collapsed = -uy > THRESHOLD * T
         if k % every == 0 or collapsed:
             bw.write(sim.time)
-            cw.write(sim.time, cs, r, cst.law, cst.state, cst.status)
+            # gap field: the contact set's g - g0, as this demo has always written (gt_end=None); the runner
+            # writes the end-of-step gap result.gt_end
+            cw.write(sim.time, dataclasses.replace(res, gt_end=None))
             n_frames += 1
         if collapsed:
             break

@@ -8,8 +8,8 @@ Per step [t_i, t_{i+1}], for every deformable body (type frame, clamped dofs eli
 
 one back-substitution per body, batched over all instances sharing a step operator (one
 multi-right-hand-side solve per block type). Rigid bodies: u_free = u_i + h M^-1 F_theta on free
-dofs, the prescribed velocity on driven dofs. Contacts (if any) add u_{i+1} = u_free + W H (h r);
-then
+dofs, the prescribed velocity on driven dofs. Contacts (if any) add u_{i+1} = u_free + W H (h r), the
+corrections of the ContactResult that the contact step returns (group_corr, rigid_corr; applied here); then
 
     q_{i+1} = q_i + h [(1-theta) u_i + theta u_{i+1}].
 
@@ -100,8 +100,9 @@ class Simulation:
 
     Parameters: bodies (DeformableBody / RigidBody in 2D, DeformableBody3D / RigidBody3D in 3D), h,
     theta in [0.5, 1], gravity vector (default (0, -9.81) in 2D, (0, 0, -9.81) in 3D), velocity_reset
-    (quasi-static), contact: an optional object with `solve(sim, t0, t1)` that returns the contact
-    impulse contribution (see contact/step.py ContactStep).
+    (quasi-static), contact: an optional object with `solve(sim, t0, t1)` that returns a
+    contact.result.ContactResult (contact/step.py ContactStep); `step` applies its velocity corrections and keeps
+    it as `last_contact`.
     """
 
     def __init__(self, bodies, h: float, theta: float = 0.5, gravity=None,
@@ -129,6 +130,7 @@ class Simulation:
         self.driver_work = 0.0  # work of the drivers on driven rigid dofs: sum R_drv . dq
         self.inertia_work = 0.0  # work of the inertia forces in the last step (W_I, module docstring)
         self.contact = contact
+        self.last_contact = None  # ContactResult of the last step (contact/result.py), read by writers and checks
         self.deformable = [i for i, b in enumerate(self.bodies) if b.kind == 0]
         self.rigid = [i for i, b in enumerate(self.bodies) if b.kind == 1]
         self.h, self.theta, self.static = None, None, False
@@ -252,12 +254,13 @@ class Simulation:
         h, th = self.h, self.theta
         t0, t1 = self.time, self.time + h
         self.free_velocities(t0, t1)
-        cinfo = {}
+        res = None
         if self.contact is not None:
-            cinfo = self.contact.solve(self, t0, t1)  # sets gr.Ucorr / body.ucorr (W H h r)
+            res = self.contact.solve(self, t0, t1)  # ContactResult: corrections W H (h r), impulses, ...
+        gcorr = res.group_corr if res is not None else [None] * len(self.groups)
         work = wdrv = winert = dmax = 0.0
-        for gr in self.groups:
-            Unew = gr.Ufree if getattr(gr, "Ucorr", None) is None else gr.Ufree + gr.Ucorr
+        for gr, Ucorr in zip(self.groups, gcorr):
+            Unew = gr.Ufree if Ucorr is None else gr.Ufree + Ucorr
             dQ = h * ((1 - th) * gr.U + th * Unew)
             dmax = max(dmax, float(np.max(np.abs(dQ), initial=0.0)))
             if not self.static:
@@ -265,13 +268,11 @@ class Simulation:
             work += float(np.sum(gr.Ftheta * dQ) - np.sum(gr.Fg * dQ))
             gr.Q += dQ
             gr.U[:] = Unew
-            gr.Ucorr = None
         drv_moves = []
-        for i in self.rigid:
+        for k, i in enumerate(self.rigid):
             b = self.bodies[i]
-            unew = b.ufree if getattr(b, "ucorr", None) is None else b.ufree + b.ucorr
-            imp = getattr(b, "contact_impulse", None)
-            cimp = np.zeros(self.rigid_ndof) if imp is None else imp
+            unew = b.ufree if res is None else b.ufree + res.rigid_corr[k]
+            cimp = np.zeros(self.rigid_ndof) if res is None else res.rigid_impulse[k]
             inert = np.zeros(self.rigid_ndof) if self.static else self._rigid_mass_times(b, unew - b.u) / h
             react = inert - b.Ftheta - cimp / h
             b.reaction = np.where(b.driven, react, 0.0)
@@ -285,12 +286,13 @@ class Simulation:
             wdrv += float(np.dot(b.reaction, dq))
             self._move_rigid(b, dq, t1)
             b.u[:] = unew
-            b.ucorr, b.contact_impulse = None, None
         self._attribute_inertia(winert, drv_moves, dmax)
         self.time, self.step_count = t1, self.step_count + 1
         self.external_work += work
         self.driver_work += wdrv
-        return self.info(cinfo)
+        if res is not None:
+            self.last_contact = res
+        return self.info(res.stats if res is not None else {})
 
     def _dof_lengths(self, b) -> np.ndarray:
         """Length per dof of a rigid body that turns a dof increment into a displacement: 1 for translations, the
@@ -324,10 +326,14 @@ class Simulation:
                 d[f"sim.body{i}.reaction"] = np.array(b.reaction)
                 if self.dim == 3:
                     d[f"sim.body{i}.orientation"] = np.array(b.orientation)
+        if self.last_contact is not None:
+            d.update(self.last_contact.export())
         return d
 
     def restore_state(self, d: dict) -> None:
-        """Inverse of `export_state` (in place: the groups' arrays keep their identity)."""
+        """Inverse of `export_state` (in place: the groups' arrays keep their identity); with a contact step and its
+        arrays in `d` (ContactStep.export_state), restores it too and keeps the record it returns as
+        `last_contact`."""
         for i, b in enumerate(self.bodies):
             rigid = ("reaction",) + (("orientation",) if self.dim == 3 else ()) if b.kind == 1 else ()
             for name in ("q", "u") + rigid:
@@ -340,6 +346,8 @@ class Simulation:
         self.step_count = int(d["sim.step"])
         self.external_work = float(d["sim.external_work"])
         self.driver_work = float(d["sim.driver_work"])
+        if self.contact is not None and "contact.steps" in d:
+            self.last_contact = self.contact.restore_state(self, d)
 
     # -------------------------------------------------------------- diagnostics
     def energies(self):

@@ -20,7 +20,7 @@ from .expand import expand
 from .model import Model, build_model
 from .output.history import HistoryWriter
 from .output.checkpoint import write_checkpoint
-from .output.contacts import ContactsWriter, ContactsWriter3D
+from .output.contacts import ContactsWriter
 from .output.paraview import BodiesWriter, BodiesWriter3D
 from .output.summary import write_summary
 
@@ -300,6 +300,8 @@ class _Guards:
         self.max_pen = case.checks.get("max_penetration")
         self.growth = case.checks.get("max_energy_growth", 10.0)
         self.model = model
+        self.alert = (np.array([itf.alert for itf in model.contact.interfaces], dtype=float)
+                      if model.contact is not None else None)  # per interface (detection.build_table)
         self.max_ratio = 0.0  # largest (E - E_0 - W) / scale seen: > 0 means energy created (unconverged solves)
 
     def check(self, sim: Simulation, info, e0: tuple) -> str | None:
@@ -308,18 +310,18 @@ class _Guards:
                 a = getattr(b, name)
                 if not np.all(np.isfinite(a)):
                     return f"{'displacement' if name == 'q' else 'velocity'} of body {self.names[i]!r} is NaN/Inf"
-        c = self.model.contact
-        if c is not None and c.cs is not None and len(c.cs.gap) and getattr(c, "P", None) is not None:
+        c = sim.last_contact  # the record of the step (contact/result.py)
+        if c is not None and c.cs is not None and len(c.cs.gap) and c.P is not None:
             if not np.all(np.isfinite(c.P)):
                 a = int(np.flatnonzero(~np.isfinite(c.P).all(axis=1))[0])
                 return f"contact impulse at contact {a} (bodies {self._pair(c, a)}) is NaN/Inf"
-            gt = getattr(c, "gt_end", None)
+            gt = c.gt_end
             if gt is not None and len(gt) == len(c.cs.gap):
                 from .laws import ELASTIC, MIXED
                 compliant = (c.law == ELASTIC) | (c.law == MIXED)
                 pen = np.where(compliant, -(gt + c.cs.g0), -gt)
                 lim = (np.full(len(gt), self.max_pen) if self.max_pen is not None
-                       else c.table.alert[c.cs.interface])
+                       else self.alert[c.cs.interface])
                 bad = pen > lim
                 if np.any(bad):
                     a = int(np.argmax(np.where(bad, pen / lim, -np.inf)))
@@ -362,9 +364,7 @@ def _run_arrays(run: dict) -> dict:
 
 
 def _restore(sim: Simulation, model: Model, d: dict) -> None:
-    sim.restore_state(d)
-    if model.contact is not None:
-        model.contact.restore_state(sim, d)
+    sim.restore_state(d)  # with the contact step's arrays: restores it too (Simulation.restore_state)
 
 
 def _step(sim: Simulation, model: Model, run: dict, policy: str, max_level: int, make_row, write_row) -> tuple:
@@ -451,21 +451,20 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
     Bodies = BodiesWriter if case.dimension == 2 else BodiesWriter3D
     pv = Bodies(sim, pdir, stress=case.output["stress"], append=resume, keep_until_time=t_resume) \
         if case.output["paraview"] else None
-    if case.dimension == 2:
-        pc = ContactsWriter(model.contact, pdir, append=resume, keep_until_time=t_resume) \
-            if case.output["paraview"] and model.contact is not None else None
-    else:
-        pc = ContactsWriter3D(pdir, append=resume, keep_until_time=t_resume, contact=model.contact) \
-            if case.output["paraview"] and model.contact is not None else None
+    pc = ContactsWriter(pdir, case.dimension, locate=model.contact.contact_points if case.dimension == 2 else None,
+                        append=resume, keep_until_time=t_resume) \
+        if case.output["paraview"] and model.contact is not None else None
     ckpt_every = case.output.get("checkpoint_every", 0)
     cv = case.output.get("curve")
     curve_body = model.bodies[model.index(cv["body"])] if cv else None
     cols = history_columns(model)
     hpath = os.path.join(out_dir, "history.csv")
     if ck is not None and os.path.exists(hpath):
-        hist = HistoryWriter.resume(hpath, int(ck["sim.step"]), columns=cols, flush_every=50)
+        # the rows before the checkpoint: read once from the file the run wrote (cut back to the checkpoint's
+        # step), rather than copied into every checkpoint
+        hist = HistoryWriter.resume(hpath, int(ck["sim.step"]), columns=cols, flush_every=50, keep=True)
     else:
-        hist = HistoryWriter(hpath, cols, flush_every=50)
+        hist = HistoryWriter(hpath, cols, flush_every=50, keep=True)  # keep=True: figures from memory
     cstats = run["cstats"]
     names = list(model.names)
     guards = _Guards(case, model, names)
@@ -476,7 +475,7 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
         if pv:
             pv.write(sim.time)
         if pc:
-            pc.write(sim.time)
+            pc.write(sim.time, sim.last_contact)
         run["frames"] = 1
         run["e0"] = (info.kinetic, info.elastic, info.gravity_potential)
 
@@ -493,7 +492,7 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
         summary["warnings"] = start_warnings + [w for s in run["stages_done"] for w in s.get("warnings", [])]
         summary["convergence"] = conv
         summary["exit_status"] = conv["exit_status"] if code is None else code
-        summary.update(_figures(case, sim, model, out_dir, conv))
+        summary.update(_figures(case, sim, model, out_dir, hist.columns_dict(), conv))
         write_summary(os.path.join(out_dir, "summary.json"), summary)
         return summary
 
@@ -560,7 +559,7 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
                         if pv:
                             pv.write(sim.time)
                             if pc:
-                                pc.write(sim.time)
+                                pc.write(sim.time, sim.last_contact)
                         checkpoint(good)
                         raise RunStopped(f"stage {st.name!r}, step {k} (t = {sim.time:.6g} s): {failure}. Outputs "
                                          f"so far are in {out_dir}; the checkpoint holds the last good step "
@@ -585,7 +584,7 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
                     if pv and (k % st.output_every == 0 or last or interrupted):
                         pv.write(sim.time)
                         if pc:
-                            pc.write(sim.time)
+                            pc.write(sim.time, sim.last_contact)
                         run["frames"] += 1
                     extra = f" sweeps {c['sweeps']}" if c else ""
                     if level:
@@ -611,7 +610,7 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
                                                        **({"warnings": cut} if cut else {})))
                         run["stage_done"] = True
                         hist.flush()
-                        _inertia_report(run["stages_done"][-1], hpath, si, st)
+                        _inertia_report(run["stages_done"][-1], hist.columns_dict(), si, st)
                         if n_unconv:
                             print(_stage_warning(st, stage_bad), file=sys.stderr)
                     if last or interrupted or (ckpt_every and sim.step_count % ckpt_every == 0):
@@ -667,11 +666,10 @@ def inertia_shares(hist: dict, stage: int) -> dict:
     return out
 
 
-def _inertia_report(done: dict, hpath: str, si: int, st) -> None:
-    """Adds `inertia_share` (inertia_shares) to the stage's summary entry; warns in quasi-static stages
-    (velocity_reset) when a share exceeds INERTIA_WARN."""
-    from .output.history import read_history
-    shares = inertia_shares(read_history(hpath), si)
+def _inertia_report(done: dict, hist: dict, si: int, st) -> None:
+    """Adds `inertia_share` (inertia_shares of the run's history columns `hist`) to the stage's summary entry; warns
+    in quasi-static stages (velocity_reset) when a share exceeds INERTIA_WARN."""
+    shares = inertia_shares(hist, si)
     done["inertia_share"] = shares
     if not st.velocity_reset:
         return
@@ -707,9 +705,10 @@ def _summary(case, model, sim, info, run, t_start, t_setup, pv, pc, status) -> d
                    outputs=dict(paraview=os.path.join("paraview", "blocks.pvd") if pv else None,
                                 contacts=os.path.join("paraview", "contacts.pvd") if pc else None,
                                 history="history.csv", checkpoint="checkpoint.npz"))
-    if model.contact is not None and getattr(model.contact, "state", None) is not None:
+    res = sim.last_contact
+    if model.contact is not None and res is not None and res.state is not None:
         from .laws import S_DISS
-        summary["dissipated_energy_J"] = float(model.contact.state[:, S_DISS].sum())
+        summary["dissipated_energy_J"] = float(res.state[:, S_DISS].sum())
     return summary
 
 
@@ -745,22 +744,22 @@ def _unit_key(unit: str) -> str:
     return {"kN·m": "kNm"}.get(unit, unit)
 
 
-def _figures(case, sim, model, out_dir, conv=None) -> dict:
+def _figures(case, sim, model, out_dir, hist: dict, conv=None) -> dict:
     """force_displacement.png and crack_pattern.png, and the curve's peak figures for summary.json (keys named
-    with their unit: translations mm / forces kN, rotations rad / moments kN·m; figures.dof_unit)."""
+    with their unit: translations mm / forces kN, rotations rad / moments kN·m; figures.dof_unit). `hist`: the
+    run's history columns (HistoryWriter.columns_dict: the rows of history.csv, kept in memory)."""
     from .output.figures import curve_data, dof_unit, write_crack_pattern, write_curve
-    from .output.history import read_history
     out = {}
     if case.dimension == 3:  # deformed blocks, off-screen (pyvista when installed, else matplotlib)
         from .output.figures import write_blocks_3d
         write_blocks_3d(os.path.join(out_dir, "blocks.png"), sim, title=case.name, backend="auto")
         out["blocks_png"] = "blocks.png"
     elif case.output.get("crack_pattern", True) and any(b.kind == 0 for b in model.bodies):
-        write_crack_pattern(os.path.join(out_dir, "crack_pattern.png"), sim, model.contact, title=case.name)
+        write_crack_pattern(os.path.join(out_dir, "crack_pattern.png"), sim, sim.last_contact, model.contact,
+                            title=case.name)
         out["crack_pattern"] = "crack_pattern.png"
     cv = case.output.get("curve")
     if cv:
-        hist = read_history(os.path.join(out_dir, "history.csv"))
         body, fk, dk = cv["body"], f"R{cv['force']}", f"u{cv['displacement']}"
         if f"{body}.{fk}" not in hist:
             return out

@@ -41,7 +41,7 @@ def test_crushing_at_the_cap_then_no_spring_back(solver):
         sim.step()
     # each step (velocity reset, θ = 1): v = -h (F - f_c A)/m, Δq = h v
     q = -n * h * h * (F - FC * A) / M
-    assert cs.r[0, 0] == pytest.approx(FC * A, rel=1e-10)
+    assert sim.last_contact.r[0, 0] == pytest.approx(FC * A, rel=1e-10)
     assert blk.q[1] == pytest.approx(q, rel=1e-9)
     assert cs.state[0, S_UP] == pytest.approx(q, rel=1e-9)            # the surface moved with the block
     assert cs.state[0, S_DISS] == pytest.approx(FC * A * abs(q), rel=1e-9)
@@ -50,7 +50,7 @@ def test_crushing_at_the_cap_then_no_spring_back(solver):
     for _ in range(4):
         sim.step()
     assert blk.q[1] == pytest.approx(q, rel=1e-9, abs=1e-15)
-    assert cs.r[0, 0] == pytest.approx(0.5 * FC * A, rel=1e-10)
+    assert sim.last_contact.r[0, 0] == pytest.approx(0.5 * FC * A, rel=1e-10)
     assert cs.state[0, S_UP] == pytest.approx(q, rel=1e-9)
 
 
@@ -60,8 +60,8 @@ def test_friction_at_the_cap_is_bounded_by_mu_fc_A(solver):
     blk, cs, sim = pressed("coulomb", dict(mu=mu), solver, fx=0.5 * FC * A)  # 0.5 f_c A > μ f_c A: slides
     for _ in range(3):
         sim.step()
-    assert cs.r[0, 0] == pytest.approx(FC * A, rel=1e-10)
-    assert abs(cs.r[0, 1]) == pytest.approx(mu * FC * A, rel=1e-10)
+    assert sim.last_contact.r[0, 0] == pytest.approx(FC * A, rel=1e-10)
+    assert abs(sim.last_contact.r[0, 1]) == pytest.approx(mu * FC * A, rel=1e-10)
     assert blk.u[0] > 0
 
 
@@ -73,7 +73,7 @@ def test_cap_on_a_compliant_joint(solver):
     blk, cs, sim = pressed("elastic", dict(c_N=cN, c_T=cN, mu=0.5), solver)
     for _ in range(6):
         sim.step()
-    assert cs.r[0, 0] == pytest.approx(FC * A, rel=1e-9)
+    assert sim.last_contact.r[0, 0] == pytest.approx(FC * A, rel=1e-9)
     assert cs.state[0, S_UN] == pytest.approx(-FC / cN, rel=1e-6)
     assert cs.state[0, S_UP] < 0 and blk.q[1] == pytest.approx(cs.state[0, S_UP] - FC / cN, rel=1e-6)
 
@@ -100,13 +100,13 @@ def test_softening_cap_follows_the_exponential_law(solver):
         f = FC * np.exp(-FC * abs(q) / G)
         dq = -h * h * (F - f * A) / M
         sim.step()
-        assert cs.r[0, 0] == pytest.approx(f * A, rel=1e-10)
+        assert sim.last_contact.r[0, 0] == pytest.approx(f * A, rel=1e-10)
         q += dq
         diss += f * A * abs(dq)
         assert blk.q[1] == pytest.approx(q, rel=1e-9)
         assert cs.state[0, S_UP] == pytest.approx(q, rel=1e-9)
         assert cs.state[0, S_DISS] == pytest.approx(diss, rel=1e-9)
-    assert cs.r[0, 0] < 0.2 * FC * A  # softened well below the initial cap
+    assert sim.last_contact.r[0, 0] < 0.2 * FC * A  # softened well below the initial cap
 
 
 def test_softening_cap_dissipates_G_fc():

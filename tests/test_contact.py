@@ -115,14 +115,14 @@ def test_stack_reactions_equal_weight_above():
     for _ in range(20):
         info = sim.step()
     assert info.contact["converged"]
-    c, r = cs.cs, cs.r
+    c, r = sim.last_contact.cs, sim.last_contact.r
     for j in range(n):
         below = n if j == 0 else j - 1  # the floor is body n
         sel = ((c.cand_body == j) & (c.ant_body == below)) | ((c.cand_body == below) & (c.ant_body == j))
         assert sel.sum() > 0
         assert r[sel, 0].sum() == pytest.approx((n - j) * m * G, rel=1e-6)
     assert floor.reaction[1] == pytest.approx(n * m * G, rel=1e-6)
-    assert cs.gt_end.min() > -1e-9
+    assert sim.last_contact.gt_end.min() > -1e-9
 
 
 def test_murette_running_bond_equilibrium():
@@ -146,7 +146,7 @@ def test_murette_running_bond_equilibrium():
         info = sim.step()
     weight = sum(mat.rho * b.length * b.height * mat.thickness for b in blocks) * G
     assert floor.reaction[1] == pytest.approx(weight, rel=1e-6)
-    c, r = cs.cs, cs.r
+    c, r = sim.last_contact.cs, sim.last_contact.r
     bed = np.abs(c.n[:, 1]) > 0.9
     for cb, ab in set(zip(c.cand_body[bed], c.ant_body[bed])):
         sel = bed & (c.cand_body == cb) & (c.ant_body == ab)
@@ -238,7 +238,7 @@ def test_updated_geometry_follows_large_sliding():
     assert blk.center[0] > 0.3 + L / 2 + 0.05  # fully on the second slab
     assert s2.reaction[1] == pytest.approx(weight, rel=1e-6)
     assert abs(s1.reaction[1]) < 1e-9 * weight
-    assert cs.gt_end.min() > -1e-9
+    assert sim.last_contact.gt_end.min() > -1e-9
 
 
 def test_residual_criterion_in_time_stepping():

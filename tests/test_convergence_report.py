@@ -245,14 +245,14 @@ def test_summary_keys_of_a_rotation_curve(tmp_path):
     from fem_blocks.runner import _figures
     h = _history()
     cols = list(h)
-    with HistoryWriter(tmp_path / "history.csv", cols) as w:
+    with HistoryWriter(tmp_path / "history.csv", cols, keep=True) as w:
         for i in range(4):
             w.write({c: h[c][i] for c in cols})
     case = SimpleNamespace(dimension=2, name="rot", output={"crack_pattern": False,
                                                              "curve": dict(body="beam", force="rz", displacement="rz")})
     model = SimpleNamespace(bodies=[])
     conv = dict(unconverged_steps=1, accepted=False, worst_residual=2.5, worst_step=1, worst_time=0.1)
-    out = _figures(case, None, model, str(tmp_path), conv)
+    out = _figures(case, None, model, str(tmp_path), w.columns_dict(), conv)
     assert out["peak_moment_kNm"] == pytest.approx(1.5, rel=1e-15)  # |Rrz| max at row 1
     assert out["rotation_at_peak_rad"] == pytest.approx(0.2, rel=1e-15)
     assert "peak_force_kN" not in out and "displacement_at_peak_mm" not in out

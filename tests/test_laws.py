@@ -303,8 +303,8 @@ def test_compliant_joint_in_compression(law, params):
         sim.step()
     kn = params.get("c_N", params.get("k_n"))
     assert blk.q[1] == pytest.approx(-F / (kn * A), rel=1e-10)
-    assert cs.r[0, 0] == pytest.approx(F, rel=1e-10)
-    assert cs.gt_end[0] == pytest.approx(-F / (kn * A), rel=1e-10)
+    assert sim.last_contact.r[0, 0] == pytest.approx(F, rel=1e-10)
+    assert sim.last_contact.gt_end[0] == pytest.approx(-F / (kn * A), rel=1e-10)
 
 
 def test_cohesive_residual_criterion():

@@ -12,7 +12,8 @@ from fem_blocks.contact.detection3d import ContactSet3D
 from fem_blocks.errors import InputError
 from fem_blocks.laws import BRITTLE, COULOMB, DUGDALE, ELASTIC, FREMOND, MIXED, NSTATE, S_BETA, S_DISS, S_UN, S_UP, S_UT
 from fem_blocks.meshing import mesh_box, mesh_hexahedron
-from fem_blocks.output.contacts import ContactsWriter3D
+from fem_blocks.contact.result import ContactResult
+from fem_blocks.output.contacts import ContactsWriter
 from fem_blocks.output.figures import write_blocks_3d
 from fem_blocks.output.paraview import BodiesWriter3D
 from fem_blocks.output.plots import plot_polygons_3d
@@ -129,8 +130,8 @@ def test_contacts3d_vtu_round_trip(tmp_path):
     law[:5] = MIXED
     state = rng.random((nc, NSTATE))
     status = rng.integers(0, 3, nc)
-    w = ContactsWriter3D(str(tmp_path))
-    f = w.write(1.5, cs, r, law=law, state=state, status=status)
+    w = ContactsWriter(str(tmp_path), 3)
+    f = w.write(1.5, ContactResult(3, {}, cs=cs, r=r, law=law, state=state, status=status))
     m = meshio.read(tmp_path / f)
     pd = m.point_data
     assert np.abs(m.points - cs.point).max() < 1e-15
@@ -153,7 +154,7 @@ def test_contacts3d_vtu_round_trip(tmp_path):
         assert np.array_equal(pd[k], state[:, c]), k
     assert len(m.cells) == 1 and m.cells[0].type == "vertex" and np.array_equal(m.cells[0].data.ravel(), np.arange(nc))
     # an empty contact set still gives a valid frame (meshio 5.0 cannot read an empty grid: parse the XML)
-    f0 = w.write(2.0, cs.subset(np.zeros(0, dtype=int)), np.zeros((0, 3)))
+    f0 = w.write(2.0, ContactResult(3, {}, cs=cs.subset(np.zeros(0, dtype=int)), r=np.zeros((0, 3))))
     piece = ET.parse(tmp_path / f0).getroot().find("UnstructuredGrid/Piece")
     assert piece.get("NumberOfPoints") == "0" and w.series.times == [1.5, 2.0]
 

@@ -134,7 +134,7 @@ def test_stack_of_three_deformable_blocks(geometry):
     assert info.contact["converged"]
     W = bt.M.diagonal().sum() / 3 * G  # weight of one block (M row sums: 3 m per block, one per component)
     assert abs(W / (2000.0 * 0.5 * G) - 1) < 1e-12
-    cs, r = cst.cs, cst.r
+    cs, r = sim.last_contact.cs, sim.last_contact.r
     F = r[:, :1] * cs.n + r[:, 1:2] * cs.t + r[:, 2:3] * cs.s  # global force of each contact (updated: frames
     Fz = F[:, 2]                                                # of the deformed faces, not exactly ±z)
     pair = {tuple(sorted(p)) for p in zip(cs.cand_body, cs.ant_body)}

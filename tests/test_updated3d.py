@@ -44,9 +44,9 @@ def small_wall(geometry, redetect_every=1):
     return sim, cst, found, beam
 
 
-def force_on_upper_course(cst):
+def force_on_upper_course(res):
     """Global force of the lower course (bodies 2, 3) on the upper course (bodies 4, 5, 6): the bed joint."""
-    cs, r = cst.cs, cst.r
+    cs, r = res.cs, res.r
     F = r[:, :1] * cs.n + r[:, 1:2] * cs.t + r[:, 2:3] * cs.s  # force of the antagonist on the candidate
     up_c, up_a = cs.cand_body >= 4, cs.ant_body >= 4
     lo_c, lo_a = np.isin(cs.cand_body, (2, 3)), np.isin(cs.ant_body, (2, 3))
@@ -76,7 +76,7 @@ def test_small_wall_precompression_updated_agrees_with_frozen(redetect_every):
             assert info.contact["converged"]
             counts.append(info.contact["contacts"])
         assert abs((found.reaction[2] - Wf) / Wt - 1) <= 1e-9
-        Fb = force_on_upper_course(cst)
+        Fb = force_on_upper_course(sim.last_contact)
         assert abs(Fb[2] / Wup - 1) <= 1e-9  # horizontally, it balances the beam's held dofs (locked-in friction)
         assert np.linalg.norm(Fb[:2] + beam.reaction[:2]) <= 1e-9 * Wup
         runs[geometry] = (counts, found.reaction.copy(), beam.reaction.copy())

@@ -22,7 +22,7 @@ class ContactScene:
         bodies = sim.bodies
         nb = len(bodies)
         self.nb = nb
-        d = self.dim = getattr(sim, "dim", 2)
+        d = self.dim = sim.dim
         self.rigid_ndof = 3 if d == 2 else 6
         self.kind = np.array([b.kind for b in bodies], dtype=np.int64)
         self.rot = np.zeros((nb, d, d))
@@ -171,23 +171,38 @@ class ContactScene:
             out[s:s + self.rigid_ndof] = {"ufree": b.ufree, "u": b.u, "q": b.q}[which]
         return out
 
-    def apply_impulse(self, imp: np.ndarray):
-        """Velocity correction W H (h r) from flat W-numbered impulses: one batched solve per group."""
+    def corrections(self, imp: np.ndarray):
+        """Velocity corrections W H (h r) from flat W-numbered impulses `imp`: one batched solve per group.
+
+        Returns (group_corr, rigid_corr, rigid_impulse): per group of `sim.groups` its correction (ndof, k) (clamped
+        dofs 0), or None when no impulse reaches it; per rigid body (sim.rigid order) W p and the impulse p. Writes
+        nothing into the simulation (the caller applies them)."""
+        group_corr = []
         for gr, uidx, xidx, R, C in self.groups:
             rhs = np.zeros_like(gr.U)
             rhs[gr.type.boundary_dofs, :] = imp[uidx].T
             rhs[gr.clamped, :] = 0.0
+            corr = None
             if np.any(rhs):
                 corr = gr.op.solve(rhs)
                 corr[gr.clamped, :] = 0.0
-                gr.Ucorr = corr
-            else:
-                gr.Ucorr = None
-        for i in self.rigid:
-            b = self.sim.bodies[i]
+            group_corr.append(corr)
+        nr = len(self.rigid)
+        rigid_corr = np.zeros((nr, self.rigid_ndof))
+        rigid_impulse = np.zeros((nr, self.rigid_ndof))
+        for k, i in enumerate(self.rigid):
             s = self.U_offset[i]
             p = imp[s:s + self.rigid_ndof]
-            b.contact_impulse = p.copy()
+            rigid_impulse[k] = p
             # the W of the Delassus operator (3D rigid: inertia of the orientation at assembly), so that the
             # corrected local velocities are exactly those of the contact solution
-            b.ucorr = self.rigid_W.get(i, b.W) @ p
+            rigid_corr[k] = self.rigid_W.get(i, self.sim.bodies[i].W) @ p
+        return group_corr, rigid_corr, rigid_impulse
+
+    def contact_points(self, cs, reference: bool = False) -> np.ndarray:
+        """(nc, 2) current (or reference) positions of the candidate points of a 2D contact set `cs`: the ends of
+        the candidate edge weighted by cs.cand_w."""
+        bx = self.positions(reference=reference)
+        b = cs.cand_body
+        idx = self.bx_start[b][:, None] + self.bnode_index_flat[self.bnode_offset[b][:, None] + cs.cand_nodes]
+        return cs.cand_w[:, :1] * bx[idx[:, 0]] + cs.cand_w[:, 1:] * bx[idx[:, 1]]

@@ -35,6 +35,7 @@ from . import detection as det
 from . import detection3d as det3
 from . import kinematics as kin
 from . import kinematics3d as kin3
+from .result import OUT_FIELDS, ContactResult
 from .scene import ContactScene
 
 STATUS_NAMES = ("open", "stick", "slip")
@@ -127,7 +128,9 @@ class ContactOptions:
 
 
 class ContactStep:
-    """The `contact` hook of `dynamics.Simulation` (solve / on_step_change)."""
+    """The `contact` hook of `dynamics.Simulation` (solve -> ContactResult / on_step_change). Keeps what the next
+    step needs (contact set, G, Delassus operator, warm start P, law state); reads the simulation, writes nothing
+    into it."""
 
     def __init__(self, interfaces, body_groups, options: ContactOptions | None = None, body_names=None,
                  body_parent=None):
@@ -156,7 +159,6 @@ class ContactStep:
         self._rigid_W_restored = None  # 3D resume: rigid W of the checkpoint, used at the next Delassus build
         self.n_unconverged = 0
         self.steps = 0
-        self.last = {}
         self.timers = dict(detection=0.0, delassus=0.0, nlgs=0.0, correction=0.0, local=0.0)
 
     # ------------------------------------------------------------------ set-up
@@ -304,7 +306,7 @@ class ContactStep:
         return np.array([itf.reference == "as_built" for itf in self.interfaces], dtype=bool)
 
     def _setup(self, sim):
-        self.dim = getattr(sim, "dim", 2)
+        self.dim = sim.dim
         self._det, self._kin = (det, kin) if self.dim == 2 else (det3, kin3)
         self._cs_cls = det.ContactSet if self.dim == 2 else det3.ContactSet3D
         self._g_cls = kin.GBlocks if self.dim == 2 else kin3.GBlocks3D
@@ -320,16 +322,25 @@ class ContactStep:
         self.body_thickness = (np.array([b.type.material.thickness if b.kind == 0 else b.thickness
                                          for b in sim.bodies]) if self.dim == 2 else None)
 
-    # ------------------------------------------------------------------ checkpoint
-    _OUT = ("gt_end", "v", "r", "status")
+    # ------------------------------------------------------------------ geometry queries (writers, figures)
+    def contact_points(self, cs, reference: bool = False) -> np.ndarray:
+        """(nc, 2) positions of the candidate points of 2D contact set `cs` in the current (or reference)
+        configuration of the bodies (ContactScene.contact_points)."""
+        return self.scene.contact_points(cs, reference)
 
+    def joint_lengths(self, cs) -> np.ndarray:
+        """(nc,) tributary joint length of each 2D contact: area / thickness of the candidate body [m]."""
+        return cs.area / self.body_thickness[cs.cand_body]
+
+    # ------------------------------------------------------------------ checkpoint
     @property
     def _CS(self):
         return tuple(f.name for f in dataclasses.fields(self._cs_cls))
 
     def export_state(self) -> dict:
         """Arrays that determine the rest of the run: contact set, G blocks, reference gaps, impulses (warm
-        start), law states and counters (the shuffled order's seed is `seed + steps`)."""
+        start), law states and counters (the shuffled order's seed is `seed + steps`). The last step's outputs
+        (ContactResult.export, "contact.out.*") are exported by the simulation that keeps the record."""
         d = {"contact.steps": np.int64(self.steps), "contact.n_unconverged": np.int64(self.n_unconverged)}
         if self.cs is None:
             return d
@@ -340,9 +351,6 @@ class ContactStep:
         d["contact.P"], d["contact.state"], d["contact.law"] = self.P, self.state, self.law
         if getattr(self, "gap_ref", None) is not None:
             d["contact.gap_ref"] = self.gap_ref
-        for k in self._OUT:
-            if getattr(self, k, None) is not None:
-                d[f"contact.out.{k}"] = getattr(self, k)
         if self.dim == 3 and self.scene is not None and len(self.scene.rigid) and self.scene.rigid_W:
             # 3D: the rigid W of the last Delassus assembly depends on the orientation then (frozen geometry keeps
             # it until the next rebuild), so it is part of the state
@@ -350,12 +358,14 @@ class ContactStep:
             d["contact.W_dirty"] = np.bool_(self.W_dirty)
         return d
 
-    def restore_state(self, sim, d: dict) -> None:
-        """Inverse of `export_state`, for a Simulation built from the same case."""
+    def restore_state(self, sim, d: dict) -> ContactResult | None:
+        """Inverse of `export_state`, for a Simulation built from the same case. Returns the record of the
+        checkpointed step (contact set, impulses, law state and the "contact.out.*" outputs; statistics and
+        velocity corrections are not checkpointed: they were applied), or None before the first contact step."""
         self.steps = int(d["contact.steps"])
         self.n_unconverged = int(d["contact.n_unconverged"])
         if "contact.cs.gap" not in d:
-            return
+            return None
         self._setup(sim)
         self.cs = self._cs_cls(**{k: np.array(d[f"contact.cs.{k}"]) for k in self._CS})
         if len(self.cs.cand_body) and max(self.cs.cand_body.max(), self.cs.ant_body.max()) >= self.scene.nb:
@@ -364,15 +374,18 @@ class ContactStep:
         self.G = self._g_cls(*(np.array(d[f"contact.G.{k}"]) for k in ("side_body", "side_dofs", "side_G")))
         self.P, self.state = np.array(d["contact.P"]), np.array(d["contact.state"])
         self.gap_ref = np.array(d["contact.gap_ref"]) if "contact.gap_ref" in d else None
-        for k in self._OUT:
-            if f"contact.out.{k}" in d:
-                setattr(self, k, np.array(d[f"contact.out.{k}"]))
         self.W_dirty = True  # rebuilt at the next step (new scene); 3D: with the rigid W in use at the export
         self._rigid_W_restored = (np.array(d["contact.rigid_W"]) if "contact.rigid_W" in d
                                   and not bool(d["contact.W_dirty"]) else None)
+        out = {k: np.array(d[f"contact.out.{k}"]) for k in OUT_FIELDS if f"contact.out.{k}" in d}
+        return ContactResult(self.dim, {}, cs=self.cs, P=self.P.copy(), law=self.law.copy(),
+                             state=self.state.copy(), **out)
 
     # ------------------------------------------------------------------ the step
-    def solve(self, sim, t0, t1):
+    def solve(self, sim, t0, t1) -> ContactResult:
+        """One contact step over [t0, t1] from the free velocities of `sim` (read only): detection/geometry,
+        local problem, solver, law commit. Returns the step's ContactResult (statistics, impulses, gaps, status,
+        law state, velocity corrections); the simulation applies the corrections."""
         from time import perf_counter
         from ..solver import nlgs
         tm = self.timers
@@ -383,17 +396,18 @@ class ContactStep:
         self._geometry(sim, first)
         c1 = perf_counter()
         tm["detection"] += c1 - c0  # includes the Delassus assembly when geometry or h changed
-        s, cs = self.scene, self.cs
+        s, cs, d = self.scene, self.cs, self.dim
         h, th = sim.h, sim.theta
         nc = len(cs.gap)
         self.steps += 1
         if nc == 0:
-            s.apply_impulse(np.zeros(s.n_udof))
-            self.last = dict(contacts=0, active=0, sweeps=0, change=0.0, residual=0.0, converged=True,
-                             solver="none", message="no contact")
-            return self.last
+            gc, rc, ri = s.corrections(np.zeros(s.n_udof))
+            return ContactResult(d, dict(contacts=0, active=0, sweeps=0, change=0.0, residual=0.0, converged=True,
+                                         solver="none", message="no contact"), cs=cs, P=self.P.copy(),
+                                 law=self.law.copy(), state=self.state.copy(), group_corr=gc, rigid_corr=rc,
+                                 rigid_impulse=ri)
         ufree = s.gather("ufree")
-        d, K = self.dim, self._kin
+        K = self._kin
         vfree = K.local_velocity(self.G, ufree, s.U_offset)
         vi = K.local_velocity(self.G, s.gather("u"), s.U_offset)
         if self.opts.geometry == "frozen":
@@ -450,28 +464,27 @@ class ContactStep:
         tm["nlgs"] += c3 - c2
         P = res.r.reshape(-1, d)
         self.P = P
-        v = res.u.reshape(-1, d)
+        v = res.u.reshape(-1, d).copy()
         imp = K.accumulate_impulse(self.G, P, s.n_udof, s.U_offset)
-        s.apply_impulse(imp)
+        gc, rc, ri = s.corrections(imp)
         tm["correction"] += perf_counter() - c3
-        self.gt_end = h * th * v[:, 0]  # v is the shifted normal velocity: g~_{i+1} = gbar + h theta v_N
-        self.v = v
-        self.r = P / h
         status = np.zeros(nc, dtype=np.int64)
         closed = P[:, 0] > 0
         slip = (closed & (np.linalg.norm(P[:, 1:], axis=1) >= self.mu * P[:, 0] * (1 - 1e-9))
                 & (np.linalg.norm(v[:, 1:], axis=1) > 1e-12))
         status[closed] = 1
         status[slip] = 2
-        self.status = status
         if not res.converged:
             self.n_unconverged += 1
-        self.last = dict(contacts=nc, active=int(closed.sum()), slip=int(slip.sum()), sweeps=int(res.sweeps),
-                         change=float(res.change), residual=float(res.residual), converged=bool(res.converged),
-                         solver=res.solver, message=str(res.message))
+        stats = dict(contacts=nc, active=int(closed.sum()), slip=int(slip.sum()), sweeps=int(res.sweeps),
+                     change=float(res.change), residual=float(res.residual), converged=bool(res.converged),
+                     solver=res.solver, message=str(res.message))
         if not res.converged and self.opts.on_nonconvergence == "fail":
             from ..errors import ConvergenceError
-            raise ConvergenceError(f"step {sim.step_count + 1} (t = {t1:.6g} s): {self.last['solver']} did not "
+            raise ConvergenceError(f"step {sim.step_count + 1} (t = {t1:.6g} s): {stats['solver']} did not "
                                    f"converge in "
                                    f"{res.sweeps} sweeps (change {res.change:.3g}, residual {res.residual:.3g})")
-        return self.last
+        # v is the shifted normal velocity: g~_{i+1} = gbar + h theta v_N
+        return ContactResult(d, stats, cs=cs, P=P.copy(), r=P / h, v=v, gt_end=h * th * v[:, 0], status=status,
+                             law=self.law.copy(), state=self.state.copy(), group_corr=gc, rigid_corr=rc,
+                             rigid_impulse=ri)

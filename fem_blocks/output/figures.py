@@ -1,4 +1,4 @@
-"""Run figures: force–displacement curve (from history.csv), crack pattern (deformed blocks, joints
+"""Run figures: force–displacement curve (from the run's history columns, kept in memory), crack pattern (deformed blocks, joints
 coloured by damage, or by opening for dry joints, drawn thicker where they open or slip) and 3D views of 3D
 bodies (write_blocks_3d)."""
 from __future__ import annotations
@@ -24,12 +24,12 @@ def _loop(edges: np.ndarray) -> np.ndarray:
 
 
 def body_outlines(sim, amplification: float):
-    polys = []
+    polys, loops = [], {}  # boundary loop per block type (computed once per call, not cached on the type)
     for b in sim.bodies:
         if b.kind == 0:
-            loop = getattr(b.type, "_outline_loop", None)
+            loop = loops.get(id(b.type))
             if loop is None:
-                loop = b.type._outline_loop = _loop(b.type.mesh.boundary_edges)
+                loop = loops[id(b.type)] = _loop(b.type.mesh.boundary_edges)
             X = b.reference_points[loop]
             D = b.displacement_global()[loop]
             polys.append(X + amplification * D)
@@ -58,37 +58,29 @@ def segment_widths(width: np.ndarray, thin: float = 0.8, thick: float = 5.0):
     return thin + (thick - thin) * np.clip(w / wmax, 0.0, 1.0), wmax
 
 
-def joint_segments(contact, sim, amplification: float):
-    """Short segments along each joint at the contact points, their crack value in [0, 1], its label and the
-    crack width at each point (crack_width)."""
-    cs = getattr(contact, "cs", None)
+def joint_segments(result, x_ref, x_cur, length, amplification: float):
+    """Short segments along each joint at the contact points of `result` (a contact.result.ContactResult, 2D),
+    their crack value in [0, 1], its label and the crack width at each point (crack_width). x_ref, x_cur (nc, 2):
+    the contact points in the reference and current configurations; length (nc,): tributary joint lengths; the
+    segment is centred at x_ref + amplification (x_cur - x_ref), along t, of that length."""
+    cs = None if result is None else result.cs
     if cs is None or len(cs.gap) == 0:
         return np.zeros((0, 2, 2)), np.zeros(0), "damage", np.zeros(0)
-    thick = contact.body_thickness[cs.cand_body]
-    half = 0.5 * cs.area / thick
-    # current point: reference point moved by the candidate displacement (amplified)
-    s = contact.scene
-    bx_ref = s.positions(reference=True)
-    bx_cur = s.positions()
-    b = cs.cand_body
-    idx = s.bx_start[b][:, None] + s.bnode_index_flat[s.bnode_offset[b][:, None] + cs.cand_nodes]
-    xr = cs.cand_w[:, :1] * bx_ref[idx[:, 0]] + cs.cand_w[:, 1:] * bx_ref[idx[:, 1]]
-    xc = cs.cand_w[:, :1] * bx_cur[idx[:, 0]] + cs.cand_w[:, 1:] * bx_cur[idx[:, 1]]
-    x = xr + amplification * (xc - xr)
+    half = 0.5 * np.asarray(length)
+    x = x_ref + amplification * (x_cur - x_ref)
     seg = np.stack([x - half[:, None] * cs.t, x + half[:, None] * cs.t], axis=1)
-    law = getattr(contact, "law", np.zeros(len(cs.gap), int))
+    law = np.zeros(len(cs.gap), int) if result.law is None else result.law
     if np.any(law >= 2):
         from ..laws import MIXED, S_BETA
-        st = contact.state
+        st = result.state
         val = np.where(law == MIXED, st[:, S_BETA], np.where(law >= 2, 1.0 - st[:, S_BETA], 0.0))
         label = "joint damage"
     else:
-        opening = np.maximum(np.asarray(contact.gt_end), 0.0)
+        opening = np.maximum(np.asarray(result.gt_end), 0.0)
         ref = max(float(np.percentile(opening, 99)) if opening.size else 0.0, 1e-12)
         val = np.clip(opening / ref, 0.0, 1.0)
         label = f"joint opening / {ref:.2g} m"
-    state = getattr(contact, "state", None)
-    width = crack_width(state) if state is not None else np.zeros(len(cs.gap))
+    width = crack_width(result.state) if result.state is not None else np.zeros(len(cs.gap))
     return seg, val, label, width
 
 
@@ -110,11 +102,20 @@ def auto_amplification(sim) -> float:
     return float(np.floor(amp / mag) * mag) if amp > 1 else 1.0
 
 
-def write_crack_pattern(path, sim, contact, title=""):
+def write_crack_pattern(path, sim, result, geometry=None, title=""):
+    """crack_pattern.png: the deformed blocks of `sim` and the joints of the 2D contact record `result` (None:
+    no contact step yet). `geometry`: the contact step's queries contact_points(cs, reference) and
+    joint_lengths(cs) (None: a model without contact)."""
     amp = auto_amplification(sim)
     polys = body_outlines(sim, amp)
-    seg, val, label, width = (joint_segments(contact, sim, amp) if contact is not None
-                              else (np.zeros((0, 2, 2)), [], "", np.zeros(0)))
+    if geometry is None:  # a model without contact
+        seg, val, label, width = np.zeros((0, 2, 2)), [], "", np.zeros(0)
+    elif result is None or result.cs is None or len(result.cs.gap) == 0:
+        seg, val, label, width = joint_segments(result, None, None, None, amp)
+    else:
+        cs = result.cs
+        seg, val, label, width = joint_segments(result, geometry.contact_points(cs, reference=True),
+                                                geometry.contact_points(cs), geometry.joint_lengths(cs), amp)
     lw, wmax = segment_widths(width)
     return plot_crack_pattern(path, polys, seg, val, amp, title=title, value_label=label, widths=lw,
                               width_note=f"line width: joint opening + slip (thickest {1e3 * wmax:.3g} mm)"

@@ -1,6 +1,10 @@
 """history.csv: header line, then one row per step; floats written with `%.17g` (exact float64 round trip),
 integers as integers; flushed and fsynced every `flush_every` rows and at close, so a crash loses at most
-`flush_every - 1` rows. `HistoryWriter.resume` truncates the rows written after a checkpoint's step."""
+`flush_every - 1` rows. `HistoryWriter.resume` truncates the rows written after a checkpoint's step.
+
+With keep=True the writer also keeps the rows it writes (and, on resume, the rows of the file it keeps) in memory:
+`columns_dict()` gives them as read_history would read the file back (name -> float64 array, empty -> NaN), so that
+figures and reports are drawn from the run itself; the file is the users' copy, not an input of the run."""
 from __future__ import annotations
 
 import csv
@@ -30,6 +34,25 @@ def _fmt(v) -> str:
     if math.isnan(f):
         return "nan"
     return "%.17g" % f
+
+
+def _value(v):
+    """A history value as read_history reads it back: None -> NaN, bool/int/float -> float; str kept."""
+    if v is None:
+        return np.nan
+    if isinstance(v, (str, np.str_)):
+        return _parse(str(v))
+    return float(v)
+
+
+def _parse(x: str):
+    """A history.csv cell as read_history reads it: "" -> NaN, a number -> float, else the string."""
+    if x == "":
+        return np.nan
+    try:
+        return float(x)
+    except ValueError:
+        return x
 
 
 def _line(values) -> str:
@@ -73,8 +96,9 @@ def _drop_torn_line(path: str) -> None:
 class HistoryWriter:
     """CSV writer with a fixed list of columns; `.write(dict)` (missing keys -> empty) or `.write(sequence)`."""
 
-    def __init__(self, path, columns, append: bool = False, flush_every: int = 1):
+    def __init__(self, path, columns, append: bool = False, flush_every: int = 1, keep: bool = False):
         self.path = os.fspath(path)
+        self.kept = [] if keep else None  # rows written (values), when keep
         self.columns = [str(c) for c in columns]
         if not self.columns:
             raise InputError(f"{self.path}: columns: expected at least one column name")
@@ -108,9 +132,10 @@ class HistoryWriter:
 
     @classmethod
     def resume(cls, path, last_step: int, step_column: str = "step", columns=None,
-               flush_every: int = 1) -> "HistoryWriter":
+               flush_every: int = 1, keep: bool = False) -> "HistoryWriter":
         """Keep the header and the rows with step <= last_step (dropping a torn last line), rewrite the file
-        atomically and reopen it for appending. `columns`, if given, must equal the file's header."""
+        atomically and reopen it for appending. `columns`, if given, must equal the file's header. keep=True: the
+        kept rows are also the first rows of `columns_dict()` (the file is read once, here)."""
         path = os.fspath(path)
         header, rows = _read_rows(path)
         if columns is not None and header != [str(c) for c in columns]:
@@ -119,16 +144,19 @@ class HistoryWriter:
         if step_column not in header:
             raise InputError(f"{path}: step_column {step_column!r} not in the header {header}")
         k = header.index(step_column)
-        keep = []
+        kept = []
         for r in rows:
             try:
                 s = float(r[k])
             except ValueError:
                 raise InputError(f"{path}: non-numeric {step_column} {r[k]!r}") from None
             if s <= last_step:
-                keep.append(r)
-        atomic_write_text(path, "".join(_line(r) for r in [header] + keep))
-        return cls(path, header, append=True, flush_every=flush_every)
+                kept.append(r)
+        atomic_write_text(path, "".join(_line(r) for r in [header] + kept))
+        w = cls(path, header, append=True, flush_every=flush_every, keep=keep)
+        if keep:
+            w.kept = [[_parse(x) for x in r] for r in kept]
+        return w
 
     def write(self, row) -> None:
         if isinstance(row, dict):
@@ -143,9 +171,25 @@ class HistoryWriter:
                 raise InputError(f"{self.path}: expected {len(self.columns)} values ({self.columns}), "
                                  f"got {len(vals)}")
         self.f.write(_line([_fmt(v) for v in vals]))
+        if self.kept is not None:
+            self.kept.append([_value(v) for v in vals])
         self._pending += 1
         if self._pending >= self.flush_every:
             self.flush()
+
+    def columns_dict(self) -> dict:
+        """The kept rows as columns: name -> float64 array (None/empty -> NaN), or a str array for a column with
+        non-numeric entries; the values read_history gives for the file (floats are written exactly)."""
+        if self.kept is None:
+            raise InputError(f"{self.path}: this HistoryWriter keeps no rows (keep=False)")
+        out = {}
+        for j, name in enumerate(self.columns):
+            col = [r[j] for r in self.kept]
+            try:
+                out[name] = np.array(col, dtype=np.float64)
+            except (TypeError, ValueError):
+                out[name] = np.array([str(x) for x in col])
+        return out
 
     def flush(self) -> None:
         self.f.flush()

@@ -1,0 +1,52 @@
+"""The record of one contact step: what `ContactStep.solve` produces and every other module reads.
+
+Data flow of a time step (docs/architecture.md "One step"): `Simulation.step` computes the free velocities,
+`ContactStep.solve(sim, t0, t1)` returns a `ContactResult`, the simulation applies its velocity corrections
+
+    u_{i+1} = u_free + W H P          (per body group: `group_corr`; per rigid body: `rigid_corr`)
+
+and keeps it as `sim.last_contact`; writers, run checks and figures read `sim.last_contact`. The record owns its
+arrays (copies: the contact step mutates its warm start and law state in place at the next step); `cs` is the
+contact set the step was solved on, shared with the step but never modified after its detection.
+
+Per contact (nc rows, local frame (n, t) in 2D, (n, t, s) in 3D, DESIGN §3–§5):
+P impulses (nc, d) [N s], r = P / h reactions [N], v the shifted local velocity at the end of the step
+(normal v_N + gbar / (h theta)), gt_end = h theta v_N the joint-corrected gap g - g0 at the end of the step [m],
+status 0 open / 1 stick / 2 slip, law codes and the committed law state (laws.py columns).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+OUT_FIELDS = ("gt_end", "v", "r", "status")  # checkpointed under "contact.out.<name>" (the last step's outputs)
+
+
+@dataclass
+class ContactResult:
+    dim: int
+    stats: dict                 # contacts, active, slip, sweeps, change, residual, converged, solver, message
+    cs: object = None           # ContactSet / ContactSet3D solved on (None: no contact detected yet)
+    P: np.ndarray = None        # (nc, d) impulses
+    r: np.ndarray = None        # (nc, d) reactions P / h
+    v: np.ndarray = None        # (nc, d) shifted local velocities at the end of the step
+    gt_end: np.ndarray = None   # (nc,) g - g0 at the end of the step
+    status: np.ndarray = None   # (nc,) 0 open, 1 stick, 2 slip
+    law: np.ndarray = None      # (nc,) law codes
+    state: np.ndarray = None    # (nc, NSTATE | NSTATE + 1) committed law state
+    group_corr: list = field(default_factory=list)  # per Simulation group: (ndof, k) correction, or None
+    rigid_corr: np.ndarray = None     # (n_rigid, rigid ndof) velocity correction W p, in sim.rigid order
+    rigid_impulse: np.ndarray = None  # (n_rigid, rigid ndof) contact impulse p on each rigid body
+
+    @property
+    def n_contacts(self) -> int:
+        return 0 if self.cs is None else len(self.cs.gap)
+
+    def has_contacts(self) -> bool:
+        """True when the record holds per-contact arrays for a non-empty contact set."""
+        return self.n_contacts > 0 and self.r is not None and len(self.r) == self.n_contacts
+
+    def export(self) -> dict:
+        """The per-contact outputs for a checkpoint ("contact.out.<name>")."""
+        return {f"contact.out.{k}": getattr(self, k) for k in OUT_FIELDS if getattr(self, k) is not None}
