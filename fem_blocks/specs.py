@@ -151,7 +151,7 @@ LAW_PARAMS: dict[str, LawParam] = {
                                  expected="finite damage viscosity eta >= 0 [s] (0: rate-independent)",
                                  finite=True),
     "f_c": LawParam("stress", dict(coulomb=0.0, elastic=0.0, brittle=0.0, fremond=0.0, mixed=0.0),
-                    "compressive strength of the cap (omit: no cap)",
+                    "compressive strength of the cap (omit: no cap)", lo_open=True,
                     expected="compressive strength f_c > 0 [Pa] (omit: no cap)"),
     "G_fc": LawParam("energy", dict(coulomb=0.0, elastic=0.0, brittle=0.0, fremond=0.0, mixed=0.0),
                      "compressive fracture energy (softening cap; needs f_c)", lo_open=True,
@@ -199,8 +199,7 @@ def validate_law_params(law: str, params: dict, name: str) -> dict:
         out[k] = v
         return v
 
-    if get("f_c") <= 0.0 and "f_c" in params:
-        raise InputError(f"{name}.f_c = {params['f_c']!r}: expected {LAW_PARAMS['f_c'].expected}")
+    get("f_c")
     if "G_fc" in params:
         if "f_c" not in params:
             raise InputError(f"{name}.G_fc: needs the compressive strength f_c [Pa] (G_fc softens the cap f_c)")
@@ -254,20 +253,18 @@ class InterfaceSpec:
     (packed into the parameter row by laws.pack) and `mu` (tan_phi for the mixed law). `where`: the key path named by the errors (default
     ``interfaces.NAME``)."""
 
-    name: str = spec(doc="interface name (default interfaceN)", toml=False)
-    groups: tuple = spec(doc="two body group names, e.g. [\"bricks\", \"bricks\"]", key="between", toml=False)
+    name: str = spec(doc="interface name (default interfaceN)")
+    groups: tuple = spec(doc="two body group names, e.g. [\"bricks\", \"bricks\"]", key="between", required=True)
     law: str = spec("coulomb", doc="interface law (docs/laws.md)", choices=LAWS)
-    mu: float = spec(0.5, doc="friction coefficient (required in a case file, except for law = 'mixed')", lo=0.0,
-                     toml=False)
+    mu: float = spec(0.5, doc="friction coefficient (required in a case file, except for law = 'mixed')", lo=0.0)
     g0: float = spec(0.0, doc="joint thickness: impenetrability on g - g0", unit="length", lo=0.0,
                      expected="g0 >= 0 [m] (joint thickness)")
     alert: float = spec(1e-3, doc="alert distance: pairs farther than g0 + alert are not contacts", unit="length",
                         lo=0.0, lo_open=True, expected="alert > 0 [m]")
     placement: str | None = spec(None, doc="candidate points: 'overlap' (the 2D default), 'nodes' or 'positions' "
                                            "(the 3D default)", choices=("overlap", "nodes", "positions"))
-    positions: tuple = spec((0.25, 0.75), doc="relative positions on the candidate edges (placement = 'positions')",
-                            toml=False)
-    candidate: str | None = spec(None, doc="group whose bodies are candidates", toml=False)
+    positions: tuple = spec((0.25, 0.75), doc="relative positions on the candidate edges (placement = 'positions')")
+    candidate: str | None = spec(None, doc="group whose bodies are candidates")
     orientation: str = spec("any", doc="'any', or 'bed'/'head' (chosen by the normal), or 'crack' (split bricks)",
                             choices=("any", "bed", "head", "crack"))
     params: dict = spec(doc="law parameters (LAW_PARAMS), SI per unit area", toml=False, default_factory=dict)
@@ -339,7 +336,7 @@ class ContactOptions:
 class StageSpec:
     """One `[[stages]]` entry. drivers: body -> dof -> (kind, history) | None (free); forces: body -> dof ->
     history. Stages accumulate in order: `controls_at`."""
-    name: str = spec(doc="stage name (default stageN)", toml=False)
+    name: str = spec(doc="stage name (default stageN)")
     duration: float = spec(doc="stage duration (at least one step h)", unit="time", lo=0.0, lo_open=True,
                            required=True)
     h: float = spec(doc="time step", unit="time", lo=0.0, lo_open=True, required=True)
@@ -347,16 +344,20 @@ class StageSpec:
     velocity_reset: bool = spec(False, doc="quasi-static strategy: velocities set to zero at the start of each step")
     output_every: int = spec(1, doc="ParaView frame every N steps", lo=1)
     static: bool = spec(False, doc="static step: no inertia, no damping (theta = 1); dynamics.py")
-    stop_at_equilibrium: bool = False
-    equilibrium_velocity: float = 1e-6
-    min_steps: int = 1
+    stop_at_equilibrium: bool = spec(False, doc="[stages.stop_at_equilibrium] given: stop when every velocity is "
+                                                "below max_velocity after min_steps")
+    equilibrium_velocity: float = spec(1e-6, doc="stop_at_equilibrium: velocity threshold", unit="length", lo=0.0,
+                                       lo_open=True, key="stop_at_equilibrium.max_velocity")
+    min_steps: int = spec(1, doc="stop_at_equilibrium: steps before the test (10 when the table is given)", lo=1,
+                          key="stop_at_equilibrium.min_steps")
     tol: float | None = spec(None, doc="contact solver tolerance for this stage (default: [contact])", lo=0.0,
                              lo_open=True)
     max_sweeps: int | None = spec(None, doc="sweep limit for this stage (default: [contact])", lo=1)
-    stop_displacement: tuple | None = None  # (body, dof, |value| [m])
-    drivers: dict = field(default_factory=dict)  # body -> dof -> (kind, history) | None (free)
-    forces: dict = field(default_factory=dict)   # body -> dof -> history
-    stop_after_peak: tuple | None = None    # (body, reaction dof, relative drop, min_steps)
+    stop_displacement: tuple | None = spec(None, doc="(body, dof, |value| [m]): stop at that displacement",
+                                           key="stop_at_displacement")
+    drivers: dict = spec(doc="body -> dof -> (kind, history) | None (free)", default_factory=dict)
+    forces: dict = spec(doc="body -> dof -> history", default_factory=dict)
+    stop_after_peak: tuple | None = spec(None, doc="(body, reaction dof, relative drop, min_steps)")
     on_nonconvergence: str | None = spec(None, doc="'warn', 'fail' or 'refine' for this stage (default: [contact])",
                                          choices=NONCONV)
 
