@@ -23,8 +23,8 @@ from typing import Any
 import numpy as np
 
 from .errors import InputError
-from .specs import (LAW_PARAMS, NONCONV, ContactOptions, InterfaceSpec, StageSpec, controls_at,  # noqa: F401
-                    schema_fields, toml_key)
+from .specs import (LAW_PARAMS, NONCONV, ChecksSpec, ContactOptions, InterfaceSpec, OutputSpec,  # noqa: F401
+                    StageSpec, controls_at, schema_fields, toml_key)
 
 NUMBER = (int, float)
 
@@ -371,8 +371,7 @@ class Case:
     output: dict
     contact: ContactOptions = field(default_factory=ContactOptions)
     interfaces: list = field(default_factory=list)  # of specs.InterfaceSpec
-    checks: dict = field(default_factory=lambda: dict(max_penetration=None, max_energy_growth=10.0,
-                                                      accept_unconverged=False))
+    checks: dict = field(default_factory=lambda: dataclasses.asdict(ChecksSpec()))  # specs.ChecksSpec
     variant: str = ""  # "" or "quick x2" (reduced-resolution variant, part of the fingerprint)
     dimension: int = 2
     warnings: list = field(default_factory=list)  # one line each, "FILE: KEY ...": printed at the start of a run,
@@ -932,33 +931,29 @@ def _check_interface_pairs(source: str, interfaces: list, blocks: list):
 
 
 def _parse_checks(root: Table) -> dict:
-    """[checks]: max_penetration, max_energy_growth, accept_unconverged."""
-    checks = dict(max_penetration=None, max_energy_growth=10.0, accept_unconverged=False)
+    """[checks] -> dict of specs.ChecksSpec: max_penetration, max_energy_growth, accept_unconverged."""
     ck = root.table("checks")
-    if ck is not None:
-        checks["max_penetration"] = ck.number("max_penetration", None, lo=0, lo_open=True, dim="length")
-        checks["max_energy_growth"] = ck.number("max_energy_growth", 10.0, lo=0, lo_open=True)
-        # a run that completes with steps still above the solver tolerance exits 0 instead of 3 (still reported)
-        checks["accept_unconverged"] = ck.boolean("accept_unconverged", False)
-        ck.done()
+    if ck is None:
+        return dataclasses.asdict(ChecksSpec())
+    checks = read_fields(ck, ChecksSpec, ("max_penetration", "max_energy_growth", "accept_unconverged"))
+    ck.done()
     return checks
 
 
 def _parse_output(root: Table, D: int) -> dict:
-    """[output]: paraview, stress, checkpoint_every, [output.curve], crack_pattern."""
+    """[output] -> dict of specs.OutputSpec: paraview, stress, checkpoint_every, crack_pattern, [output.curve]."""
     out = root.table("output")
-    output = {"paraview": True, "stress": True, "checkpoint_every": 0, "crack_pattern": True}
+    output = dataclasses.asdict(OutputSpec())
+    del output["curve"]  # present only when given (or chosen in 3D)
     if out is not None:
-        output["paraview"] = out.boolean("paraview", True)
-        output["stress"] = out.boolean("stress", True)
-        output["checkpoint_every"] = out.integer("checkpoint_every", 0, lo=0)
+        output.update(read_fields(out, OutputSpec, ("paraview", "stress", "checkpoint_every")))
         cv = out.table("curve")
         if cv is not None:
             output["curve"] = dict(body=cv.string("body", required=True),
                                    force=cv.string("force", "x", choices=dofs_of(D)),
                                    displacement=cv.string("displacement", "x", choices=dofs_of(D)))
             cv.done()
-        output["crack_pattern"] = out.boolean("crack_pattern", True)
+        output.update(read_fields(out, OutputSpec, ("crack_pattern",)))
         out.done()
     return output
 

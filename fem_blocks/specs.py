@@ -404,3 +404,24 @@ def controls_at(rigid_bodies, stages, k: int) -> dict:
                 what = "forces" if kind == "force" else "drivers"
                 out[(body, dof)] = Control(kind, hist, f"stages[{i}].{what}.{body}.{dof}", i)
     return out
+
+
+# ----------------------------------------------------------------------------- [checks], [output]
+@dataclass
+class ChecksSpec:
+    """The `[checks]` table: numerical safety limits (runner guards) and the exit status of unconverged runs.
+    (The Case holds it as a dict: `dataclasses.asdict`.)"""
+    max_penetration: float | None = spec(None, doc="penetration limit (default: the alert distance)", unit="length",
+                                         lo=0.0, lo_open=True)
+    max_energy_growth: float = spec(10.0, doc="limit of the energy growth ratio", lo=0.0, lo_open=True)
+    accept_unconverged: bool = spec(False, doc="true: a run with unconverged steps exits 0 instead of 3")
+
+
+@dataclass
+class OutputSpec:
+    """The `[output]` table (the Case holds it as a dict; `curve` only when given or chosen in 3D)."""
+    paraview: bool = spec(True, doc="write paraview/blocks.pvd (and contacts.pvd)")
+    stress: bool = spec(True, doc="cell stresses and von Mises in the ParaView files")
+    checkpoint_every: int = spec(0, doc="checkpoint every N steps (0: at the end of each stage only)", lo=0)
+    crack_pattern: bool = spec(True, doc="write crack_pattern.png")
+    curve: dict | None = spec(None, doc="[output.curve] body, force, displacement: force-displacement figure")
