@@ -23,8 +23,8 @@ from typing import Any
 import numpy as np
 
 from .errors import InputError
-from .specs import (LAW_PARAMS, NONCONV, ChecksSpec, ContactOptions, InterfaceSpec, OutputSpec,  # noqa: F401
-                    StageSpec, controls_at, schema_fields, toml_key)
+from .specs import (LAW_PARAMS, NONCONV, ChecksSpec, ContactOptions, InterfaceSpec, MaterialSpec,  # noqa: F401
+                    OutputSpec, StageSpec, controls_at, schema_fields, toml_key)
 
 NUMBER = (int, float)
 
@@ -284,18 +284,6 @@ def read_fields(t: "Table", cls, names, defaults: dict | None = None) -> dict:
 
 
 # ----------------------------------------------------------------------------- case objects
-@dataclass
-class MaterialSpec:
-    name: str
-    E: float
-    nu: float
-    rho: float
-    thickness: float
-    plane: str
-    alpha: float
-    beta: float
-
-
 @dataclass
 class BlockTypeSpec:
     name: str
@@ -572,19 +560,13 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
 
 
 def _parse_materials(root: Table, D: int, units: str, warnings: list) -> dict:
-    """[materials.NAME] -> MaterialSpec (SI), with the unit-system plausibility checks."""
+    """[materials.NAME] -> specs.MaterialSpec (SI), with the unit-system plausibility checks."""
     materials = {}
     for mname, t in root.named_tables("materials").items():
         t.dimension_keys(D, dict(thickness=2, plane=2))
         ray = t.vector("rayleigh", 2, default=(0.0, 0.0), lo=0.0)
-        materials[mname] = MaterialSpec(
-            name=mname,
-            E=t.number("E", lo=0, lo_open=True, dim="stress", required=True),
-            nu=t.number("nu", lo=-1, hi=0.5, lo_open=True, hi_open=True, required=True),
-            rho=t.number("rho", lo=0, lo_open=True, dim="density", required=True),
-            thickness=t.number("thickness", 1.0, lo=0, lo_open=True, dim="length"),
-            plane=t.string("plane", "stress", choices=("stress", "strain")),
-            alpha=ray[0], beta=ray[1])
+        materials[mname] = MaterialSpec(name=mname, alpha=ray[0], beta=ray[1],
+                                        **read_fields(t, MaterialSpec, ("E", "nu", "rho", "thickness", "plane")))
         _plausible(t, "rho", materials[mname].rho, 1.0, 1e5, "kg/m^3", units)
         _plausible(t, "E", materials[mname].E, 1e3, 1e13, "Pa", units)
         _warn_implausible(warnings, t, "E", materials[mname].E, "E", units)

@@ -406,6 +406,22 @@ def controls_at(rigid_bodies, stages, k: int) -> dict:
     return out
 
 
+# ----------------------------------------------------------------------------- [materials.NAME]
+@dataclass
+class MaterialSpec:
+    """One `[materials.NAME]` table: linear elastic material of deformable blocks (model.py -> bodies.Material).
+    The unit-system plausibility checks (E, rho) are case.py's."""
+    name: str = spec(doc="the table's name", toml=False)
+    E: float = spec(doc="Young's modulus", unit="stress", lo=0.0, lo_open=True, required=True)
+    nu: float = spec(doc="Poisson's ratio", lo=-1.0, hi=0.5, lo_open=True, hi_open=True, required=True)
+    rho: float = spec(doc="density", unit="density", lo=0.0, lo_open=True, required=True)
+    thickness: float = spec(1.0, doc="out-of-plane thickness (2D)", unit="length", lo=0.0, lo_open=True)
+    plane: str = spec("stress", doc="plane stress or plane strain (2D)", choices=("stress", "strain"))
+    alpha: float = spec(0.0, doc="Rayleigh damping [a, b]: C = a M + b K (a = alpha, b = beta)", key="rayleigh",
+                        lo=0.0)
+    beta: float = spec(0.0, doc="Rayleigh b (the second value of rayleigh)", toml=False, lo=0.0)
+
+
 # ----------------------------------------------------------------------------- [checks], [output]
 @dataclass
 class ChecksSpec:

@@ -1,6 +1,6 @@
 """docs/case-files.md cannot drift from the schema (fem_blocks/specs.py).
 
-* `[contact]`, `[[interfaces]]`, `[[stages]]` (with "Load protocol"), `[checks]` and `[output]`: the keys of the hand-written tables are
+* `[contact]`, `[[interfaces]]`, `[[stages]]` (with "Load protocol"), `[checks]`, `[output]` and `[materials.NAME]`: the keys of the hand-written tables are
   exactly the schema's TOML keys (a key added to a dataclass without a doc row, or a doc row left for a removed
   key, fails), and where the doc's default column holds a literal it is the field's default;
 * the interface-law parameter table is generated from `LAW_PARAMS` (scripts/schema_tables.py) and must be up to
@@ -14,8 +14,8 @@ import re
 
 import pytest
 
-from fem_blocks.specs import (ChecksSpec, ContactOptions, InterfaceSpec, OutputSpec, StageSpec, schema_fields,
-                              toml_key)
+from fem_blocks.specs import (ChecksSpec, ContactOptions, InterfaceSpec, MaterialSpec, OutputSpec, StageSpec,
+                              schema_fields, toml_key)
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 DOC = os.path.join(ROOT, "docs", "case-files.md")
@@ -63,7 +63,8 @@ def schema_keys(cls) -> set:
 @pytest.mark.parametrize("cls, heads", [(ContactOptions, ["`[contact]`"]),
                                         (InterfaceSpec, ["`[[interfaces]]`"]),
                                         (StageSpec, ["`[[stages]]`", "Load protocol"]),
-                                        (ChecksSpec, ["`[checks]`"]), (OutputSpec, ["`[output]`"])])
+                                        (ChecksSpec, ["`[checks]`"]), (OutputSpec, ["`[output]`"]),
+                                        (MaterialSpec, ["`[materials.NAME]`"])])
 def test_doc_tables_name_exactly_the_schema_keys(cls, heads):
     doc = {}
     for h in heads:
