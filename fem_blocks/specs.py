@@ -9,7 +9,9 @@ Each field below is defined once, with its default, unit kind, valid range or ch
   `controls_at(rigid_bodies, stages, k)` folds them (stages accumulate in order) into the control of every
   rigid dof during stage k — the one implementation used by the case checks and by the runner;
 * `LAW_PARAMS`     — the interface-law parameter table (unit kind, range, default per law, which laws use it);
-  `laws.law_parameters` validates against it and packs the parameter vector.
+  `validate_law_params` is the one validation against it (with the laws' cross rules); `laws.pack` puts the
+  values in the kernels' parameter vector (`laws.law_parameters` = both);
+* `MaterialSpec`, `ChecksSpec`, `OutputSpec` — `[materials.NAME]`, `[checks]`, `[output]`.
 
 Metadata keys (`spec`): `doc`, `unit` (unit kind of the mm-N-MPa conversion: "length", "stress", "stiffness",
 "energy", "time", ... — see case.UNIT_SYSTEMS/DERIVED; None: dimensionless), `choices`, `lo`/`hi` (with `lo_open`/
@@ -18,7 +20,7 @@ case file), `expected` (the text of the range error, when the generic one would 
 
 `check_fields(obj, prefix)` is the one generic validator of the Python API (messages
 ``PREFIX.NAME = VALUE: expected ...``); case.py maps TOML tables onto these classes with one generic mapper
-(`case.read_fields`) that reads the same metadata. Imports: stdlib, numpy and fem_blocks.errors only.
+(`case.read_fields`) that reads the same metadata. Imports: stdlib and fem_blocks.errors only.
 """
 from __future__ import annotations
 
@@ -27,11 +29,6 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from .errors import InputError, check_range
-
-# SI unit of each unit kind (for messages and docs)
-SI_UNIT = {"length": "m", "stress": "Pa", "stiffness": "N/m^3", "energy": "J/m^2", "time": "s",
-           "viscosity": "J s/m^2", "force": "N", "density": "kg/m^3", "mass": "kg", "moment": "N m"}
-
 
 def spec(default=dataclasses.MISSING, *, doc: str, unit: str | None = None, choices=None, lo=None, hi=None,
          lo_open: bool = False, hi_open: bool = False, key: str | None = None, toml: bool = True,
@@ -71,10 +68,9 @@ def toml_key(f) -> str:
 
 def check_fields(obj, prefix: str, names=None):
     """Validate the fields of `obj` against their metadata (choices, range); InputError
-    ``PREFIX.NAME = VALUE: expected ...``. `names`: only these fields."""
-    for f in schema_fields(type(obj)):
-        if names is not None and f.name not in names:
-            continue
+    ``PREFIX.NAME = VALUE: expected ...``. `names`: only these fields, in that order."""
+    fields = {f.name: f for f in schema_fields(type(obj))}
+    for f in (fields.values() if names is None else [fields[n] for n in names]):
         md, v = f.metadata, getattr(obj, f.name)
         if md["choices"] is not None:
             if v not in md["choices"] and not (v is None and f.default is None):
