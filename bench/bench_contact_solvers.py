@@ -7,6 +7,7 @@ Writes its section in docs/benchmarks.md.
 
 Usage: .venv/bin/python bench/bench_contact_solvers.py [--placement nodes|positions]
 """
+import dataclasses
 import json
 import os
 import platform
@@ -25,7 +26,8 @@ HEADING = "## Contact solvers on the shear wall (NLGS vs Newton)"
 
 def run(solver: str, placement: str, n_push: int, max_sweeps: int):
     case = load_case(os.path.join(ROOT, "demos", "shear_wall.toml"))
-    case.contact.update(solver=solver, criterion="residual", tol=1e-6, max_sweeps=max_sweeps, check_every=10)
+    case.contact = dataclasses.replace(case.contact, solver=solver, criterion="residual", tol=1e-6,
+                                       max_sweeps=max_sweeps, check_every=10)
     for itf in case.interfaces:
         itf.placement = placement
     push = case.stages[1]

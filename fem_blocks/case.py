@@ -11,6 +11,7 @@ which case values are converted to SI at load.
 """
 from __future__ import annotations
 
+import dataclasses
 import difflib
 import hashlib
 import math
@@ -23,6 +24,8 @@ import numpy as np
 from . import casefile
 from .errors import InputError
 from .geometry import box_corners, check_hex_corners, rotation3d
+from .specs import (LAW_PARAMS, NONCONV, ChecksSpec, ContactOptions, InterfaceSpec, MaterialSpec,  # noqa: F401
+                    OutputSpec, StageSpec, controls_at, schema_fields, toml_key)
 
 NUMBER = (int, float)
 
@@ -251,19 +254,37 @@ def _range_text(lo, hi, lo_open, hi_open, integer) -> str:
     return kind + (" " + " and ".join(parts) if parts else "")
 
 
+def read_fields(t: "Table", cls, names, defaults: dict | None = None) -> dict:
+    """The one TOML -> schema mapper: read the fields `names` (in that order) of the schema class `cls`
+    (specs.py) from table t with their metadata (TOML key, default, unit kind, range or choices, required)
+    -> {field name: value in SI}. `defaults`: field -> default where it depends on other keys."""
+    fields = {f.name: f for f in schema_fields(cls)}
+    out = {}
+    for name in names:
+        f = fields[name]
+        md, k = f.metadata, toml_key(f)
+        d = (defaults or {}).get(name, None if f.default is dataclasses.MISSING else f.default)
+        base = str(f.type).split("|")[0].strip()
+        req = md["required"]
+        if md["choices"] is not None:
+            v = t.string(k, d, choices=tuple(c for c in md["choices"] if c is not None), required=req)
+        elif base == "bool":
+            v = t.boolean(k, d)
+        elif base == "int":
+            v = t.integer(k, d, lo=md["lo"], hi=md["hi"], required=req)
+        elif base == "float":
+            unit = md["unit"]
+            v = t.number(k, d, lo=md["lo"], hi=md["hi"], lo_open=md["lo_open"], hi_open=md["hi_open"],
+                         dim=None if unit in DERIVED else unit, required=req)
+            if unit in DERIVED and v is not None and k in t.data:
+                v *= DERIVED[unit](t.units)
+        else:
+            raise TypeError(f"{cls.__name__}.{name}: no TOML reader for type {f.type}")
+        out[name] = v
+    return out
+
+
 # ----------------------------------------------------------------------------- case objects
-@dataclass
-class MaterialSpec:
-    name: str
-    E: float
-    nu: float
-    rho: float
-    thickness: float
-    plane: str
-    alpha: float
-    beta: float
-
-
 @dataclass
 class BlockTypeSpec:
     name: str
@@ -319,22 +340,6 @@ class RigidSpec:
     drivers: dict
     forces: dict
     group: str = "rigid"
-
-
-@dataclass
-class InterfaceCaseSpec:
-    name: str
-    groups: tuple
-    law: str
-    mu: float
-    g0: float
-    alert: float
-    placement: str | None  # None: the default ("overlap" in 2D, "positions" in 3D)
-    positions: tuple
-    candidate: str | None
-    orientation: str
-    params: dict = field(default_factory=dict)
-    reference: str = "nominal"
 
 
 # ----------------------------------------------------------------------------- generated geometry (expand.py)
@@ -450,38 +455,8 @@ class DomeSpec(GeneratorSpec):
         return list(self.pier_bodies)
 
 
-# interface-law parameters and their physical dimension (for unit conversion)
-LAW_PARAM_UNITS = {"c_N": "stiffness", "c_T": "stiffness", "k_n": "stiffness", "k_s": "stiffness",
-                   "r_c": "stress", "s_c": "stress", "f_t": "stress", "c": "stress", "f_c": "stress", "l_c": "length",
-                   "w": "energy", "G_I": "energy", "G_II": "energy", "b": "viscosity", "p": None, "mu_r": None,
-                   "tan_phi": None, "variant": None, "friction": None, "softening": None,
-                   "damage_viscosity": "time", "G_fc": "energy"}
 DERIVED = {"stiffness": lambda U: U["stress"] / U["length"], "energy": lambda U: U["force"] / U["length"],
            "viscosity": lambda U: U["force"] / U["length"] * U["time"]}
-
-
-NONCONV = ("warn", "fail", "refine")
-
-
-@dataclass
-class StageSpec:
-    name: str
-    duration: float
-    h: float
-    theta: float
-    velocity_reset: bool
-    output_every: int
-    static: bool = False             # static step: no inertia, no damping (theta = 1); dynamics.py
-    stop_at_equilibrium: bool = False
-    equilibrium_velocity: float = 1e-6
-    min_steps: int = 1
-    tol: float | None = None          # contact solver overrides for this stage
-    max_sweeps: int | None = None
-    stop_displacement: tuple | None = None  # (body, dof, |value| [m])
-    drivers: dict = field(default_factory=dict)  # body -> dof -> (kind, history) | None (free)
-    forces: dict = field(default_factory=dict)   # body -> dof -> history
-    stop_after_peak: tuple | None = None    # (body, reaction dof, relative drop)
-    on_nonconvergence: str | None = None    # "warn" | "fail" | "refine" (None: [contact] on_nonconvergence)
 
 
 @dataclass
@@ -496,10 +471,9 @@ class Case:
     rigid_bodies: list
     stages: list
     output: dict
-    contact: dict = field(default_factory=dict)
-    interfaces: list = field(default_factory=list)
-    checks: dict = field(default_factory=lambda: dict(max_penetration=None, max_energy_growth=10.0,
-                                                      accept_unconverged=False))
+    contact: ContactOptions = field(default_factory=ContactOptions)
+    interfaces: list = field(default_factory=list)  # of specs.InterfaceSpec
+    checks: dict = field(default_factory=lambda: dataclasses.asdict(ChecksSpec()))  # specs.ChecksSpec
     variant: str = ""  # "" or "quick x2" (reduced-resolution variant, part of the fingerprint)
     dimension: int = 2
     warnings: list = field(default_factory=list)  # one line each, "FILE: KEY ...": printed at the start of a run,
@@ -635,6 +609,7 @@ def load_case(path: str) -> Case:
 
 
 def parse_case(data: dict, source: str = "<case>") -> Case:
+    """Parse and validate a case (the TOML data of `source`), section by section; InputError naming the key."""
     if any(k in data for k in casefile.KEYS):  # a table as written (extends, unset, [laws]): compose it first
         from .laws import LAW_KEYS
         data, source = casefile.compose(data, source, LAW_KEYS)
@@ -653,18 +628,58 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
         tuple(g * U["length"] / U["time"] ** 2 for g in gravity)
 
     warnings: list = []  # plausibility warnings, one line each (expand.py adds those of what was built)
+    materials = _parse_materials(root, D, units, warnings)
+    block_types = _parse_block_types(root, D, materials, base, units, warnings)
+    names: set = set()
+    blocks = _parse_blocks(root, D, block_types, names)
+    rigid = _parse_rigid_bodies(root, D, U, units, names, warnings)
+    generators = _parse_builders(root, U, materials, warnings, units)
+    rigid_all = rigid + [r for g in generators for r in g.rigid]  # with the generated ones (names, drivers, mass)
+    if not blocks and not rigid and not generators:
+        raise root.error("blocks", "missing; expected at least one [[blocks]] or [[rigid_bodies]] entry")
+    stages = _parse_stages(root, D)
+    contact = _parse_contact(root, source)
+    all_groups = {b.group for b in blocks} | {g.group for g in generators} | {r.group for r in rigid_all}
+    interfaces = _parse_interfaces(root, D, all_groups, warnings, source)
+    history_times = root.string("history_times", "absolute", choices=("absolute", "stage"))
+    allow_pairs = _parse_allow_no_interface(root, all_groups)
+    _check_interface_pairs(source, interfaces, blocks)
+    checks = _parse_checks(root)
+    output = _parse_output(root, D)
+    root.done()
+    _check_stages(source, stages, rigid_all)
+    if "curve" in output:
+        cb = output["curve"]["body"]
+        if cb not in {r.name for r in rigid_all}:
+            raise InputError(f"{source}: output.curve.body = {cb!r}: expected a rigid body among "
+                             f"{sorted(r.name for r in rigid_all)}")
+    if D == 3:
+        if "curve" not in output:  # 3D: the force-displacement curve of the first dof a stage drives
+            for st in stages:
+                drv = [(b, d) for b, dofs in st.drivers.items() for d, spec in dofs.items() if spec is not None]
+                if drv:
+                    output["curve"] = dict(body=drv[0][0], force=drv[0][1], displacement=drv[0][1])
+                    break
+    for itf in interfaces:
+        if itf.reference == "as_built" and contact.geometry != "frozen":
+            raise InputError(f"{source}: interfaces.{itf.name}.reference = 'as_built': expected contact.geometry = "
+                             f"'frozen' (joints closed as built are a small-displacement model)")
+    case = Case(source=source, name=name, units=units, gravity=gravity, materials=materials,
+                block_types=block_types, blocks=blocks, rigid_bodies=rigid, stages=stages, output=output,
+                contact=contact, interfaces=interfaces, checks=checks, dimension=D, warnings=warnings,
+                allow_no_interface=allow_pairs, history_times=history_times, generators=generators)
+    case.warnings += stage_history_warnings(case)
+    return case
+
+
+def _parse_materials(root: Table, D: int, units: str, warnings: list) -> dict:
+    """[materials.NAME] -> specs.MaterialSpec (SI), with the unit-system plausibility checks."""
     materials = {}
     for mname, t in root.named_tables("materials").items():
         t.dimension_keys(D, dict(thickness=2, plane=2))
         ray = t.vector("rayleigh", 2, default=(0.0, 0.0), lo=0.0)
-        materials[mname] = MaterialSpec(
-            name=mname,
-            E=t.number("E", lo=0, lo_open=True, dim="stress", required=True),
-            nu=t.number("nu", lo=-1, hi=0.5, lo_open=True, hi_open=True, required=True),
-            rho=t.number("rho", lo=0, lo_open=True, dim="density", required=True),
-            thickness=t.number("thickness", 1.0, lo=0, lo_open=True, dim="length"),
-            plane=t.string("plane", "stress", choices=("stress", "strain")),
-            alpha=ray[0], beta=ray[1])
+        materials[mname] = MaterialSpec(name=mname, alpha=ray[0], beta=ray[1],
+                                        **read_fields(t, MaterialSpec, ("E", "nu", "rho", "thickness", "plane")))
         _plausible(t, "rho", materials[mname].rho, 1.0, 1e5, "kg/m^3", units)
         _plausible(t, "E", materials[mname].E, 1e3, 1e13, "Pa", units)
         _warn_implausible(warnings, t, "E", materials[mname].E, "E", units)
@@ -672,7 +687,11 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
         if "thickness" in t.data:
             _warn_implausible(warnings, t, "thickness", materials[mname].thickness, "length", units)
         t.done()
+    return materials
 
+
+def _parse_block_types(root: Table, D: int, materials: dict, base: str, units: str, warnings: list) -> dict:
+    """[block_types.NAME] -> BlockTypeSpec (2D: rectangle, polygon, file; 3D: _parse_block_type_3d)."""
     block_types = {}
     for tname, t in root.named_tables("block_types").items():
         if D == 3:
@@ -705,9 +724,12 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
             bt.file = _mesh_file(t, base)
         t.done()
         block_types[tname] = bt
+    return block_types
 
+
+def _parse_blocks(root: Table, D: int, block_types: dict, names: set) -> list:
+    """[[blocks]] -> BlockSpec with their clamps and tractions; body names go into `names`."""
     blocks = []
-    names = set()
     for i, t in enumerate(root.tables("blocks")):
         ty = t.string("type", required=True)
         if ty not in block_types:
@@ -741,7 +763,11 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
             c.done()
         t.done()
         blocks.append(b)
+    return blocks
 
+
+def _parse_rigid_bodies(root: Table, D: int, U: dict, units: str, names: set, warnings: list) -> list:
+    """[[rigid_bodies]] -> RigidSpec (2D polygon or 3D box/corners, mass, drivers, forces)."""
     rigid = []
     for i, t in enumerate(root.tables("rigid_bodies")):
         rname = t.string("name", f"rigid{i}")
@@ -760,16 +786,23 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
         r.group = t.string("group", "rigid")
         rigid.append(r)
         t.done()
-    generators = []  # generated geometry, as given; expand.py makes its block types, blocks and rigid bodies
+    return rigid
+
+
+def _parse_builders(root: Table, U: dict, materials, warnings, units) -> list:
+    """[wall], [arch], [wall3d], [dome] -> their specs as given (WallSpec...); expand.py makes their block types,
+    blocks and rigid bodies."""
+    generators = []
     for key, parse in (("wall", _parse_wall), ("arch", _parse_arch), ("wall3d", _parse_wall3d), ("dome", _parse_dome)):
         tb = root.table(key)
         if tb is not None:
             generators.append(parse(tb, U, materials, warnings, units))
             tb.done()
-    rigid_all = rigid + [r for g in generators for r in g.rigid]  # with the generated ones (names, drivers, mass)
-    if not blocks and not rigid and not generators:
-        raise root.error("blocks", "missing; expected at least one [[blocks]] or [[rigid_bodies]] entry")
+    return generators
 
+
+def _parse_stages(root: Table, D: int) -> list:
+    """[[stages]] -> StageSpec (fields from specs.StageSpec; drivers, forces and stop criteria)."""
     stages = []
     stage_names = set()
     for i, t in enumerate(root.tables("stages", min_count=1)):
@@ -777,103 +810,131 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
         if sname in stage_names:
             raise t.error("name", f"= {sname!r}: duplicate stage name")
         stage_names.add(sname)
-        h = t.number("h", lo=0, lo_open=True, dim="time", required=True)
-        dur = t.number("duration", lo=0, lo_open=True, dim="time", required=True)
+        f = read_fields(t, StageSpec, ("h", "duration"))
+        h, dur = f["h"], f["duration"]
         if dur < h * (1 - 1e-12):
             raise t.error("duration", f"= {dur:g} s: expected at least one time step h = {h:g} s")
         if dur / h > 1e8:
             raise t.error("duration", f"= {dur:g} s: expected at most 1e8 steps of h = {h:g} s")
-        static = t.boolean("static", False)
-        st = StageSpec(name=sname, duration=dur, h=h,
-                       theta=t.number("theta", 1.0 if static else 0.5, lo=0.5, hi=1.0),
-                       velocity_reset=t.boolean("velocity_reset", False),
-                       output_every=t.integer("output_every", 1, lo=1), static=static)
-        if static and st.theta != 1.0:
+        f.update(read_fields(t, StageSpec, ("static",)))
+        f.update(read_fields(t, StageSpec, ("theta", "velocity_reset", "output_every"),
+                             defaults=dict(theta=1.0 if f["static"] else 0.5)))
+        st = StageSpec(name=sname, **f)
+        if st.static and st.theta != 1.0:
             raise t.error("theta", f"= {st.theta:g}: expected 1 (or no theta) in a stage with static = true: the "
                                    "static step is the backward-Euler step without inertia")
-        dtab = t.table("drivers")
-        if dtab is not None:
-            for body in list(dtab.data):
-                bt_ = dtab.table(body)
-                st.drivers[body] = {}
-                for dof in list(bt_.data):
-                    if dof not in dofs_of(D):
-                        raise _dof_error(bt_, dof, D)
-                    if bt_.data[dof] == "free":
-                        bt_.used.add(dof)
-                        st.drivers[body][dof] = None
-                        continue
-                    d = bt_.table(dof)
-                    st.drivers[body][dof] = (d.string("kind", required=True, choices=("velocity", "displacement")),
-                                             d.history("history", None if dof[0] == "r" else "length",
-                                                       required=True))
-                    d.done()
-                bt_.done()
-            dtab.done()
-        ftab = t.table("forces")
-        if ftab is not None:
-            for body in list(ftab.data):
-                bt_ = ftab.table(body)
-                st.forces[body] = {}
-                for dof in list(bt_.data):
-                    if dof not in dofs_of(D):
-                        raise _dof_error(bt_, dof, D)
-                    if dof in st.drivers.get(body, {}) and st.drivers[body][dof] is not None:
-                        raise bt_.error(dof, "this dof is driven in this stage; a driven dof cannot also carry a force")
-                    st.forces[body][dof] = bt_.history(dof, "force" if dof[0] != "r" else None)
-                bt_.done()
-            ftab.done()
-        st.tol = t.number("tol", None, lo=0, lo_open=True)
-        st.on_nonconvergence = t.string("on_nonconvergence", None, choices=NONCONV)
-        st.max_sweeps = t.integer("max_sweeps", None, lo=1)
-        sd = t.table("stop_at_displacement")
-        if sd is not None:
-            body = sd.string("body", required=True)
-            dof = sd.string("dof", required=True, choices=dofs_of(D))
-            st.stop_displacement = (body, dof, abs(sd.number("value", required=True, dim=None if dof[0] == "r"
-                                                             else "length")))
-            sd.done()
-        sp = t.table("stop_after_peak")
-        if sp is not None:
-            st.stop_after_peak = (sp.string("body", required=True), sp.string("dof", required=True,
-                                                                              choices=dofs_of(D)),
-                                  sp.number("drop", 0.2, lo=0, hi=1, lo_open=True, hi_open=True),
-                                  sp.integer("min_steps", 20, lo=1))
-            sp.done()
-        eq = t.table("stop_at_equilibrium")
-        if eq is not None:
-            st.stop_at_equilibrium = True
-            st.equilibrium_velocity = eq.number("max_velocity", 1e-6, lo=0, lo_open=True, dim="length")
-            st.min_steps = eq.integer("min_steps", 10, lo=1)
-            eq.done()
+        st.drivers = _stage_drivers(t, D)
+        st.forces = _stage_forces(t, D, st.drivers)
+        for k, v in read_fields(t, StageSpec, ("tol", "on_nonconvergence", "max_sweeps")).items():
+            setattr(st, k, v)
+        _stage_stops(t, D, st)
         stages.append(st)
         t.done()
+    return stages
 
-    contact = {}
+
+def _stage_drivers(t: Table, D: int) -> dict:
+    """[stages.drivers.BODY] DOF = {kind, history} | "free" -> body -> dof -> (kind, history) | None."""
+    drivers = {}
+    dtab = t.table("drivers")
+    if dtab is not None:
+        for body in list(dtab.data):
+            bt_ = dtab.table(body)
+            drivers[body] = {}
+            for dof in list(bt_.data):
+                if dof not in dofs_of(D):
+                    raise _dof_error(bt_, dof, D)
+                if bt_.data[dof] == "free":
+                    bt_.used.add(dof)
+                    drivers[body][dof] = None
+                    continue
+                d = bt_.table(dof)
+                drivers[body][dof] = (d.string("kind", required=True, choices=("velocity", "displacement")),
+                                      d.history("history", None if dof[0] == "r" else "length", required=True))
+                d.done()
+            bt_.done()
+        dtab.done()
+    return drivers
+
+
+def _stage_forces(t: Table, D: int, drivers: dict) -> dict:
+    """[stages.forces.BODY] DOF = history -> body -> dof -> history (not on a dof the stage drives)."""
+    forces = {}
+    ftab = t.table("forces")
+    if ftab is not None:
+        for body in list(ftab.data):
+            bt_ = ftab.table(body)
+            forces[body] = {}
+            for dof in list(bt_.data):
+                if dof not in dofs_of(D):
+                    raise _dof_error(bt_, dof, D)
+                if dof in drivers.get(body, {}) and drivers[body][dof] is not None:
+                    raise bt_.error(dof, "this dof is driven in this stage; a driven dof cannot also carry a force")
+                forces[body][dof] = bt_.history(dof, "force" if dof[0] != "r" else None)
+            bt_.done()
+        ftab.done()
+    return forces
+
+
+def _stage_stops(t: Table, D: int, st: StageSpec):
+    """[stages.stop_at_displacement], [stages.stop_after_peak], [stages.stop_at_equilibrium]."""
+    sd = t.table("stop_at_displacement")
+    if sd is not None:
+        body = sd.string("body", required=True)
+        dof = sd.string("dof", required=True, choices=dofs_of(D))
+        st.stop_displacement = (body, dof, abs(sd.number("value", required=True, dim=None if dof[0] == "r"
+                                                         else "length")))
+        sd.done()
+    sp = t.table("stop_after_peak")
+    if sp is not None:
+        st.stop_after_peak = (sp.string("body", required=True), sp.string("dof", required=True,
+                                                                          choices=dofs_of(D)),
+                              sp.number("drop", 0.2, lo=0, hi=1, lo_open=True, hi_open=True),
+                              sp.integer("min_steps", 20, lo=1))
+        sp.done()
+    eq = t.table("stop_at_equilibrium")
+    if eq is not None:
+        st.stop_at_equilibrium = True
+        st.equilibrium_velocity = eq.number("max_velocity", 1e-6, lo=0, lo_open=True, dim="length")
+        st.min_steps = eq.integer("min_steps", 10, lo=1)
+        eq.done()
+
+
+CONTACT_KEYS = tuple(f.name for f in schema_fields(ContactOptions))
+
+
+def _parse_contact(root: Table, source: str) -> ContactOptions:
+    """[contact] -> specs.ContactOptions (its defaults when the table is absent); the options' cross-field rules
+    (e.g. fallback = 'newton' needs nlgs + residual) checked here, before any meshing."""
     ct = root.table("contact")
-    if ct is not None:
-        contact = dict(geometry=ct.string("geometry", "frozen", choices=("frozen", "updated")),
-                       redetect_every=ct.integer("redetect_every", 1, lo=1),
-                       tol=ct.number("tol", 1e-6, lo=0, lo_open=True),
-                       max_sweeps=ct.integer("max_sweeps", 2000, lo=1),
-                       omega=ct.number("omega", 1.0, lo=0, hi=2, lo_open=True, hi_open=True),
-                       order=ct.string("order", "given", choices=("given", "reversed", "shuffled")),
-                       seed=ct.integer("seed", 0, lo=0),
-                       on_nonconvergence=ct.string("on_nonconvergence", "warn", choices=NONCONV),
-                       max_refinements=ct.integer("max_refinements", 4, lo=1, hi=12),
-                       solver=ct.string("solver", "nlgs", choices=("nlgs", "newton")),
-                       criterion=ct.string("criterion", "change", choices=("change", "residual")),
-                       check_every=ct.integer("check_every", 10, lo=1),
-                       fallback=ct.string("fallback", "none", choices=("none", "newton")),
-                       coarse=ct.string("coarse", "none", choices=("none", "interfaces")),
-                       coarse_every=ct.integer("coarse_every", 10, lo=1))
-        from .contact.step import ContactOptions
-        try:  # the options' cross-field rules (e.g. fallback = 'newton' needs nlgs + residual), before any meshing
-            ContactOptions(**contact)
-        except InputError as e:
-            raise InputError(f"{source}: {e}") from None
-        ct.done()
-    all_groups = {b.group for b in blocks} | {g.group for g in generators} | {r.group for r in rigid_all}
+    if ct is None:
+        return ContactOptions()
+    f = read_fields(ct, ContactOptions, CONTACT_KEYS)
+    try:
+        opts = ContactOptions(**f)
+    except InputError as e:
+        raise InputError(f"{source}: {e}") from None
+    ct.done()
+    return opts
+
+
+def _law_params(t: Table) -> dict:
+    """The interface-law parameters of an [[interfaces]] entry (specs.LAW_PARAMS, without mu), in SI."""
+    params = {}
+    for key, p in LAW_PARAMS.items():
+        if key == "mu" or key not in t.data:
+            continue
+        if p.choices is not None:
+            params[key] = t.string(key)
+        else:
+            params[key] = t.number(key, dim=p.unit if p.unit in t.units else None)
+            if p.unit in DERIVED:
+                params[key] *= DERIVED[p.unit](t.units)
+    return params
+
+
+def _parse_interfaces(root: Table, D: int, all_groups: set, warnings: list, source: str) -> list:
+    """[[interfaces]] -> specs.InterfaceSpec (the engine's class; validated once, law parameters included)."""
     interfaces = []
     seen_if = set()
     for i, t in enumerate(root.tables("interfaces")):
@@ -896,7 +957,7 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
         if (not isinstance(pos, list) or not pos or
                 not all(isinstance(x, NUMBER) and not isinstance(x, bool) and 0 < x < 1 for x in pos)):
             raise t.error("positions", f"= {pos!r}: expected a list of relative positions strictly between 0 and 1")
-        placement = t.string("placement", None, choices=("overlap", "nodes", "positions"))
+        placement = read_fields(t, InterfaceSpec, ("placement",))["placement"]
         if placement == "overlap" and D == 3:
             raise t.error("placement", "= 'overlap': expected 'positions' or 'nodes' in 3D")
         used = placement or ("overlap" if D == 2 else "positions")
@@ -904,32 +965,22 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
             warnings.append(f"{t.source}: {t.key('positions')} = {pos!r} is not used: the candidate points are placed "
                             f"by placement = {used!r}" + (" (the 2D default)" if placement is None else "")
                             + "; set placement = \"positions\" to use them")
-        law = t.string("law", "coulomb", choices=("coulomb", "elastic", "brittle", "fremond", "mixed"))
-        params = {}
-        for key, dim in LAW_PARAM_UNITS.items():
-            if key in t.data:
-                if key in ("variant", "friction", "softening"):
-                    params[key] = t.string(key)
-                else:
-                    params[key] = t.number(key, dim=dim if dim in U else None)
-                    if dim in DERIVED:
-                        params[key] *= DERIVED[dim](U)
+        law = read_fields(t, InterfaceSpec, ("law",))["law"]
+        params = _law_params(t)
         mu = t.number("mu", 0.0 if law == "mixed" else None, lo=0, required=law != "mixed")
+        f = read_fields(t, InterfaceSpec, ("g0", "alert", "orientation", "reference"))
         try:
-            from .laws import law_parameters
-            law_parameters(law, dict(params, **({} if law == "mixed" else {"mu": mu})), t.path)
+            interfaces.append(InterfaceSpec(name=iname, groups=tuple(between), law=law, mu=mu, params=params,
+                                            placement=placement, positions=tuple(float(x) for x in pos),
+                                            candidate=cand, where=t.path, **f))
         except InputError as e:
             raise InputError(f"{casefile.origin_of_message(source, e)}: {e}") from None
-        interfaces.append(InterfaceCaseSpec(
-            name=iname, groups=tuple(between), law=law, mu=mu, params=params,
-            g0=t.number("g0", 0.0, lo=0, dim="length"),
-            alert=t.number("alert", 1e-3, lo=0, lo_open=True, dim="length"),
-            placement=placement,
-            positions=tuple(float(x) for x in pos), candidate=cand,
-            orientation=t.string("orientation", "any", choices=("any", "bed", "head", "crack")),
-            reference=t.string("reference", "nominal", choices=("nominal", "as_built"))))
         t.done()
-    history_times = root.string("history_times", "absolute", choices=("absolute", "stage"))
+    return interfaces
+
+
+def _parse_allow_no_interface(root: Table, all_groups: set) -> list:
+    """allow_no_interface = [[group, group], ...] -> sorted group pairs."""
     allow_pairs = []
     allow = root.raw("allow_no_interface")
     if allow is not None:
@@ -943,6 +994,11 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
                     raise root.error("allow_no_interface", f"group {g!r} has no body; expected groups among "
                                                            f"{sorted(all_groups)}")
             allow_pairs.append(tuple(sorted(p)))
+    return allow_pairs
+
+
+def _check_interface_pairs(source: str, interfaces: list, blocks: list):
+    """One interface per group pair (orientation 'any'), or 'bed' + 'head'; a 'crack' interface joins them."""
     pairs = {}
     for itf in interfaces:
         pairs.setdefault(tuple(sorted(itf.groups)), []).append(itf)
@@ -956,37 +1012,40 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
         if not (orients == ["any"] or orients == ["bed", "head"]):
             raise InputError(f"{source}: interfaces {[x.name for x in lst]}: the group pair {list(key)} takes one "
                              f"interface (orientation 'any') or two ('bed' and 'head'), got {orients}")
-    if interfaces and not contact:
-        contact = dict(geometry="frozen", redetect_every=1, tol=1e-6, max_sweeps=2000, omega=1.0, order="given",
-                       seed=0, on_nonconvergence="warn", max_refinements=4, criterion="change", check_every=10,
-                       solver="nlgs")
 
-    checks = dict(max_penetration=None, max_energy_growth=10.0, accept_unconverged=False)
+
+def _parse_checks(root: Table) -> dict:
+    """[checks] -> dict of specs.ChecksSpec: max_penetration, max_energy_growth, accept_unconverged."""
     ck = root.table("checks")
-    if ck is not None:
-        checks["max_penetration"] = ck.number("max_penetration", None, lo=0, lo_open=True, dim="length")
-        checks["max_energy_growth"] = ck.number("max_energy_growth", 10.0, lo=0, lo_open=True)
-        # a run that completes with steps still above the solver tolerance exits 0 instead of 3 (still reported)
-        checks["accept_unconverged"] = ck.boolean("accept_unconverged", False)
-        ck.done()
+    if ck is None:
+        return dataclasses.asdict(ChecksSpec())
+    checks = read_fields(ck, ChecksSpec, ("max_penetration", "max_energy_growth", "accept_unconverged"))
+    ck.done()
+    return checks
 
+
+def _parse_output(root: Table, D: int) -> dict:
+    """[output] -> dict of specs.OutputSpec: paraview, stress, checkpoint_every, crack_pattern, [output.curve]."""
     out = root.table("output")
-    output = {"paraview": True, "stress": True, "checkpoint_every": 0, "crack_pattern": True}
+    output = dataclasses.asdict(OutputSpec())
+    del output["curve"]  # present only when given (or chosen in 3D)
     if out is not None:
-        output["paraview"] = out.boolean("paraview", True)
-        output["stress"] = out.boolean("stress", True)
-        output["checkpoint_every"] = out.integer("checkpoint_every", 0, lo=0)
+        output.update(read_fields(out, OutputSpec, ("paraview", "stress", "checkpoint_every")))
         cv = out.table("curve")
         if cv is not None:
             output["curve"] = dict(body=cv.string("body", required=True),
                                    force=cv.string("force", "x", choices=dofs_of(D)),
                                    displacement=cv.string("displacement", "x", choices=dofs_of(D)))
             cv.done()
-        output["crack_pattern"] = out.boolean("crack_pattern", True)
+        output.update(read_fields(out, OutputSpec, ("crack_pattern",)))
         out.done()
-    root.done()
-    rigid_names = {r.name: r for r in rigid_all}
-    driven_now: dict = {}  # body -> driven dofs after the stages so far (stages accumulate)
+    return output
+
+
+def _check_stages(source: str, stages: list, rigid: list):
+    """Stage drivers/forces name rigid bodies with a mass where they free or load a dof; stop criteria name rigid
+    bodies; stop_after_peak reads a dof that is driven during its stage (specs.controls_at)."""
+    rigid_names = {r.name: r for r in rigid}
     for i, st in enumerate(stages):
         for key in ("drivers", "forces"):
             for body, dofs in getattr(st, key).items():
@@ -1003,38 +1062,11 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
             if ref is not None and ref[0] not in rigid_names:
                 raise InputError(f"{source}: stages[{i}].{key}.body = {ref[0]!r}: expected a rigid body among "
                                  f"{sorted(rigid_names)}")
-        for body, dofs in st.drivers.items():
-            for dof, spec in dofs.items():
-                driven_now.setdefault(body, set(rigid_names[body].drivers))
-                (driven_now[body].add if spec is not None else driven_now[body].discard)(dof)
-        for body, dofs in st.forces.items():
-            for dof in dofs:
-                driven_now.setdefault(body, set(rigid_names[body].drivers)).discard(dof)
-        if st.stop_after_peak is not None and st.stop_after_peak[1] not in driven_now.get(
-                st.stop_after_peak[0], set(rigid_names[st.stop_after_peak[0]].drivers)):
-            raise InputError(f"{source}: stages[{i}].stop_after_peak.dof = {st.stop_after_peak[1]!r}: expected a "
-                             f"driven dof of {st.stop_after_peak[0]!r} (its reaction is the force)")
-    if "curve" in output:
-        cb = output["curve"]["body"]
-        if cb not in rigid_names:
-            raise InputError(f"{source}: output.curve.body = {cb!r}: expected a rigid body among {sorted(rigid_names)}")
-    if D == 3:
-        if "curve" not in output:  # 3D: the force-displacement curve of the first dof a stage drives
-            for st in stages:
-                drv = [(b, d) for b, dofs in st.drivers.items() for d, spec in dofs.items() if spec is not None]
-                if drv:
-                    output["curve"] = dict(body=drv[0][0], force=drv[0][1], displacement=drv[0][1])
-                    break
-    for itf in interfaces:
-        if itf.reference == "as_built" and contact and contact.get("geometry") != "frozen":
-            raise InputError(f"{source}: interfaces.{itf.name}.reference = 'as_built': expected contact.geometry = "
-                             f"'frozen' (joints closed as built are a small-displacement model)")
-    case = Case(source=source, name=name, units=units, gravity=gravity, materials=materials,
-                block_types=block_types, blocks=blocks, rigid_bodies=rigid, stages=stages, output=output,
-                contact=contact, interfaces=interfaces, checks=checks, dimension=D, warnings=warnings,
-                allow_no_interface=allow_pairs, history_times=history_times, generators=generators)
-    case.warnings += stage_history_warnings(case)
-    return case
+        if st.stop_after_peak is not None:
+            c = controls_at(rigid, stages, i).get(st.stop_after_peak[:2])
+            if c is None or not c.driven:
+                raise InputError(f"{source}: stages[{i}].stop_after_peak.dof = {st.stop_after_peak[1]!r}: expected "
+                                 f"a driven dof of {st.stop_after_peak[0]!r} (its reaction is the force)")
 
 
 # ----------------------------------------------------------------------------- stage times and histories
@@ -1055,26 +1087,12 @@ def rigid_specs(case: Case) -> list:
 
 
 def active_histories(case: Case, si: int) -> dict:
-    """Driver and force histories in force during stage `si` (stages accumulate in order, as the runner applies
-    them): (body, dof) -> (label, kind, history, stage) with kind "displacement", "velocity" or "force", stage the
-    index of the stage that set it (-1: the body's own [rigid_bodies] drivers/forces, times from the run start)."""
-    act = {}
-    for r in rigid_specs(case):
-        for dof, (kind, hist) in r.drivers.items():
-            act[(r.name, dof)] = (f"rigid_bodies.{r.name}.drivers.{dof}", kind, hist, -1)
-        for dof, hist in r.forces.items():
-            act[(r.name, dof)] = (f"rigid_bodies.{r.name}.forces.{dof}", "force", hist, -1)
-    for i, st in enumerate(case.stages[:si + 1]):
-        for body, dofs in st.drivers.items():
-            for dof, spec in dofs.items():
-                if spec is None:
-                    act.pop((body, dof), None)
-                else:
-                    act[(body, dof)] = (f"stages[{i}].drivers.{body}.{dof}", spec[0], spec[1], i)
-        for body, dofs in st.forces.items():
-            for dof, hist in dofs.items():
-                act[(body, dof)] = (f"stages[{i}].forces.{body}.{dof}", "force", hist, i)
-    return act
+    """Driver and force histories in force during stage `si` (specs.controls_at: stages accumulate in order, as the
+    runner applies them): (body, dof) -> (label, kind, history, stage) with kind "displacement", "velocity" or
+    "force", stage the index of the stage that set it (-1: the body's own [rigid_bodies] drivers/forces, times from
+    the run start)."""
+    return {key: (c.label, c.kind, c.history, c.stage)
+            for key, c in controls_at(rigid_specs(case), case.stages, si).items()}
 
 
 def ended_histories(case: Case, si: int) -> list:

@@ -43,7 +43,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from .errors import InputError, check_range
+from . import specs as _specs
+from .errors import InputError
 
 COULOMB, ELASTIC, BRITTLE, DUGDALE, FREMOND, MIXED = 0, 1, 2, 3, 4, 5
 LAW_NAMES = {"coulomb": COULOMB, "elastic": ELASTIC, "brittle": BRITTLE, "dugdale": DUGDALE,
@@ -58,109 +59,36 @@ NSTATE = 7
 S_US = 7
 NSTATE3 = 8
 
-LAW_KEYS = {
-    "coulomb": {"mu", "f_c", "G_fc"},
-    "elastic": {"mu", "c_N", "c_T", "f_c", "G_fc"},
-    "brittle": {"mu", "variant", "c_N", "c_T", "r_c", "s_c", "l_c", "f_c", "G_fc"},
-    "fremond": {"mu", "mu_r", "friction", "c_N", "c_T", "w", "b", "p", "f_c", "G_fc"},
-    "mixed": {"k_n", "k_s", "f_t", "c", "G_I", "G_II", "tan_phi", "softening", "f_c", "G_fc", "damage_viscosity"},
-}
+LAW_KEYS = _specs.LAW_KEYS  # the parameters each law takes (specs.LAW_PARAMS, the one table)
+
+# parameter name -> column of the parameter vector (mixed: k_n, k_s, tan_phi share the columns of c_N, c_T, mu)
+_COLUMNS = dict(mu=P_MU, c_N=P_CN, c_T=P_CT, r_c=P_RC, s_c=P_SC, l_c=P_LC, w=P_W, b=P_B, p=P_P, mu_r=P_MUR,
+                k_n=P_CN, k_s=P_CT, f_t=P_FT, c=P_C, G_I=P_GI, G_II=P_GII, tan_phi=P_MU, damage_viscosity=P_ETA,
+                f_c=P_FC, G_fc=P_GFC)
 
 
-def law_parameters(law: str, params: dict, name: str) -> tuple[int, np.ndarray]:
-    """Validate a law's parameters (SI, per unit area) -> (law code, parameter row)."""
-    if law not in LAW_KEYS:
-        raise InputError(f"{name}.law = {law!r}: expected one of {sorted(LAW_KEYS)}")
-    unknown = set(params) - LAW_KEYS[law]
-    if unknown:
-        raise InputError(f"{name}.{sorted(unknown)[0]}: unknown parameter for law {law!r}; expected "
-                         f"{sorted(LAW_KEYS[law])}")
+def pack(law: str, values: dict) -> tuple[int, np.ndarray]:
+    """Validated parameter values (specs.validate_law_params) -> (law code, parameter row of NPAR columns)."""
     p = np.zeros(NPAR)
-
-    def get(k, default=None, lo=0.0, lo_open=False, expected=None):
-        if k not in params:
-            if default is None:
-                raise InputError(f"{name}.{k}: missing; law {law!r} needs {expected or k}")
-            return default
-        return check_range(f"{name}.{k}", params[k], lo, lo_open=lo_open, expected=expected)
-
-    p[P_FC] = get("f_c", 0.0, lo_open=False, expected="compressive strength f_c > 0 [Pa] (omit: no cap)")
-    if "f_c" in params and p[P_FC] <= 0.0:
-        raise InputError(f"{name}.f_c = {params['f_c']!r}: expected compressive strength f_c > 0 [Pa] (omit: no cap)")
-    if "G_fc" in params:
-        if "f_c" not in params:
-            raise InputError(f"{name}.G_fc: needs the compressive strength f_c [Pa] (G_fc softens the cap f_c)")
-        p[P_GFC] = get("G_fc", None, lo_open=True, expected="compressive fracture energy G_fc > 0 [J/m^2] "
-                                                              "(omit: perfectly plastic cap)")
-        if not np.isfinite(p[P_GFC]):
-            raise InputError(f"{name}.G_fc = {params['G_fc']!r}: expected finite compressive fracture energy "
-                             f"G_fc > 0 [J/m^2] (omit: perfectly plastic cap)")
-    if law != "mixed":
-        p[P_MU] = get("mu", None if law == "coulomb" else 0.0, expected="mu >= 0")
+    for k, v in values.items():
+        if k in _COLUMNS:
+            p[_COLUMNS[k]] = v
     if law == "coulomb":
         return COULOMB, p
     if law == "elastic":
-        p[P_CN] = get("c_N", None, lo_open=True, expected="c_N > 0 [N/m^3]")
-        p[P_CT] = get("c_T", None, lo_open=True, expected="c_T > 0 [N/m^3]")
         return ELASTIC, p
     if law == "brittle":
-        variant = params.get("variant", "elastic")
-        if variant not in ("elastic", "dugdale"):
-            raise InputError(f"{name}.variant = {variant!r}: expected 'elastic' or 'dugdale'")
-        p[P_RC] = get("r_c", None, lo_open=True, expected="tensile strength r_c > 0 [Pa]")
-        if variant == "dugdale":
-            p[P_LC] = get("l_c", None, lo_open=True, expected="critical opening l_c > 0 [m]")
-            for k in ("c_N", "c_T", "s_c"):
-                if k in params:
-                    raise InputError(f"{name}.{k}: not a parameter of the Dugdale variant (r_c, l_c, mu)")
-            return DUGDALE, p
-        if "l_c" in params:
-            raise InputError(f"{name}.l_c: not a parameter of the elastic-brittle variant (c_N, c_T, r_c, s_c, mu)")
-        p[P_CN] = get("c_N", None, lo_open=True, expected="c_N > 0 [N/m^3]")
-        p[P_CT] = get("c_T", 0.0, expected="c_T >= 0 [N/m^3]")
-        p[P_SC] = get("s_c", 0.0, expected="shear strength s_c >= 0 [Pa] (0: none)")
-        return BRITTLE, p
+        return (DUGDALE if values["variant"] == "dugdale" else BRITTLE), p
     if law == "fremond":
-        p[P_CN] = get("c_N", None, lo_open=True, expected="c_N > 0 [N/m^3]")
-        p[P_CT] = get("c_T", None, lo_open=True, expected="c_T > 0 [N/m^3]")
-        p[P_W] = get("w", None, lo_open=True, expected="adhesion energy w > 0 [J/m^2]")
-        p[P_B] = get("b", 0.0, expected="viscosity b >= 0 [J s/m^2]")
-        p[P_P] = get("p", 1.0, lo_open=True, expected="exponent p > 0")
-        friction = params.get("friction", "constant")
-        if friction not in ("constant", "damage"):
-            raise InputError(f"{name}.friction = {friction!r}: expected 'constant' (mu) or 'damage' "
-                             f"(mu(beta) = (1 - beta) mu_r)")
-        if friction == "damage":
-            p[P_MUR] = get("mu_r", None, expected="residual friction mu_r >= 0")
-            p[P_MUKIND] = 1.0
-        elif "mu_r" in params:
-            raise InputError(f"{name}.mu_r: only with friction = 'damage'")
+        p[P_MUKIND] = 1.0 if values["friction"] == "damage" else 0.0
         return FREMOND, p
-    # mixed-mode softening
-    p[P_CN] = get("k_n", None, lo_open=True, expected="normal stiffness k_n > 0 [N/m^3]")
-    p[P_CT] = get("k_s", None, lo_open=True, expected="shear stiffness k_s > 0 [N/m^3]")
-    p[P_FT] = get("f_t", None, lo_open=True, expected="tensile strength f_t > 0 [Pa]")
-    p[P_C] = get("c", None, lo_open=True, expected="cohesion c > 0 [Pa]")
-    p[P_GI] = get("G_I", None, lo_open=True, expected="mode I fracture energy G_I > 0 [J/m^2]")
-    p[P_GII] = get("G_II", None, lo_open=True, expected="mode II fracture energy G_II > 0 [J/m^2]")
-    p[P_MU] = get("tan_phi", None, expected="friction tan_phi >= 0")
-    soft = params.get("softening", "linear")
-    if soft not in ("linear", "exponential"):
-        raise InputError(f"{name}.softening = {soft!r}: expected 'linear' or 'exponential'")
-    p[P_SOFT] = 0.0 if soft == "linear" else 1.0
-    p[P_ETA] = get("damage_viscosity", 0.0, expected="finite damage viscosity eta >= 0 [s] (0: rate-independent)")
-    if not np.isfinite(p[P_ETA]):
-        raise InputError(f"{name}.damage_viscosity = {params['damage_viscosity']!r}: expected finite damage viscosity "
-                         f"eta >= 0 [s] (0: rate-independent)")
-    eI = p[P_FT] ** 2 / (2 * p[P_CN])
-    eII = p[P_C] ** 2 / (2 * p[P_CT])
-    if p[P_GI] <= eI:
-        raise InputError(f"{name}.G_I = {p[P_GI]:g}: the peak f_t is not reachable; expected G_I > f_t^2/(2 k_n) "
-                         f"= {eI:g} J/m^2 (the elastic energy at the peak)")
-    if p[P_GII] <= eII:
-        raise InputError(f"{name}.G_II = {p[P_GII]:g}: the peak c is not reachable; expected G_II > c^2/(2 k_s) "
-                         f"= {eII:g} J/m^2")
+    p[P_SOFT] = 0.0 if values["softening"] == "linear" else 1.0
     return MIXED, p
+
+
+def law_parameters(law: str, params: dict, name: str) -> tuple[int, np.ndarray]:
+    """Validate a law's parameters (SI, per unit area; specs.validate_law_params) -> (law code, parameter row)."""
+    return pack(law, _specs.validate_law_params(law, params, name))
 
 
 def initial_state(law: np.ndarray, dim: int = 2) -> np.ndarray:

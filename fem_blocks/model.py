@@ -112,16 +112,12 @@ def build_model(case: Case) -> Model:
         groups.append(r.group)
     contact = None
     if case.interfaces:
-        from .contact.step import ContactOptions, ContactStep, InterfaceSpec
-        specs = [InterfaceSpec(name=i.name, groups=i.groups, law=i.law, mu=i.mu, g0=i.g0, alert=i.alert,
-                               placement=i.placement, positions=i.positions, candidate=i.candidate,
-                               orientation=i.orientation, params=i.params, reference=i.reference)
-                 for i in case.interfaces]
+        from .contact.step import ContactStep
         parent = [-1] * len(names)
         index = {n: k for k, n in enumerate(names)}
         for b in case.blocks:
             parent[index[b.name]] = b.parent
-        contact = ContactStep(specs, groups, ContactOptions(**case.contact), body_names=names, body_parent=parent)
+        contact = ContactStep(case.interfaces, groups, case.contact, body_names=names, body_parent=parent)
     return Model(bodies, block_types, names, np.asarray(case.gravity, dtype=float), groups, contact, D)
 
 

@@ -224,17 +224,14 @@ def _enter_stage(model: Model, sim: Simulation, case: Case, si: int, t0: float =
     st = case.stages[si]
     off = t0 if getattr(case, "history_times", "absolute") == "stage" else 0.0
     changed = False
-    for bname, dofs in st.drivers.items():
+    for bname, dof, kind, hist in st.changes():  # (the bodies accumulate them: specs.controls_at)
         b = model.bodies[model.index(bname)]
-        for dof, spec in dofs.items():
-            b.set_driver(dof, None if spec is None else Driver(spec[0], _shift(spec[1], off),
-                                                               name=f"stages[{si}].drivers.{bname}"))
-            changed = True
-    for bname, dofs in st.forces.items():
-        b = model.bodies[model.index(bname)]
-        for dof, force_hist in dofs.items():
-            b.set_force(dof, _shift(force_hist, off))
-            changed = True
+        if kind == "force":
+            b.set_force(dof, _shift(hist, off))
+        else:
+            b.set_driver(dof, None if kind == "free" else Driver(kind, _shift(hist, off),
+                                                                 name=f"stages[{si}].drivers.{bname}"))
+        changed = True
     if changed and model.contact is not None:
         model.contact.mark_W_dirty()  # rigid W (driven dofs) changed
     if st.static:  # the static step needs every body held without its mass (dynamics.py docstring)
@@ -247,10 +244,7 @@ def _enter_stage(model: Model, sim: Simulation, case: Case, si: int, t0: float =
     sim.set_step(st.h, st.theta, st.static)
     sim.velocity_reset = st.velocity_reset
     if model.contact is not None:
-        o = model.contact.opts
-        o.tol = st.tol if st.tol is not None else case.contact.get("tol", o.tol)
-        o.max_sweeps = st.max_sweeps if st.max_sweeps is not None else case.contact.get("max_sweeps", o.max_sweeps)
-        o.on_nonconvergence = "warn"  # the runner applies the policy (it writes a checkpoint before stopping)
+        model.contact.set_options(case.contact.for_stage(st))  # the runner applies the non-convergence policy
 
 
 def _cut_histories(case: Case, si: int, t_end: float, stage_t0: list, stages_done: list) -> list:
@@ -281,7 +275,7 @@ def _cut_histories(case: Case, si: int, t_end: float, stage_t0: list, stages_don
 
 
 def _policy(case: Case, st) -> str:
-    return st.on_nonconvergence or case.contact.get("on_nonconvergence", "warn")
+    return st.on_nonconvergence or case.contact.on_nonconvergence
 
 
 class _Guards:
@@ -524,7 +518,7 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
                     run.update(stage=si, k=0, stage_done=False, peak_force=0.0)
                 resumed_mid_stage = False
                 policy = _policy(case, st)
-                max_level = case.contact.get("max_refinements", 4)
+                max_level = case.contact.max_refinements
                 stop_body = {}
                 for key, ref in (("disp", st.stop_displacement), ("peak", st.stop_after_peak)):
                     if ref is not None:
@@ -715,15 +709,9 @@ def _summary(case, model, sim, info, run, t_start, t_setup, pv, pc, status) -> d
 def _dof_control(case, body: str, dof: str, stage: int):
     """How `dof` of rigid body `body` is controlled during stage `stage` (stages accumulate in order, as in
     `_enter_stage`): ("driven", None), or ("force", history or None) for a free dof (None: no applied force)."""
-    spec = next((r for r in case.rigid_bodies if r.name == body), None)
-    state = ("driven", None) if spec is not None and dof in spec.drivers else \
-        ("force", spec.forces.get(dof) if spec is not None else None)
-    for st in case.stages[:stage + 1]:
-        if dof in st.drivers.get(body, {}):
-            state = ("force", None) if st.drivers[body][dof] is None else ("driven", None)
-        if dof in st.forces.get(body, {}):
-            state = ("force", st.forces[body][dof])
-    return state
+    from .specs import controls_at
+    c = controls_at(case.rigid_bodies, case.stages, stage).get((body, dof))
+    return ("driven", None) if c is not None and c.driven else ("force", None if c is None else c.history)
 
 
 def _vertical_force(case, hist, body: str, k: int):

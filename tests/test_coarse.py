@@ -145,5 +145,6 @@ def test_case_file_key(tmp_path):
     f = tmp_path / "c.toml"
     f.write_text(src.replace('solver = "newton"', "coarse_every = 7"))
     case = load_case(str(f))
-    opts = ContactOptions(**case.contact)
+    opts = case.contact
+    assert isinstance(opts, ContactOptions)
     assert (opts.coarse, opts.coarse_every) == ("interfaces", 7)

@@ -26,11 +26,11 @@ the global Newton (solver/newton.py); the 3D Newton for interface laws is not wr
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import InputError, check_range
+from ..errors import InputError
+from ..specs import ContactOptions, InterfaceSpec  # noqa: F401 (the engine's spec classes; defined in specs.py)
 from . import detection as det
 from . import detection3d as det3
 from . import kinematics as kin
@@ -39,92 +39,6 @@ from .result import OUT_FIELDS, ContactResult
 from .scene import ContactScene
 
 STATUS_NAMES = ("open", "stick", "slip")
-
-
-@dataclass
-class InterfaceSpec:
-    """Interface between two body groups: law and joint geometry."""
-
-    name: str
-    groups: tuple  # (group_a, group_b)
-    law: str = "coulomb"
-    mu: float = 0.5
-    g0: float = 0.0
-    alert: float = 1e-3
-    placement: str | None = None  # None: "overlap" in 2D, "positions" in 3D (docs/case-files.md)
-    positions: tuple = (0.25, 0.75)  # used by placement = "positions"
-    candidate: str | None = None  # group name whose bodies are candidates
-    orientation: str = "any"  # "any" | "bed" (normal within 45° of vertical) | "head"
-    params: dict = field(default_factory=dict)
-    reference: str = "nominal"  # "nominal": joint closed at gap = g0; "as_built": closed at the initial gap (frozen)
-
-    def __post_init__(self):
-        n = f"interfaces.{self.name}"
-        if self.reference not in ("nominal", "as_built"):
-            raise InputError(f"{n}.reference = {self.reference!r}: expected 'nominal' or 'as_built'")
-        check_range(f"{n}.mu", self.mu, 0.0, expected="mu >= 0")
-        check_range(f"{n}.g0", self.g0, 0.0, expected="g0 >= 0 [m] (joint thickness)")
-        check_range(f"{n}.alert", self.alert, 0.0, lo_open=True, expected="alert > 0 [m]")
-        if self.placement not in (None, "positions", "nodes", "overlap"):
-            raise InputError(f"{n}.placement = {self.placement!r}: expected 'overlap', 'nodes' or 'positions'")
-        for p in self.positions:
-            check_range(f"{n}.positions", p, 0.0, 1.0, lo_open=True, hi_open=True, expected="0 < position < 1")
-        if self.orientation not in ("any", "bed", "head", "crack"):
-            raise InputError(f"{n}.orientation = {self.orientation!r}: expected 'any', 'bed', 'head' or 'crack'")
-        from ..laws import law_parameters
-        prm = dict(self.params)
-        if self.law != "mixed":
-            prm.setdefault("mu", self.mu)
-        self.law_code, self.law_par = law_parameters(self.law, prm, n)
-        self.mu = float(self.law_par[0])
-
-
-@dataclass
-class ContactOptions:
-    geometry: str = "frozen"
-    redetect_every: int = 1
-    tol: float = 1e-6
-    max_sweeps: int = 2000
-    omega: float = 1.0
-    order: str = "given"
-    seed: int = 0
-    on_nonconvergence: str = "warn"
-    max_refinements: int = 4  # "refine": at most 2^max_refinements sub-steps per step
-    criterion: str = "change"   # "change": ‖ΔP‖/‖P‖ between sweeps; "residual": natural-map residual ‖F‖/‖q‖
-    solver: str = "nlgs"        # "nlgs" | "newton" (global semismooth Newton, NLGS start and fallback; 2D Coulomb)
-    check_every: int = 10
-    fallback: str = "none"      # "newton": NLGS hands over to the global Newton when it stagnates (Coulomb contacts)
-    coarse: str = "none"        # "interfaces": two-level NLGS, coarse correction per interface (solver/coarse.py)
-    coarse_every: int = 10      # sweeps between two coarse corrections
-
-    def __post_init__(self):
-        if self.geometry not in ("frozen", "updated"):
-            raise InputError(f"contact.geometry = {self.geometry!r}: expected 'frozen' or 'updated'")
-        check_range("contact.tol", self.tol, 0.0, lo_open=True, expected="tol > 0")
-        check_range("contact.max_sweeps", self.max_sweeps, 1, expected="max_sweeps >= 1")
-        check_range("contact.omega", self.omega, 0.0, 2.0, lo_open=True, hi_open=True, expected="0 < omega < 2")
-        if self.order not in ("given", "reversed", "shuffled"):
-            raise InputError(f"contact.order = {self.order!r}: expected 'given', 'reversed' or 'shuffled'")
-        if self.solver not in ("nlgs", "newton"):
-            raise InputError(f"contact.solver = {self.solver!r}: expected 'nlgs' or 'newton'")
-        if self.criterion not in ("change", "residual"):
-            raise InputError(f"contact.criterion = {self.criterion!r}: expected 'change' or 'residual'")
-        check_range("contact.check_every", self.check_every, 1, expected="check_every >= 1")
-        if self.fallback not in ("none", "newton"):
-            raise InputError(f"contact.fallback = {self.fallback!r}: expected 'none' or 'newton'")
-        if self.fallback == "newton" and (self.solver != "nlgs" or self.criterion != "residual"):
-            raise InputError("contact.fallback = 'newton': expected solver = 'nlgs' and criterion = 'residual' "
-                             "(stagnation is measured on the residual)")
-        if self.coarse not in ("none", "interfaces"):
-            raise InputError(f"contact.coarse = {self.coarse!r}: expected 'none' or 'interfaces'")
-        check_range("contact.coarse_every", self.coarse_every, 1, expected="coarse_every >= 1")
-        if self.coarse != "none" and (self.solver != "nlgs" or self.fallback != "none"):
-            raise InputError(f"contact.coarse = {self.coarse!r}: expected solver = 'nlgs' and fallback = 'none' (the "
-                             "coarse correction is a step of the Gauss-Seidel solver)")
-        if self.on_nonconvergence not in ("warn", "fail", "refine"):
-            raise InputError(f"contact.on_nonconvergence = {self.on_nonconvergence!r}: expected 'warn', 'fail' or "
-                             "'refine' (refine: handled by the runner, warn here)")
-        check_range("contact.max_refinements", self.max_refinements, 1, 12, expected="1 <= max_refinements <= 12")
 
 
 class ContactStep:
@@ -167,6 +81,10 @@ class ContactStep:
         self.mark_W_dirty()
         if self.scene is not None:
             self.scene._group_index()
+
+    def set_options(self, opts: ContactOptions):
+        """Take new solver options (a stage's tol/max_sweeps: ContactOptions.for_stage) from the next step on."""
+        self.opts = opts
 
     def mark_W_dirty(self):
         """The Delassus operator must be rebuilt (new h, drivers changed): rigid W from the current orientation."""
@@ -211,20 +129,22 @@ class ContactStep:
         """Per-contact law code, parameters (per unit area) and friction from the contact's interface."""
         cs = self.cs
         self._assign_cracks()
-        codes = np.array([itf.law_code for itf in self.interfaces], dtype=np.int64)
-        pars = np.array([itf.law_par for itf in self.interfaces])
+        from ..laws import pack
+        rows = [pack(itf.law, itf.law_values) for itf in self.interfaces]
+        codes = np.array([c for c, _ in rows], dtype=np.int64)
+        pars = np.array([p for _, p in rows])
         self.law = codes[cs.interface]
         self.par = np.ascontiguousarray(pars[cs.interface])
         self.mu = self.par[:, 0].copy()
         from ..laws import P_FC
         self.cohesive = bool(np.any(self.law != 0) or np.any(self.par[:, P_FC] > 0))  # caps: cohesive kernels
         if self.opts.coarse != "none" and self.cohesive:
-            bad = next(itf for itf in self.interfaces if itf.law_code != 0 or itf.law_par[P_FC] > 0)
+            bad = next(itf for itf, (c, p) in zip(self.interfaces, rows) if c != 0 or p[P_FC] > 0)
             raise InputError(f"interfaces.{bad.name}.law = {bad.law!r}: contact.coarse = {self.opts.coarse!r} handles "
                              "the Coulomb law without crushing cap only; expected contact.coarse = 'none'")
         self._coarse = None  # built at the next solve from the new contact set
         if self.dim == 3 and self.cohesive and self.opts.solver == "newton":
-            bad = next(itf for itf in self.interfaces if itf.law_code != 0 or itf.law_par[P_FC] > 0)
+            bad = next(itf for itf, (c, p) in zip(self.interfaces, rows) if c != 0 or p[P_FC] > 0)
             raise InputError(f"interfaces.{bad.name}.law = {bad.law!r}: the 3D Newton solver handles the Coulomb law "
                              f"without crushing cap only; expected contact.solver = 'nlgs' for 3D interface laws")
 
