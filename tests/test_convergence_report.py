@@ -176,9 +176,10 @@ def test_solver_label_names_the_solver_and_its_fallback():
     `solver`, set where each solver runs: Newton alone, Newton whose line search handed over to Gauss-Seidel,
     Gauss-Seidel alone (also when fallback = "newton" was not needed), Gauss-Seidel then Newton."""
     from fem_blocks.solver import newton, nlgs
+    from fem_blocks.linalg import to_block_csr
     from test_nlgs import random_problem
     W, q = random_problem()
-    B = nlgs.to_block_csr(W, 2)
+    B = to_block_csr(W, 2)
     res = newton.solve_newton(B, q, 0.3, tol=1e-12)
     assert res.converged and res.solver == "Newton"
     assert newton._result(res.r, res.u, 5, 20, 0, 0.0, 1.0, 1e-8, q).solver == "Newton"

@@ -16,6 +16,7 @@ import pytest
 from fem_blocks.errors import InputError
 from fem_blocks.io import fclib
 from fem_blocks.solver import newton, nlgs
+from fem_blocks.linalg import to_block_csr
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from test_fclib import FCLIB, SUMMARY  # noqa: E402  (data location and Siconos reference summary)
@@ -59,7 +60,7 @@ def test_fclib_3d_default(name):
     ref = SUMMARY[name]
     p = problem(name)
     assert p.dim == 3
-    res = newton.solve_newton(nlgs.to_block_csr(p.W, 3), p.q, p.mu, tol=1e-8)
+    res = newton.solve_newton(to_block_csr(p.W, 3), p.q, p.mu, tol=1e-8)
     assert res.converged, res.message
     assert ref["err_rel_q"] <= 1e-8 or name == "LMGC_100_PR_PerioBox-i00361-60-03000"
     check_solution(p, res, 1e-8)
@@ -73,7 +74,7 @@ def test_fclib_3d_default(name):
 @pytest.mark.parametrize("name", [n for n in PROBLEMS_3D if n not in COLD_SLOW])
 def test_fclib_3d_pure_newton_from_zero(name):
     p = problem(name)
-    res = newton.solve_newton(nlgs.to_block_csr(p.W, 3), p.q, p.mu, tol=1e-8, gs_sweeps=0)
+    res = newton.solve_newton(to_block_csr(p.W, 3), p.q, p.mu, tol=1e-8, gs_sweeps=0)
     assert res.converged, res.message
     check_solution(p, res, 1e-8)
 
@@ -125,7 +126,7 @@ W1 = np.array([[2.0, 0.3, -0.2], [0.3, 1.5, 0.1], [-0.2, 0.1, 1.2]])  # SPD, cou
 
 
 def solve1(W, q, mu):
-    res = newton.solve_newton(nlgs.to_block_csr(W, 3), q, mu, tol=1e-14, gs_sweeps=0)
+    res = newton.solve_newton(to_block_csr(W, 3), q, mu, tol=1e-14, gs_sweeps=0)
     assert res.converged, res.message
     return res.r, res.u
 
@@ -211,7 +212,7 @@ def test_box_slides_down_the_steepest_slope(phi, psi):
     theta, mu = 0.5, 0.3  # tan θ = 0.546 > μ: slides
     W, q, velocity, s, n, F, m, h, g = box_on_incline(theta, phi, psi, mu)
     assert np.linalg.matrix_rank(W) == 6  # 12 unknowns, 6 dofs: hyperstatic, reactions not unique
-    res = newton.solve_newton(nlgs.to_block_csr(W, 3), q, mu, tol=1e-12, gs_sweeps=0)
+    res = newton.solve_newton(to_block_csr(W, 3), q, mu, tol=1e-12, gs_sweeps=0)
     assert res.converged, res.message
     v = velocity(res.r)
     a_ex = g * (np.sin(theta) - mu * np.cos(theta))
@@ -231,7 +232,7 @@ def test_box_slides_down_the_steepest_slope(phi, psi):
 def test_box_sticks_below_the_friction_angle(phi, psi):
     theta, mu = 0.25, 0.4  # tan θ = 0.255 < μ: sticks
     W, q, velocity, s, n, F, m, h, g = box_on_incline(theta, phi, psi, mu)
-    res = newton.solve_newton(nlgs.to_block_csr(W, 3), q, mu, tol=1e-12, gs_sweeps=0)
+    res = newton.solve_newton(to_block_csr(W, 3), q, mu, tol=1e-12, gs_sweeps=0)
     assert res.converged, res.message
     assert np.abs(velocity(res.r)).max() <= 1e-9 * h * g
     imp = res.r.reshape(4, 3) @ F
@@ -291,7 +292,7 @@ def test_random_3d_problems_agree_with_nlgs(seed, mu):
     A = rng.standard_normal((3 * n, 4 * n)) * (rng.random((3 * n, 4 * n)) < 0.04)
     W = A @ A.T + np.diag(1 + rng.random(3 * n))
     q = rng.standard_normal(3 * n)
-    B = nlgs.to_block_csr(W, 3)
+    B = to_block_csr(W, 3)
     res = newton.solve_newton(B, q, mu, tol=1e-12, gs_sweeps=0)
     assert res.converged, res.message
     ref = nlgs.solve_block_csr(B, q, mu, tol=1e-12, max_sweeps=100000, criterion="residual")
@@ -300,7 +301,7 @@ def test_random_3d_problems_agree_with_nlgs(seed, mu):
 
 
 def test_3d_input_errors():
-    B = nlgs.to_block_csr(np.eye(6), 3)
+    B = to_block_csr(np.eye(6), 3)
     with pytest.raises(InputError, match="memory"):
         newton.solve_newton(B, -np.ones(6), 0.3, memory=0)
     with pytest.raises(InputError, match="r0: expected 6"):

@@ -7,6 +7,7 @@ import scipy.sparse as sp
 from fem_blocks.errors import InputError
 from fem_blocks.io import fclib
 from fem_blocks.solver import nlgs
+from fem_blocks.linalg import to_block_csr
 
 from fem_blocks.solver import local as loc
 
@@ -138,7 +139,7 @@ def test_bad_arguments_3d_and_block_csr():
         nlgs.solve(W, np.full(6, np.nan), 0.3, dim=3)
     with pytest.raises(InputError, match="r0: expected finite values"):
         nlgs.solve(W, q, 0.3, dim=3, r0=np.full(6, np.inf))
-    B2 = nlgs.to_block_csr(W, 2)
+    B2 = to_block_csr(W, 2)
     with pytest.raises(InputError, match="dim = 3: W is a BlockCSR of 2x2 blocks"):
         nlgs.solve(B2, q, 0.3, dim=3)
 
@@ -325,7 +326,7 @@ def test_3d_orders_deterministic_warm_start_relaxation():
 def test_sweep_and_block_csr_path_match_solve():
     """The raw kernel path (to_block_csr + sweep / solve_block_csr) gives the same reactions as solve."""
     W, q = random_problem_3d(n=10, seed=4)
-    B = nlgs.to_block_csr(sp.csr_matrix(W), 3)
+    B = to_block_csr(sp.csr_matrix(W), 3)
     assert B.blocks.shape == (B.indices.size, 3, 3) and B.blocks.flags["C_CONTIGUOUS"]
     np.testing.assert_array_equal(B.indices[B.diag_pos], np.arange(10))
     np.testing.assert_allclose(B.to_scipy().toarray(), W, rtol=0, atol=0)

@@ -69,9 +69,9 @@ from numba import njit
 from ..errors import InputError
 from ..laws import MIXED, P_CN, P_CT, S_BETA, S_BROKEN, cap_stress, compression_stiffness, linear_part, \
     mixed_damage_gradient, viscous_damage
-from ..linalg import lu_solve
+from ..linalg import BlockCSR, lu_solve, matvec_bcsr
 from . import nlgs
-from .nlgs import BlockCSR, NLGSResult
+from .nlgs import NLGSResult
 
 
 def _rho(W: BlockCSR):
@@ -417,7 +417,7 @@ def solve_cohesive_newton(W: BlockCSR, q, mu, law, par, st, ueff, area, h: float
     def refresh(r_):
         """x_α = D(u(r_)) for the mixed-mode contacts (damage inside)."""
         u_ = np.empty_like(q)
-        nlgs.matvec_bcsr(W.indptr, W.indices, W.blocks, r_, u_)
+        matvec_bcsr(W.indptr, W.indices, W.blocks, r_, u_)
         u_ += q
         S_, c_, m_, cmp_, cap_, T_ = scratch
         _cohesive_terms(law, par, st, x, ueff, u_, area, float(h), float(theta), S_, c_, m_, cmp_, cap_, True, T_)
@@ -487,14 +487,14 @@ def solve_cohesive_newton(W: BlockCSR, q, mu, law, par, st, ueff, area, h: float
 
 def _prepare(W, q, mu, r0, tol, dims=(2,)):
     if not isinstance(W, BlockCSR):
-        raise InputError(f"W: expected a BlockCSR (nlgs.to_block_csr), got {type(W).__name__}")
+        raise InputError(f"W: expected a BlockCSR (linalg.to_block_csr), got {type(W).__name__}")
     if W.dim not in dims:
         raise InputError(f"newton: dim = {W.dim}: expected {' or '.join(map(str, dims))} "
                          f"({'the interface-law Newton solver is 2D' if dims == (2,) else '2×2 or 3×3 blocks'})")
     q, mu = nlgs._check(W, q, mu, tol, 1, 1.0, "given", 1)
     n, d = W.n, W.dim
     if n and np.any(W.diag_pos < 0):
-        raise InputError("W: every contact needs a diagonal block (nlgs.to_block_csr adds missing ones)")
+        raise InputError("W: every contact needs a diagonal block (linalg.to_block_csr adds missing ones)")
     r = np.zeros(d * n) if r0 is None else np.array(r0, dtype=np.float64).ravel()
     if r.size != d * n or not np.all(np.isfinite(r)):
         raise InputError(f"r0: expected {d * n} finite values")

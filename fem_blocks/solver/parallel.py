@@ -19,8 +19,9 @@ import numpy as np
 from numba import njit
 
 from ..errors import InputError
+from ..linalg import BlockCSR, matvec_bcsr
 from . import nlgs
-from .nlgs import BlockCSR, NLGSResult
+from .nlgs import NLGSResult
 
 
 @njit(cache=True)
@@ -89,13 +90,13 @@ def solve_parallel(W: BlockCSR, q, mu, comm=None, r0=None, tol: float = 1e-8, ma
                 r.reshape(-1, d)[idx] = recv.reshape(-1, d)
         sweeps += 1
         if sweeps % check_every == 0 or sweeps == max_sweeps:
-            nlgs.matvec_bcsr(W.indptr, W.indices, W.blocks, r, u)
+            matvec_bcsr(W.indptr, W.indices, W.blocks, r, u)
             u += q
             res = float(nlgs.natural_map(r, u, mu, d)) / qnorm
             if res <= tol:
                 converged = True
                 break
-    nlgs.matvec_bcsr(W.indptr, W.indices, W.blocks, r, u)
+    matvec_bcsr(W.indptr, W.indices, W.blocks, r, u)
     u += q
     res = float(nlgs.natural_map(r, u, mu, d)) / qnorm
     msg = (f"{'converged' if converged else 'not converged'} in {sweeps} colour-parallel sweeps on {size} ranks "
