@@ -1,6 +1,6 @@
 """Global semismooth Newton in 3D (solver/newton.py, dim 3): every 3D FCLIB problem, closed-form single contacts,
 a rigid box on an incline (hyperstatic, 4 contact points), the generalized Jacobian against finite differences,
-random problems against NLGS, and the NLGS -> Newton hand-over (nlgs.solve(..., fallback="newton")).
+random problems against NLGS, and the NLGS -> Newton hand-over (face_solve(..., fallback="newton")).
 
 Target on FCLIB: the README residual ‖F‖/‖q‖ <= 1e-8, recomputed independently from the returned r with
 fclib.residual (numpy). Every 3D problem whose Siconos reference reached 1e-8 is here; LMGC_100_PR_PerioBox (Siconos:
@@ -15,11 +15,13 @@ import pytest
 
 from fem_blocks.errors import InputError
 from fem_blocks.io import fclib
-from fem_blocks.solver import newton, nlgs
 from fem_blocks.linalg import to_block_csr
+from fem_blocks.solver import ContactProblem, SolverOptions, newton, nlgs
+from fem_blocks.solver.driver import nlgs_then_newton
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from test_fclib import FCLIB, SUMMARY  # noqa: E402  (data location and Siconos reference summary)
+from test_nlgs import face_solve  # noqa: E402
 
 FILES = {os.path.splitext(os.path.basename(f))[0]: f
          for f in glob.glob(os.path.join(FCLIB, "**", "*.hdf5"), recursive=True)}
@@ -65,7 +67,7 @@ def test_fclib_3d_default(name):
     assert ref["err_rel_q"] <= 1e-8 or name == "LMGC_100_PR_PerioBox-i00361-60-03000"
     check_solution(p, res, 1e-8)
     if name in STACKED:  # Newton, not the start sweeps, did the work
-        gs = nlgs.solve(p.W, p.q, p.mu, dim=3, tol=1e-8, max_sweeps=20, criterion="residual", check_every=20)
+        gs = face_solve(p.W, p.q, p.mu, dim=3, tol=1e-8, max_sweeps=20, criterion="residual", check_every=20)
         assert gs.residual > 1e-5
         assert "Newton iterations" in res.message and not res.message.startswith("converged: 0 Newton")
 
@@ -86,7 +88,7 @@ def test_nlgs_hands_over_to_newton_when_it_stagnates(name):
     """OneObject: the given order cycles (period 2, residual 1.7e-3 forever); the stacked boxes crawl (1e-8 only
     after 1.7e5-2.6e5 sweeps), the sphere packing too (8e-8 after 1e6 sweeps). With fallback="newton" the stagnation is detected after a few hundred sweeps."""
     p = problem(name)
-    res = nlgs.solve(p.W, p.q, p.mu, dim=3, tol=1e-8, max_sweeps=20000, criterion="residual", check_every=10,
+    res = face_solve(p.W, p.q, p.mu, dim=3, tol=1e-8, max_sweeps=20000, criterion="residual", check_every=10,
                      fallback="newton")
     assert res.converged, res.message
     assert "Gauss-Seidel stagnated" in res.message and "then Newton: converged" in res.message
@@ -101,8 +103,8 @@ def test_fallback_not_triggered_keeps_nlgs_result():
         if name not in FILES:
             pytest.skip(f"{name} not available")
         p = fclib.read(FILES[name])
-        a = nlgs.solve(p.W, p.q, p.mu, dim=dim, tol=1e-8, criterion="residual", check_every=10)
-        b = nlgs.solve(p.W, p.q, p.mu, dim=dim, tol=1e-8, criterion="residual", check_every=10, fallback="newton")
+        a = face_solve(p.W, p.q, p.mu, dim=dim, tol=1e-8, criterion="residual", check_every=10)
+        b = face_solve(p.W, p.q, p.mu, dim=dim, tol=1e-8, criterion="residual", check_every=10, fallback="newton")
         assert a.converged and b.converged and np.array_equal(a.r, b.r) and a.sweeps == b.sweeps
         assert "Gauss-Seidel alone" in b.message
 
@@ -110,15 +112,16 @@ def test_fallback_not_triggered_keeps_nlgs_result():
 def test_fallback_input_errors():
     W, q = np.eye(3), np.array([-1.0, 0.2, 0.0])
     with pytest.raises(InputError, match="criterion = 'residual'"):
-        nlgs.solve(W, q, 0.3, dim=3, fallback="newton")
+        face_solve(W, q, 0.3, dim=3, fallback="newton")
     with pytest.raises(InputError, match="fallback = 'x'"):
-        nlgs.solve(W, q, 0.3, dim=3, fallback="x")
+        face_solve(W, q, 0.3, dim=3, fallback="x")
+    problem, options = ContactProblem(W, q, 0.3, 3), SolverOptions(criterion="residual", fallback="newton")
     with pytest.raises(InputError, match="stall_factor"):
-        nlgs.solve(W, q, 0.3, dim=3, criterion="residual", fallback="newton", stall_factor=1.5)
+        nlgs_then_newton(problem, options, stall_factor=1.5)
     with pytest.raises(InputError, match="stall_sweeps"):
-        nlgs.solve(W, q, 0.3, dim=3, criterion="residual", fallback="newton", stall_sweeps=0)
-    with pytest.raises(InputError, match="unknown options"):
-        nlgs.solve(W, q, 0.3, dim=3, criterion="residual", fallback="newton", stall=3)
+        nlgs_then_newton(problem, options, stall_sweeps=0)
+    with pytest.raises(TypeError, match="stall"):  # unknown options
+        nlgs_then_newton(problem, options, stall=3)
 
 
 # ----------------------------------------------------------------------------- closed forms, one contact

@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import InputError, check_range
+from ..solver.options import SolverOptions, option
 from . import detection as det
 from . import detection3d as det3
 from . import kinematics as kin
@@ -79,51 +80,18 @@ class InterfaceSpec:
 
 
 @dataclass
-class ContactOptions:
-    geometry: str = "frozen"
-    redetect_every: int = 1
-    tol: float = 1e-6
-    max_sweeps: int = 2000
-    omega: float = 1.0
-    order: str = "given"
-    seed: int = 0
-    on_nonconvergence: str = "warn"
-    max_refinements: int = 4  # "refine": at most 2^max_refinements sub-steps per step
-    criterion: str = "change"   # "change": ‖ΔP‖/‖P‖ between sweeps; "residual": natural-map residual ‖F‖/‖q‖
-    solver: str = "nlgs"        # "nlgs" | "newton" (global semismooth Newton, NLGS start and fallback; 2D Coulomb)
-    check_every: int = 10
-    fallback: str = "none"      # "newton": NLGS hands over to the global Newton when it stagnates (Coulomb contacts)
-    coarse: str = "none"        # "interfaces": two-level NLGS, coarse correction per interface (solver/coarse.py)
-    coarse_every: int = 10      # sweeps between two coarse corrections
+class ContactOptions(SolverOptions):
+    """The solver's options (solver/options.py) and the contact step's own: geometry update and what to do when a
+    step does not converge."""
 
-    def __post_init__(self):
-        if self.geometry not in ("frozen", "updated"):
-            raise InputError(f"contact.geometry = {self.geometry!r}: expected 'frozen' or 'updated'")
-        check_range("contact.tol", self.tol, 0.0, lo_open=True, expected="tol > 0")
-        check_range("contact.max_sweeps", self.max_sweeps, 1, expected="max_sweeps >= 1")
-        check_range("contact.omega", self.omega, 0.0, 2.0, lo_open=True, hi_open=True, expected="0 < omega < 2")
-        if self.order not in ("given", "reversed", "shuffled"):
-            raise InputError(f"contact.order = {self.order!r}: expected 'given', 'reversed' or 'shuffled'")
-        if self.solver not in ("nlgs", "newton"):
-            raise InputError(f"contact.solver = {self.solver!r}: expected 'nlgs' or 'newton'")
-        if self.criterion not in ("change", "residual"):
-            raise InputError(f"contact.criterion = {self.criterion!r}: expected 'change' or 'residual'")
-        check_range("contact.check_every", self.check_every, 1, expected="check_every >= 1")
-        if self.fallback not in ("none", "newton"):
-            raise InputError(f"contact.fallback = {self.fallback!r}: expected 'none' or 'newton'")
-        if self.fallback == "newton" and (self.solver != "nlgs" or self.criterion != "residual"):
-            raise InputError("contact.fallback = 'newton': expected solver = 'nlgs' and criterion = 'residual' "
-                             "(stagnation is measured on the residual)")
-        if self.coarse not in ("none", "interfaces"):
-            raise InputError(f"contact.coarse = {self.coarse!r}: expected 'none' or 'interfaces'")
-        check_range("contact.coarse_every", self.coarse_every, 1, expected="coarse_every >= 1")
-        if self.coarse != "none" and (self.solver != "nlgs" or self.fallback != "none"):
-            raise InputError(f"contact.coarse = {self.coarse!r}: expected solver = 'nlgs' and fallback = 'none' (the "
-                             "coarse correction is a step of the Gauss-Seidel solver)")
-        if self.on_nonconvergence not in ("warn", "fail", "refine"):
-            raise InputError(f"contact.on_nonconvergence = {self.on_nonconvergence!r}: expected 'warn', 'fail' or "
-                             "'refine' (refine: handled by the runner, warn here)")
-        check_range("contact.max_refinements", self.max_refinements, 1, 12, expected="1 <= max_refinements <= 12")
+    geometry: str = option("frozen", "frozen (reference configuration) or updated (re-detection)",
+                           choices=("frozen", "updated"))
+    redetect_every: int = option(1, "updated geometry: steps between two re-detections")
+    on_nonconvergence: str = option("warn", "unconverged step: warn, fail, or refine (runner)",
+                                    choices=("warn", "fail", "refine"),
+                                    note=" (refine: handled by the runner, warn here)")
+    max_refinements: int = option(4, "refine: at most 2^max_refinements sub-steps per step", lo=1, hi=12,
+                                  expected="1 <= max_refinements <= 12")
 
 
 class ContactStep:
@@ -374,7 +342,7 @@ class ContactStep:
     # ------------------------------------------------------------------ the step
     def solve(self, sim, t0, t1):
         from time import perf_counter
-        from ..solver import nlgs
+        from ..solver import ContactProblem, InterfaceLaws, solve
         tm = self.timers
         c0 = perf_counter()
         first = self.scene is None
@@ -407,40 +375,24 @@ class ContactStep:
         q[:, 0] += gbar / (h * th)
         c2 = perf_counter()
         tm["local"] += c2 - c1
+        laws = None
         if self.cohesive:
             from ..laws import NSTATE, S_UN, S_UT
             ueff = self.state[:, [S_UN, S_UT] + ([NSTATE] if d == 3 else [])] + h * (1 - th) * vi
             ueff[:, 0] -= gbar  # u = u_eff + h theta v_shifted (v_shifted = v_N + gbar/(h theta))
-            if self.opts.solver == "newton":
-                from ..solver.newton import solve_cohesive_newton
-                res, trial = solve_cohesive_newton(self.Wdel, q.ravel(), self.mu, self.law, self.par, self.state,
-                                                   ueff, cs.area, h, th, r0=self.P.ravel(), tol=self.opts.tol,
-                                                   max_sweeps_total=self.opts.max_sweeps)
-            else:
-                res, trial = nlgs.solve_cohesive(self.Wdel, q.ravel(), self.mu, self.law, self.par, self.state,
-                                                 ueff, cs.area, h, th, r0=self.P.ravel(), tol=self.opts.tol,
-                                                 max_sweeps=self.opts.max_sweeps, omega=self.opts.omega,
-                                                 order=self.opts.order, seed=self.opts.seed + self.steps,
-                                                 criterion=self.opts.criterion, check_every=self.opts.check_every)
+            laws = InterfaceLaws(self.law, self.par, self.state, ueff, cs.area, h, th)
+        coarse = None
+        if self.opts.coarse == "interfaces":
+            if self._coarse is None:
+                from ..solver.coarse import InterfaceCoarse
+                self._coarse = InterfaceCoarse.from_contacts(cs, self.opts.coarse_every)
+            coarse = self._coarse
+        res = solve(ContactProblem(self.Wdel, q.ravel(), self.mu, laws=laws),
+                    dataclasses.replace(self.opts, seed=self.opts.seed + self.steps), r0=self.P.ravel(), coarse=coarse)
+        if self.cohesive:
             from ..laws import commit_step  # crushing at the cap, then the laws' commit (any dimension)
-            commit_step(self.law, self.par, self.state, trial, ueff, res.r, res.u, cs.area, h, th)
+            commit_step(self.law, self.par, self.state, res.trial, ueff, res.r, res.u, cs.area, h, th)
         else:
-            if self.opts.solver == "newton":
-                from ..solver.newton import solve_newton
-                res = solve_newton(self.Wdel, q.ravel(), self.mu, r0=self.P.ravel(), tol=self.opts.tol,
-                                   max_sweeps_total=self.opts.max_sweeps)
-            else:
-                coarse = None
-                if self.opts.coarse == "interfaces":
-                    if self._coarse is None:
-                        from ..solver.coarse import InterfaceCoarse
-                        self._coarse = InterfaceCoarse.from_contacts(cs, self.opts.coarse_every)
-                    coarse = self._coarse
-                res = nlgs.solve_block_csr(self.Wdel, q.ravel(), self.mu, r0=self.P.ravel(), tol=self.opts.tol,
-                                           max_sweeps=self.opts.max_sweeps, omega=self.opts.omega,
-                                           order=self.opts.order, seed=self.opts.seed + self.steps,
-                                           criterion=self.opts.criterion, check_every=self.opts.check_every,
-                                           fallback=self.opts.fallback, coarse=coarse)
             from ..laws import NSTATE, S_UN, S_UT
             vs = res.u.reshape(-1, d)
             self.state[:, S_UN] += h * ((1 - th) * vi[:, 0] + th * (vs[:, 0] - gbar / (h * th)))
