@@ -25,7 +25,7 @@ import numpy as np
 from numba import njit
 
 from ..errors import InputError
-from ..linalg import BlockCSR, matvec_bcsr, to_block_csr  # noqa: F401 (to_block_csr: part of this module's face)
+from ..linalg import BlockCSR, matvec_bcsr, to_block_csr
 from .local import _proj_cone2, _proj_cone3, _solve3, local_3d
 from .problem import SolverResult
 
