@@ -104,3 +104,14 @@ def test_options_fields_defined_once():
     assert issubclass(ContactOptions, SolverOptions)
     with pytest.raises(InputError, match=r"contact\.omega = 2\.0: expected 0 < omega < 2"):
         SolverOptions(omega=2.0)
+
+
+def test_imports_go_one_way():
+    """nlgs.py does not import newton.py (the NLGS -> Newton hand-over lives in driver.py), and the options load
+    without the compiled kernels."""
+    import subprocess
+    import sys
+    code = ("import sys, fem_blocks.solver.options; a = sorted(m for m in sys.modules if m.startswith('fem_blocks.'));"
+            " import fem_blocks.solver.nlgs; print(a, 'fem_blocks.solver.newton' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.strip()
+    assert out == "['fem_blocks.errors', 'fem_blocks.solver', 'fem_blocks.solver.options'] False"
