@@ -22,7 +22,8 @@ sys.path.insert(0, ROOT)
 from bench_kernel import machine, write_section  # noqa: E402
 from fem_blocks.errors import InputError  # noqa: E402
 from fem_blocks.io import fclib  # noqa: E402
-from fem_blocks.solver import newton, nlgs  # noqa: E402
+from fem_blocks.solver import ContactProblem, SolverOptions, newton, nlgs, solve  # noqa: E402
+from fem_blocks.linalg import to_block_csr  # noqa: E402
 
 FCLIB = os.environ.get("FCLIB_DIR", os.path.join(ROOT, "..", "shared", "data", "fclib"))
 HEADING = "## FCLIB 3D problems: NLGS and global Newton"
@@ -53,7 +54,7 @@ def run():
             continue
         if p.dim != 3:
             continue
-        B = nlgs.to_block_csr(p.W, 3)
+        B = to_block_csr(p.W, 3)
         if not warmed:  # numba cache / compilation outside the timings
             nlgs.solve_block_csr(B, p.q, p.mu, max_sweeps=2, criterion="residual")
             newton.solve_newton(B, p.q, p.mu, max_iter=1)
@@ -66,8 +67,8 @@ def run():
                                                    check_every=10))
         nd, tnd = timed(lambda: newton.solve_newton(B, p.q, p.mu, tol=TOL))
         n0, tn0 = timed(lambda: newton.solve_newton(B, p.q, p.mu, tol=TOL, gs_sweeps=0, max_iter=500))
-        fb, tfb = timed(lambda: nlgs.solve_block_csr(B, p.q, p.mu, tol=TOL, max_sweeps=CAP, criterion="residual",
-                                                    check_every=10, fallback="newton"))
+        fb, tfb = timed(lambda: solve(ContactProblem(B, p.q, p.mu), SolverOptions(
+            tol=TOL, max_sweeps=CAP, criterion="residual", check_every=10, fallback="newton")))
         row = dict(problem=p.name, kind=p.kind, contacts=p.n_contacts, ref=ref.get(p.name),
                    gs=(g.sweeps, g.converged, res_of(g.r), tg),
                    nd=(nd.message, nd.converged, res_of(nd.r), tnd),
@@ -96,7 +97,8 @@ def markdown(rows):
            f"Columns: **NLGS** alone (cap {CAP:,} sweeps, residual checked every 10); **Newton** = "
            "`newton.solve_newton` with its default start (20 NLGS sweeps, then Newton: \"iterations + GS sweeps "
            "(fallbacks)\"); **Newton from 0** = `gs_sweeps=0` (cap 500 iterations); **NLGS → Newton** = "
-           "`nlgs.solve_block_csr(..., fallback=\"newton\")` (windows of 200 sweeps, hand-over when a window does not "
+           "`solver.solve` with `SolverOptions(fallback=\"newton\")` (windows of 200 sweeps, hand-over when a window "
+           "does not "
            "halve the residual; sweeps + Newton iterations). Times include everything (LU factorisations, line "
            "search). Siconos: `reference_solutions/SUMMARY.json` (its best solver, tolerance 1e-12).", "",
            f"Machine: {machine()}. Shared machine: expect ±30 %.", "",

@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from .solver.nlgs import BlockCSR
+from .linalg import BlockCSR
 
 
 @njit(cache=True)

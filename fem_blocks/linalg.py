@@ -1,4 +1,10 @@
-"""Sparse direct factorizations with PETSc (petsc4py), shared by all instances of a block type.
+"""Linear algebra: the block-CSR matrix of the contact solvers, and sparse direct factorizations with PETSc.
+
+`BlockCSR` stores a matrix of d x d blocks (d = 2 or 3, one block row per contact: the Delassus operator W of
+u = W r + q) as plain arrays (indptr, indices, blocks (nnzb, d, d), diag_pos) that the numba kernels take without
+scipy objects; `to_block_csr` builds it from a dense or scipy matrix, `matvec_bcsr` computes y = W x.
+
+Sparse direct factorizations with PETSc (petsc4py), shared by all instances of a block type:
 
 `Factor(A)` factors a symmetric positive definite scipy CSR matrix once (PETSc's own LU for small
 systems, CHOLMOD Cholesky from 1000 dofs up; superlu_dist is never used, see STACK-FACTS §2) and
@@ -6,9 +12,82 @@ solves `A x = b` for one or many right-hand sides (`MatMatSolve` on a dense bloc
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 import scipy.sparse as sp
+from numba import njit
 from petsc4py import PETSc
+
+from .errors import InputError
+
+
+@dataclass
+class BlockCSR:
+    indptr: np.ndarray   # (nc+1,) int64
+    indices: np.ndarray  # (nnzb,) int64, sorted per row
+    blocks: np.ndarray   # (nnzb, d, d) float64, C-contiguous
+    diag_pos: np.ndarray  # (nc,) int64: position of the diagonal block of each row
+
+    @property
+    def n(self) -> int:
+        return len(self.indptr) - 1
+
+    @property
+    def dim(self) -> int:
+        return self.blocks.shape[1]
+
+    def to_scipy(self) -> sp.csr_matrix:
+        d = self.dim
+        return sp.bsr_matrix((self.blocks, self.indices, self.indptr), shape=(d * self.n, d * self.n)).tocsr()
+
+
+def to_block_csr(W, dim: int = 2) -> BlockCSR:
+    """Block-CSR of a dense or sparse W (m x m, m = dim * nc); a missing diagonal block is added as zeros."""
+    if isinstance(W, BlockCSR):
+        return W
+    if sp.issparse(W):
+        Ws = W.tocsr()
+    else:
+        Wd = np.asarray(W, dtype=float)
+        if Wd.ndim != 2:
+            raise InputError(f"W: expected a square matrix, got shape {Wd.shape}")
+        Ws = sp.csr_matrix(Wd)
+    m = Ws.shape[0]
+    if Ws.shape[1] != m or m % dim:
+        raise InputError(f"W: expected a square matrix of size dim * n_contacts, got shape {Ws.shape} (dim {dim})")
+    nc = m // dim
+    c = Ws.tocoo()  # explicit zero diagonal entries (a csr sum would drop them): every row gets its diagonal block
+    Ws = sp.coo_matrix((np.r_[c.data, np.zeros(m)], (np.r_[c.row, np.arange(m)], np.r_[c.col, np.arange(m)])),
+                       shape=(m, m)).tocsr()
+    B = Ws.tobsr(blocksize=(dim, dim))
+    B.sort_indices()
+    indptr = B.indptr.astype(np.int64)
+    indices = B.indices.astype(np.int64)
+    blocks = np.ascontiguousarray(B.data, dtype=np.float64)
+    diag_pos = np.full(nc, -1, dtype=np.int64)
+    rows = np.repeat(np.arange(nc), np.diff(indptr))
+    on = rows == indices
+    diag_pos[rows[on]] = np.flatnonzero(on)
+    return BlockCSR(indptr, indices, blocks, diag_pos)
+
+
+@njit(cache=True)
+def matvec_bcsr(indptr, indices, blocks, x, y):
+    """y = W x (block-CSR, d x d blocks, d = blocks.shape[1])."""
+    n = indptr.shape[0] - 1
+    dd = blocks.shape[1]
+    for a in range(n):
+        for i in range(dd):
+            y[dd * a + i] = 0.0
+        for k in range(indptr[a], indptr[a + 1]):
+            b = indices[k]
+            for i in range(dd):
+                s = 0.0
+                for j in range(dd):
+                    s += blocks[k, i, j] * x[dd * b + j]
+                y[dd * a + i] += s
+
 
 SMALL_SYSTEM = 1000  # dofs: below, PETSc LU is fastest; above, CHOLMOD Cholesky
 

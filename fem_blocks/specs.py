@@ -4,7 +4,8 @@ Each field below is defined once, with its default, unit kind, valid range or ch
 `dataclasses.field(metadata=...)` (built by `spec(...)`):
 
 * `InterfaceSpec`  — one `[[interfaces]]` entry: groups, law, friction, joint geometry, law parameters;
-* `ContactOptions` — the `[contact]` table (solver options, geometry, non-convergence policy);
+* `SolverOptions`  — the solver's options (`solver.solve(problem, options)`), the `[contact]` table's solver keys;
+* `ContactOptions` — the `[contact]` table: SolverOptions plus contact geometry and non-convergence policy;
 * `StageSpec`      — one `[[stages]]` entry; `StageSpec.changes()` lists what a stage sets, and
   `controls_at(rigid_bodies, stages, k)` folds them (stages accumulate in order) into the control of every
   rigid dof during stage k — the one implementation used by the case checks and by the runner;
@@ -286,25 +287,23 @@ NONCONV = ("warn", "fail", "refine")
 
 
 @dataclass
-class ContactOptions:
-    """The `[contact]` table: contact geometry, solver and its options, non-convergence policy."""
-    geometry: str = spec("frozen", doc="'frozen' (reference configuration) or 'updated' (re-detection)",
-                         choices=("frozen", "updated"))
-    redetect_every: int = spec(1, doc="steps between re-detections (updated geometry)", lo=1)
-    tol: float = spec(1e-6, doc="solver tolerance (on the measure chosen by criterion)", lo=0.0, lo_open=True)
-    max_sweeps: int = spec(2000, doc="sweep limit per step", lo=1)
-    omega: float = spec(1.0, doc="relaxation", lo=0.0, hi=2.0, lo_open=True, hi_open=True)
-    order: str = spec("given", doc="contact order of the sweeps", choices=("given", "reversed", "shuffled"))
-    seed: int = spec(0, doc="seed of order = 'shuffled'", lo=0)
-    on_nonconvergence: str = spec("warn", doc="what a step reaching max_sweeps does", choices=NONCONV,
-                                  expected="'warn', 'fail' or 'refine' (refine: handled by the runner, warn here)")
-    max_refinements: int = spec(4, doc="'refine': at most 2^max_refinements sub-steps per step", lo=1, hi=12)
+class SolverOptions:
+    """How the contact problem u = W r + q (Signorini–Coulomb or interface laws per contact) is solved: what
+    `solver.solve(problem, options)` reads (solver/driver.py). The `[contact]` table's solver keys."""
+    solver: str = spec("nlgs", doc="'nlgs' (nonlinear Gauss-Seidel) or 'newton' (global semismooth Newton, NLGS "
+                       "start and fallback)", choices=("nlgs", "newton"))
+    tol: float = spec(1e-6, doc="solver tolerance (relative, on the measure chosen by criterion)", lo=0.0,
+                      lo_open=True)
+    max_sweeps: int = spec(2000, doc="NLGS: most Gauss-Seidel sweeps per step; Newton: most fallback sweeps", lo=1)
+    omega: float = spec(1.0, doc="NLGS relaxation r <- omega r_local + (1 - omega) r", lo=0.0, hi=2.0, lo_open=True,
+                        hi_open=True)
+    order: str = spec("given", doc="contact order of the sweeps (shuffled: seeded by seed + step count)",
+                      choices=("given", "reversed", "shuffled"))
+    seed: int = spec(0, doc="seed of order = 'shuffled' (the contact step adds its step count)", lo=0)
     criterion: str = spec("change", doc="'change': |dP|/|P| between sweeps; 'residual': natural-map residual |F|/|q|",
                           choices=("change", "residual"))
-    solver: str = spec("nlgs", doc="'nlgs' or 'newton' (global semismooth Newton, NLGS start and fallback)",
-                       choices=("nlgs", "newton"))
     check_every: int = spec(10, doc="sweeps between two residual evaluations", lo=1)
-    fallback: str = spec("none", doc="'newton': NLGS hands over to the global Newton when it stagnates",
+    fallback: str = spec("none", doc="'newton': NLGS hands over to the global Newton when it stagnates (Coulomb)",
                          choices=("none", "newton"))
     coarse: str = spec("none", doc="'interfaces': two-level NLGS, coarse correction per interface (solver/coarse.py)",
                        choices=("none", "interfaces"))
@@ -318,6 +317,18 @@ class ContactOptions:
         if self.coarse != "none" and (self.solver != "nlgs" or self.fallback != "none"):
             raise InputError(f"contact.coarse = {self.coarse!r}: expected solver = 'nlgs' and fallback = 'none' (the "
                              "coarse correction is a step of the Gauss-Seidel solver)")
+
+
+@dataclass
+class ContactOptions(SolverOptions):
+    """The `[contact]` table: the solver's options (SolverOptions) and the contact step's own: contact geometry and
+    what an unconverged step does."""
+    geometry: str = spec("frozen", doc="'frozen' (reference configuration) or 'updated' (re-detection)",
+                         choices=("frozen", "updated"))
+    redetect_every: int = spec(1, doc="steps between re-detections (updated geometry)", lo=1)
+    on_nonconvergence: str = spec("warn", doc="what a step reaching max_sweeps does", choices=NONCONV,
+                                  expected="'warn', 'fail' or 'refine' (refine: handled by the runner, warn here)")
+    max_refinements: int = spec(4, doc="'refine': at most 2^max_refinements sub-steps per step", lo=1, hi=12)
 
     def for_stage(self, stage: "StageSpec") -> "ContactOptions":
         """The options of a stage: its tol/max_sweeps override these; the non-convergence policy is applied by the

@@ -11,6 +11,7 @@ from fem_blocks.dynamics import Simulation
 from fem_blocks.errors import InputError
 from fem_blocks.meshing import mesh_rectangle
 from fem_blocks.solver import coarse as co
+from fem_blocks.linalg import to_block_csr
 from fem_blocks.solver import nlgs
 
 L, H, RHO, T = 0.25, 0.06, 1800.0, 0.12
@@ -39,7 +40,7 @@ def test_galerkin_operator_is_PtWP():
     rng = np.random.default_rng(1)
     nc, ng = 40, 9
     A = sp.random(2 * nc, 2 * nc, density=0.15, random_state=2) + sp.eye(2 * nc)
-    W = nlgs.to_block_csr((A @ A.T).tocsr(), 2)
+    W = to_block_csr((A @ A.T).tocsr(), 2)
     group = rng.integers(0, ng, nc)
     group[:ng] = np.arange(ng)
     point = rng.random((nc, 2))
@@ -121,7 +122,7 @@ def test_options_validation():
     assert ContactOptions().coarse == "none"
     with pytest.raises(InputError, match="coarse.every"):
         co.InterfaceCoarse(np.zeros(2, dtype=int), np.zeros((2, 2)), np.ones((2, 2)), every=0)
-    W = nlgs.to_block_csr(np.eye(4), 2)
+    W = to_block_csr(np.eye(4), 2)
     C = co.InterfaceCoarse(np.zeros(3, dtype=int), np.zeros((3, 2)), np.ones((3, 2)))
     with pytest.raises(InputError, match="coarse: built for 3 contacts"):
         nlgs.solve_block_csr(W, np.zeros(4), 0.5, coarse=C)

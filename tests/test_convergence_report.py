@@ -175,20 +175,21 @@ def test_solver_label_names_the_solver_and_its_fallback():
     """The step info's `solver` (used by the warning, the summary and the last line) is the solver result's own
     `solver`, set where each solver runs: Newton alone, Newton whose line search handed over to Gauss-Seidel,
     Gauss-Seidel alone (also when fallback = "newton" was not needed), Gauss-Seidel then Newton."""
-    from fem_blocks.solver import newton, nlgs
+    from fem_blocks.linalg import to_block_csr
+    from fem_blocks.solver import ContactProblem, SolverOptions, newton, nlgs, solve
     from test_nlgs import random_problem
     W, q = random_problem()
-    B = nlgs.to_block_csr(W, 2)
+    B = to_block_csr(W, 2)
     res = newton.solve_newton(B, q, 0.3, tol=1e-12)
     assert res.converged and res.solver == "Newton"
     assert newton._result(res.r, res.u, 5, 20, 0, 0.0, 1.0, 1e-8, q).solver == "Newton"
     assert newton._result(res.r, res.u, 5, 20, 3, 0.0, 1.0, 1e-8, q).solver == "Newton + NLGS fallback"
     assert nlgs.solve_block_csr(B, q, 0.3, tol=1e-10, criterion="residual").solver == "NLGS"
-    # fallback = "newton": windows of 200 sweeps that converge alone, or a window of 1 sweep with factor 0 (any
-    # residual left counts as stagnation) that hands over to Newton
-    alone = nlgs._solve_with_newton_fallback(B, q, 0.3, None, 1e-10, 100000, 1.0, "given", 0, 10, 200, 0.5, 50)
+    # fallback = "newton": windows of 200 sweeps that converge alone, or a budget of 1 sweep that hands over to Newton
+    fb = dict(criterion="residual", check_every=10, fallback="newton")
+    alone = solve(ContactProblem(B, q, 0.3), SolverOptions(tol=1e-10, max_sweeps=100000, **fb))
     assert alone.converged and alone.solver == "NLGS" and "Gauss-Seidel alone" in alone.message
-    handed = nlgs._solve_with_newton_fallback(B, q, 0.3, None, 1e-12, 100000, 1.0, "given", 0, 10, 1, 0.0, 50)
+    handed = solve(ContactProblem(B, q, 0.3), SolverOptions(tol=1e-12, max_sweeps=1, **fb))
     assert handed.converged and handed.solver == "NLGS + Newton fallback" and "then Newton" in handed.message
 
 

@@ -9,6 +9,7 @@ import pytest
 from fem_blocks import laws
 from fem_blocks.laws import MIXED, NSTATE, S_BETA
 from fem_blocks.solver import newton, nlgs
+from fem_blocks.linalg import to_block_csr
 
 PAR = dict(k_n=1e11, k_s=5e10, f_t=2e5, c=3e5, G_I=10.0, G_II=50.0, tan_phi=0.6)
 
@@ -67,7 +68,7 @@ def test_newton_normal_function_is_continuous_at_closure():
     st[0, S_BETA] = 0.3
     h, th, area = 1e-3, 1.0, np.array([1e-3])
     ueff = np.zeros((1, 2))
-    W = nlgs.to_block_csr(np.array([[2.0, 0.3], [0.3, 1.5]]), 2)
+    W = to_block_csr(np.array([[2.0, 0.3], [0.3, 1.5]]), 2)
     rn, rt = newton._rho(W)
     P = np.array([5.0, 1.0])
 
@@ -106,7 +107,7 @@ def _softening_problem(n=24, seed=5, scale=400.0):
     dI = PAR["f_t"] / PAR["k_n"]
     h, th = 1e-3, 1.0
     q = rng.standard_normal(2 * n) * scale * dI / (h * th)
-    return nlgs.to_block_csr(W, 2), q, np.full(n, PAR["tan_phi"]), law, par, st, np.zeros((n, 2)), \
+    return to_block_csr(W, 2), q, np.full(n, PAR["tan_phi"]), law, par, st, np.zeros((n, 2)), \
         np.full(n, 1e-3), h, th
 
 

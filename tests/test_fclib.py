@@ -9,6 +9,7 @@ assert the level the kernel reaches (about 2x the measured value), so that a reg
 import glob
 import json
 import os
+import sys
 
 import h5py
 import numpy as np
@@ -18,6 +19,9 @@ import scipy.sparse as sp
 from fem_blocks.errors import InputError
 from fem_blocks.io import fclib
 from fem_blocks.solver import nlgs
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from test_nlgs import face_solve  # noqa: E402  (solver.solve with the former nlgs.solve defaults)
 
 # The data live beside the project (../shared/data/fclib from the project root): CI lays shared/ there.
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -83,7 +87,7 @@ def test_nlgs_on_fclib(path):
     p = problem(path)
     opts = dict(max_sweeps=MAX_SWEEPS)
     opts.update(OPTIONS.get(p.name, {}))
-    res = nlgs.solve(p.W, p.q, p.mu, dim=p.dim, tol=1e-8, criterion="residual", check_every=10, **opts)
+    res = face_solve(p.W, p.q, p.mu, dim=p.dim, tol=1e-8, criterion="residual", check_every=10, **opts)
     # the reported residual is the README one, recomputed independently (numpy) from the returned r
     R = fclib.residual(p.W, p.q, p.mu, res.r, p.dim)
     # (u = W r + q is summed in another order: differences of round-off size relative to |W||r| + |q| + |r|)
@@ -129,8 +133,8 @@ def test_warm_start_from_guess_cuts_sweeps():
     """README: warm-starting Capsules-i97-269 from /guesses/1 cuts Siconos' NSGS from 2423 to 98 sweeps."""
     p = problem(os.path.join(FCLIB, "Capsules-i97-269.hdf5"))
     assert p.guess_r is not None and p.guess_r.size == p.q.size
-    cold = nlgs.solve(p.W, p.q, p.mu, dim=3, tol=1e-8, max_sweeps=MAX_SWEEPS, criterion="residual")
-    warm = nlgs.solve(p.W, p.q, p.mu, dim=3, tol=1e-8, max_sweeps=MAX_SWEEPS, criterion="residual",
+    cold = face_solve(p.W, p.q, p.mu, dim=3, tol=1e-8, max_sweeps=MAX_SWEEPS, criterion="residual")
+    warm = face_solve(p.W, p.q, p.mu, dim=3, tol=1e-8, max_sweeps=MAX_SWEEPS, criterion="residual",
                       r0=p.guess_r)
     assert cold.converged and warm.converged
     assert warm.sweeps < cold.sweeps / 2

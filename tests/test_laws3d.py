@@ -15,6 +15,7 @@ from fem_blocks.errors import InputError
 from fem_blocks.laws import (NSTATE3, S_BETA, S_BROKEN, S_DISS, S_UN, S_UP, S_US, S_UT, commit_step, initial_state,
                              law_parameters, linear_part)
 from fem_blocks.solver import nlgs
+from fem_blocks.linalg import to_block_csr
 
 L, T = 0.2, 0.1
 A = L * T  # joint area (one contact point carrying the whole joint)
@@ -56,7 +57,7 @@ class Joint:
         self.t = 0.0
         self.P = np.zeros((self.nc, self.d))
         Wd = np.einsum("aik,k,bjk->aibj", self.G, self.minv, self.G).reshape(self.nc * self.d, self.nc * self.d)
-        self.W = nlgs.to_block_csr(Wd, self.d)
+        self.W = to_block_csr(Wd, self.d)
         self.results = []
 
     def _f(self, k, t):
@@ -612,7 +613,7 @@ def test_random_coupled_problems_converge_to_zero_natural_map(law, params):
     for trial_no in range(5):
         M = rng.normal(size=(3 * n, 3 * n))
         Wd = M @ M.T / (3 * n) + 0.1 * np.eye(3 * n)
-        W3 = nlgs.to_block_csr(Wd, 3)
+        W3 = to_block_csr(Wd, 3)
         q = rng.normal(size=3 * n) * 0.1
         lawv = np.full(n, code, dtype=np.int64)
         parv = np.tile(par, (n, 1))

@@ -22,6 +22,7 @@ import numpy as np
 import pytest
 
 from fem_blocks.solver import newton, nlgs
+from fem_blocks.linalg import to_block_csr
 
 E, NU, RHO, T, L, H = 12.0e9, 0.2, 2000.0, 0.1, 0.21, 0.062  # SI: the bricks (mm-N-MPa case)
 CN, CT = 50.0e9, 20.833333333333336e9  # N/m^3: the bed joints
@@ -119,7 +120,7 @@ def test_single_joint_closed_form(law, m, solver):
     params, k = _law(law, m)
     code, par = law_parameters("brittle" if law == "dugdale" else law, params, "bed")
     h, th, A, wN, wT, qN, qT, u0 = 0.05, 1.0, 1.5e-3, 2.0, 1.0, -1e-3, 2e-4, 1e-7
-    W = nlgs.to_block_csr(np.diag([wN, wT]), 2)
+    W = to_block_csr(np.diag([wN, wT]), 2)
     lawa = np.array([code], dtype=np.int64)
     st = initial_state(lawa)
     ueff = np.array([[0.0, u0]])

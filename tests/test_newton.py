@@ -11,6 +11,7 @@ import pytest
 from fem_blocks.contact.step import ContactStep
 from fem_blocks.io import fclib
 from fem_blocks.solver import newton, nlgs
+from fem_blocks.linalg import to_block_csr
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import test_laws as tl  # noqa: E402
@@ -40,7 +41,7 @@ def test_fclib_2d_problems(name):
     if name not in files:
         pytest.skip(f"{name} not in {FCLIB}")
     p = fclib.read(files[name])
-    res = newton.solve_newton(nlgs.to_block_csr(p.W, 2), p.q, p.mu, tol=1e-12)
+    res = newton.solve_newton(to_block_csr(p.W, 2), p.q, p.mu, tol=1e-12)
     assert res.converged, res.message
     assert fclib.residual(p.W, p.q, p.mu, res.r, 2).rel_q <= 1e-12  # recomputed independently
 
@@ -49,7 +50,7 @@ def test_fclib_2d_problems(name):
 @pytest.mark.parametrize("mu", [0.0, 0.3, 0.8])
 def test_random_problems_agree_with_nlgs(seed, mu):
     W, q = random_problem(n=60, seed=seed)
-    B = nlgs.to_block_csr(W, 2)
+    B = to_block_csr(W, 2)
     res = newton.solve_newton(B, q, mu, tol=1e-13, gs_sweeps=0)  # pure Newton from r = 0
     assert res.converged, res.message
     ref = nlgs.solve_block_csr(B, q, mu, tol=1e-13, max_sweeps=200000, criterion="residual")
@@ -72,7 +73,7 @@ def test_hyperstatic_block_on_a_floor_balances_the_load():
     W = G @ Minv @ G.T
     assert np.linalg.matrix_rank(W) == 3
     q = G @ (h * Minv @ np.array([F, -m * g, 0.0]))
-    res = newton.solve_newton(nlgs.to_block_csr(W, 2), q, mu, tol=1e-12, gs_sweeps=0)
+    res = newton.solve_newton(to_block_csr(W, 2), q, mu, tol=1e-12, gs_sweeps=0)
     assert res.converged, res.message
     P = res.r.reshape(-1, 2)
     assert P[:, 0].sum() == pytest.approx(h * m * g, rel=1e-10)
@@ -124,7 +125,7 @@ def test_bad_arguments():
     W, q = random_problem(n=5)
     # 3D is supported by solve_newton (tests/test_newton3d.py), not by the interface-law solver
     with pytest.raises(Exception, match="2D"):
-        newton.solve_cohesive_newton(nlgs.to_block_csr(np.eye(6), 3), np.zeros(6), 0.3, np.zeros(2, dtype=int),
+        newton.solve_cohesive_newton(to_block_csr(np.eye(6), 3), np.zeros(6), 0.3, np.zeros(2, dtype=int),
                                      np.zeros((2, 16)), np.zeros((2, 6)), np.zeros((2, 2)), np.ones(2), 1e-3, 0.5)
     with pytest.raises(Exception, match="r0"):
-        newton.solve_newton(nlgs.to_block_csr(W, 2), q, 0.3, r0=np.zeros(3))
+        newton.solve_newton(to_block_csr(W, 2), q, 0.3, r0=np.zeros(3))

@@ -1,6 +1,6 @@
 """Global semismooth Newton in 3D (solver/newton.py, dim 3): every 3D FCLIB problem, closed-form single contacts,
 a rigid box on an incline (hyperstatic, 4 contact points), the generalized Jacobian against finite differences,
-random problems against NLGS, and the NLGS -> Newton hand-over (nlgs.solve(..., fallback="newton")).
+random problems against NLGS, and the NLGS -> Newton hand-over (face_solve(..., fallback="newton")).
 
 Target on FCLIB: the README residual ‖F‖/‖q‖ <= 1e-8, recomputed independently from the returned r with
 fclib.residual (numpy). Every 3D problem whose Siconos reference reached 1e-8 is here; LMGC_100_PR_PerioBox (Siconos:
@@ -15,10 +15,13 @@ import pytest
 
 from fem_blocks.errors import InputError
 from fem_blocks.io import fclib
-from fem_blocks.solver import newton, nlgs
+from fem_blocks.linalg import to_block_csr
+from fem_blocks.solver import ContactProblem, SolverOptions, newton, nlgs
+from fem_blocks.solver.driver import nlgs_then_newton
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from test_fclib import FCLIB, SUMMARY  # noqa: E402  (data location and Siconos reference summary)
+from test_nlgs import face_solve  # noqa: E402
 
 FILES = {os.path.splitext(os.path.basename(f))[0]: f
          for f in glob.glob(os.path.join(FCLIB, "**", "*.hdf5"), recursive=True)}
@@ -59,12 +62,12 @@ def test_fclib_3d_default(name):
     ref = SUMMARY[name]
     p = problem(name)
     assert p.dim == 3
-    res = newton.solve_newton(nlgs.to_block_csr(p.W, 3), p.q, p.mu, tol=1e-8)
+    res = newton.solve_newton(to_block_csr(p.W, 3), p.q, p.mu, tol=1e-8)
     assert res.converged, res.message
     assert ref["err_rel_q"] <= 1e-8 or name == "LMGC_100_PR_PerioBox-i00361-60-03000"
     check_solution(p, res, 1e-8)
     if name in STACKED:  # Newton, not the start sweeps, did the work
-        gs = nlgs.solve(p.W, p.q, p.mu, dim=3, tol=1e-8, max_sweeps=20, criterion="residual", check_every=20)
+        gs = face_solve(p.W, p.q, p.mu, dim=3, tol=1e-8, max_sweeps=20, criterion="residual", check_every=20)
         assert gs.residual > 1e-5
         assert "Newton iterations" in res.message and not res.message.startswith("converged: 0 Newton")
 
@@ -73,7 +76,7 @@ def test_fclib_3d_default(name):
 @pytest.mark.parametrize("name", [n for n in PROBLEMS_3D if n not in COLD_SLOW])
 def test_fclib_3d_pure_newton_from_zero(name):
     p = problem(name)
-    res = newton.solve_newton(nlgs.to_block_csr(p.W, 3), p.q, p.mu, tol=1e-8, gs_sweeps=0)
+    res = newton.solve_newton(to_block_csr(p.W, 3), p.q, p.mu, tol=1e-8, gs_sweeps=0)
     assert res.converged, res.message
     check_solution(p, res, 1e-8)
 
@@ -85,7 +88,7 @@ def test_nlgs_hands_over_to_newton_when_it_stagnates(name):
     """OneObject: the given order cycles (period 2, residual 1.7e-3 forever); the stacked boxes crawl (1e-8 only
     after 1.7e5-2.6e5 sweeps), the sphere packing too (8e-8 after 1e6 sweeps). With fallback="newton" the stagnation is detected after a few hundred sweeps."""
     p = problem(name)
-    res = nlgs.solve(p.W, p.q, p.mu, dim=3, tol=1e-8, max_sweeps=20000, criterion="residual", check_every=10,
+    res = face_solve(p.W, p.q, p.mu, dim=3, tol=1e-8, max_sweeps=20000, criterion="residual", check_every=10,
                      fallback="newton")
     assert res.converged, res.message
     assert "Gauss-Seidel stagnated" in res.message and "then Newton: converged" in res.message
@@ -100,8 +103,8 @@ def test_fallback_not_triggered_keeps_nlgs_result():
         if name not in FILES:
             pytest.skip(f"{name} not available")
         p = fclib.read(FILES[name])
-        a = nlgs.solve(p.W, p.q, p.mu, dim=dim, tol=1e-8, criterion="residual", check_every=10)
-        b = nlgs.solve(p.W, p.q, p.mu, dim=dim, tol=1e-8, criterion="residual", check_every=10, fallback="newton")
+        a = face_solve(p.W, p.q, p.mu, dim=dim, tol=1e-8, criterion="residual", check_every=10)
+        b = face_solve(p.W, p.q, p.mu, dim=dim, tol=1e-8, criterion="residual", check_every=10, fallback="newton")
         assert a.converged and b.converged and np.array_equal(a.r, b.r) and a.sweeps == b.sweeps
         assert "Gauss-Seidel alone" in b.message
 
@@ -109,15 +112,16 @@ def test_fallback_not_triggered_keeps_nlgs_result():
 def test_fallback_input_errors():
     W, q = np.eye(3), np.array([-1.0, 0.2, 0.0])
     with pytest.raises(InputError, match="criterion = 'residual'"):
-        nlgs.solve(W, q, 0.3, dim=3, fallback="newton")
+        face_solve(W, q, 0.3, dim=3, fallback="newton")
     with pytest.raises(InputError, match="fallback = 'x'"):
-        nlgs.solve(W, q, 0.3, dim=3, fallback="x")
+        face_solve(W, q, 0.3, dim=3, fallback="x")
+    problem, options = ContactProblem(W, q, 0.3, 3), SolverOptions(criterion="residual", fallback="newton")
     with pytest.raises(InputError, match="stall_factor"):
-        nlgs.solve(W, q, 0.3, dim=3, criterion="residual", fallback="newton", stall_factor=1.5)
+        nlgs_then_newton(problem, options, stall_factor=1.5)
     with pytest.raises(InputError, match="stall_sweeps"):
-        nlgs.solve(W, q, 0.3, dim=3, criterion="residual", fallback="newton", stall_sweeps=0)
-    with pytest.raises(InputError, match="unknown options"):
-        nlgs.solve(W, q, 0.3, dim=3, criterion="residual", fallback="newton", stall=3)
+        nlgs_then_newton(problem, options, stall_sweeps=0)
+    with pytest.raises(TypeError, match="stall"):  # unknown options
+        nlgs_then_newton(problem, options, stall=3)
 
 
 # ----------------------------------------------------------------------------- closed forms, one contact
@@ -125,7 +129,7 @@ W1 = np.array([[2.0, 0.3, -0.2], [0.3, 1.5, 0.1], [-0.2, 0.1, 1.2]])  # SPD, cou
 
 
 def solve1(W, q, mu):
-    res = newton.solve_newton(nlgs.to_block_csr(W, 3), q, mu, tol=1e-14, gs_sweeps=0)
+    res = newton.solve_newton(to_block_csr(W, 3), q, mu, tol=1e-14, gs_sweeps=0)
     assert res.converged, res.message
     return res.r, res.u
 
@@ -211,7 +215,7 @@ def test_box_slides_down_the_steepest_slope(phi, psi):
     theta, mu = 0.5, 0.3  # tan θ = 0.546 > μ: slides
     W, q, velocity, s, n, F, m, h, g = box_on_incline(theta, phi, psi, mu)
     assert np.linalg.matrix_rank(W) == 6  # 12 unknowns, 6 dofs: hyperstatic, reactions not unique
-    res = newton.solve_newton(nlgs.to_block_csr(W, 3), q, mu, tol=1e-12, gs_sweeps=0)
+    res = newton.solve_newton(to_block_csr(W, 3), q, mu, tol=1e-12, gs_sweeps=0)
     assert res.converged, res.message
     v = velocity(res.r)
     a_ex = g * (np.sin(theta) - mu * np.cos(theta))
@@ -231,7 +235,7 @@ def test_box_slides_down_the_steepest_slope(phi, psi):
 def test_box_sticks_below_the_friction_angle(phi, psi):
     theta, mu = 0.25, 0.4  # tan θ = 0.255 < μ: sticks
     W, q, velocity, s, n, F, m, h, g = box_on_incline(theta, phi, psi, mu)
-    res = newton.solve_newton(nlgs.to_block_csr(W, 3), q, mu, tol=1e-12, gs_sweeps=0)
+    res = newton.solve_newton(to_block_csr(W, 3), q, mu, tol=1e-12, gs_sweeps=0)
     assert res.converged, res.message
     assert np.abs(velocity(res.r)).max() <= 1e-9 * h * g
     imp = res.r.reshape(4, 3) @ F
@@ -291,7 +295,7 @@ def test_random_3d_problems_agree_with_nlgs(seed, mu):
     A = rng.standard_normal((3 * n, 4 * n)) * (rng.random((3 * n, 4 * n)) < 0.04)
     W = A @ A.T + np.diag(1 + rng.random(3 * n))
     q = rng.standard_normal(3 * n)
-    B = nlgs.to_block_csr(W, 3)
+    B = to_block_csr(W, 3)
     res = newton.solve_newton(B, q, mu, tol=1e-12, gs_sweeps=0)
     assert res.converged, res.message
     ref = nlgs.solve_block_csr(B, q, mu, tol=1e-12, max_sweeps=100000, criterion="residual")
@@ -300,7 +304,7 @@ def test_random_3d_problems_agree_with_nlgs(seed, mu):
 
 
 def test_3d_input_errors():
-    B = nlgs.to_block_csr(np.eye(6), 3)
+    B = to_block_csr(np.eye(6), 3)
     with pytest.raises(InputError, match="memory"):
         newton.solve_newton(B, -np.ones(6), 0.3, memory=0)
     with pytest.raises(InputError, match="r0: expected 6"):

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from fem_blocks.solver import newton, nlgs
+from fem_blocks.linalg import to_block_csr
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from test_nlgs import random_problem  # noqa: E402
@@ -44,7 +45,7 @@ def test_pure_newton_converges_without_fallback(seed, mu):
     """60 contacts, W SPD (test_nlgs.random_problem), r0 = 0, gs_sweeps = 0: converged to 1e-13 in at most 8
     Newton iterations (measured: 4), no fallback, no Gauss–Seidel sweep."""
     W, q = random_problem(n=60, seed=seed)
-    res = newton.solve_newton(nlgs.to_block_csr(W, 2), q, mu, tol=1e-13, gs_sweeps=0)
+    res = newton.solve_newton(to_block_csr(W, 2), q, mu, tol=1e-13, gs_sweeps=0)
     assert res.converged, res.message
     it, sweeps, fallbacks = counts(res.message)
     assert fallbacks == 0 and sweeps == 0, res.message
@@ -55,7 +56,7 @@ def test_pure_newton_converges_without_fallback(seed, mu):
 def test_newton_after_gauss_seidel_start_finishes_in_few_iterations():
     """With the default start (20 sweeps), Newton finishes: at most 3 iterations, no fallback."""
     W, q = random_problem(n=60, seed=2)
-    res = newton.solve_newton(nlgs.to_block_csr(W, 2), q, 0.8, tol=1e-15)
+    res = newton.solve_newton(to_block_csr(W, 2), q, 0.8, tol=1e-15)
     assert res.converged, res.message
     it, sweeps, fallbacks = counts(res.message)
     assert fallbacks == 0 and sweeps == 20 and 1 <= it <= 3, res.message

@@ -6,9 +6,15 @@ import scipy.sparse as sp
 
 from fem_blocks.errors import InputError
 from fem_blocks.io import fclib
-from fem_blocks.solver import nlgs
+from fem_blocks.linalg import to_block_csr
+from fem_blocks.solver import ContactProblem, SolverOptions, local as loc, nlgs, solve
 
-from fem_blocks.solver import local as loc
+
+def face_solve(W, q, mu, dim=None, r0=None, **options):
+    """The public face solve(ContactProblem, SolverOptions) with the defaults of the former nlgs.solve (tol 1e-8,
+    10000 sweeps, the residual checked every sweep)."""
+    options = {**dict(tol=1e-8, max_sweeps=10000, check_every=1), **options}
+    return solve(ContactProblem(W, q, mu, dim), SolverOptions(**options), r0=r0)
 
 
 @pytest.mark.parametrize("q, mu, expect_case", [
@@ -44,7 +50,7 @@ def test_block_on_two_supports_sum_of_reactions():
     W = G @ Minv @ G.T
     v_free = Minv @ np.array([0.0, -p, -p * c])
     q = G @ v_free
-    res = nlgs.solve(W, q, mu=0.0, tol=1e-14, max_sweeps=10000)
+    res = face_solve(W, q, mu=0.0, tol=1e-14, max_sweeps=10000)
     r = res.r.reshape(-1, 2)
     assert res.converged
     assert r[:, 0].sum() == pytest.approx(p, rel=1e-12)
@@ -59,7 +65,7 @@ def test_incline_one_step_sliding():
     W = np.eye(2) / m * h / h  # impulse in N s: v = v0 + P / m
     q = np.array([-h * g * np.cos(alpha), h * g * np.sin(alpha)])  # free velocity after one step (normal, tangent)
     for mu, vt in ((0.3, h * g * (np.sin(alpha) - 0.3 * np.cos(alpha))), (0.7, 0.0)):
-        res = nlgs.solve(W / m * m, q, mu=mu, tol=1e-14)
+        res = face_solve(W / m * m, q, mu=mu, tol=1e-14)
         assert res.u[1] == pytest.approx(vt, abs=1e-14)
         assert res.u[0] == pytest.approx(0.0, abs=1e-14)
         assert res.r[0] == pytest.approx(m * h * g * np.cos(alpha), rel=1e-14)
@@ -77,8 +83,8 @@ def test_orders_converge_and_are_deterministic():
     W, q = random_problem()
     base = None
     for order in ("given", "reversed", "shuffled"):
-        r1 = nlgs.solve(W, q, 0.4, tol=1e-12, order=order, seed=7, criterion="residual")
-        r2 = nlgs.solve(W, q, 0.4, tol=1e-12, order=order, seed=7, criterion="residual")
+        r1 = face_solve(W, q, 0.4, tol=1e-12, order=order, seed=7, criterion="residual")
+        r2 = face_solve(W, q, 0.4, tol=1e-12, order=order, seed=7, criterion="residual")
         assert r1.converged and r1.residual <= 1e-12
         assert np.array_equal(r1.r, r2.r)  # bitwise reproducible
         # the solver's reported residual against the independent numpy natural map of io/fclib.residual
@@ -86,23 +92,23 @@ def test_orders_converge_and_are_deterministic():
         assert R.rel_q <= 1e-12 and r1.residual == pytest.approx(R.rel_q, rel=1e-6, abs=1e-15)
         base = r1.r if base is None else base
         assert np.allclose(r1.r, base, atol=1e-9)  # unique solution here (W SPD, small mu)
-    s1 = nlgs.solve(W, q, 0.4, tol=1e-12, order="shuffled", seed=1)
-    s2 = nlgs.solve(W, q, 0.4, tol=1e-12, order="shuffled", seed=2)
+    s1 = face_solve(W, q, 0.4, tol=1e-12, order="shuffled", seed=1)
+    s2 = face_solve(W, q, 0.4, tol=1e-12, order="shuffled", seed=2)
     assert s1.sweeps != s2.sweeps or not np.array_equal(s1.r, s2.r)
 
 
 def test_warm_start_and_relaxation():
     W, q = random_problem(seed=5)
-    cold = nlgs.solve(W, q, 0.3, tol=1e-10)
-    warm = nlgs.solve(W, q, 0.3, tol=1e-10, r0=cold.r)
+    cold = face_solve(W, q, 0.3, tol=1e-10)
+    warm = face_solve(W, q, 0.3, tol=1e-10, r0=cold.r)
     assert warm.sweeps <= 2 < cold.sweeps
-    relaxed = nlgs.solve(W, q, 0.3, tol=1e-10, omega=0.8, criterion="residual")
+    relaxed = face_solve(W, q, 0.3, tol=1e-10, omega=0.8, criterion="residual")
     assert relaxed.converged and relaxed.residual <= 1e-10
 
 
 def test_nonconvergence_reported_not_raised():
     W, q = random_problem(seed=6)
-    res = nlgs.solve(W, q, 0.3, tol=1e-15, max_sweeps=3)
+    res = face_solve(W, q, 0.3, tol=1e-15, max_sweeps=3)
     assert not res.converged and res.sweeps == 3 and "not converged after 3 sweeps" in res.message
 
 
@@ -113,7 +119,7 @@ def test_nonconvergence_reported_not_raised():
     (dict(order="random"), "order = 'random'"),
     (dict(max_sweeps=0), "max_sweeps = 0"),
     (dict(dim=4), "dim = 4: expected 2 or 3"),
-    (dict(omega=0.0), "omega = 0.0: expected 0 < omega <= 2"),
+    (dict(omega=0.0), "omega = 0.0: expected 0 < omega < 2"),
     (dict(criterion="both"), "criterion = 'both'"),
     (dict(check_every=0), "check_every = 0"),
     (dict(mu=[0.1, 0.2]), "mu: expected a scalar or 3 friction"),
@@ -124,23 +130,26 @@ def test_bad_arguments(kwargs, match):
     args = dict(mu=0.3)
     args.update(kwargs)
     with pytest.raises(InputError, match=match):
-        nlgs.solve(W, q, **args)
+        face_solve(W, q, **args)
     with pytest.raises(InputError, match="q: expected 6 entries"):
-        nlgs.solve(W, q[:-1], 0.3)
+        face_solve(W, q[:-1], 0.3)
+    # the kernel's own checks (reached without SolverOptions)
+    with pytest.raises(InputError, match="omega = 0.0: expected 0 < omega <= 2"):
+        nlgs.solve_block_csr(to_block_csr(W, 2), q, 0.3, omega=0.0)
 
 
 
 def test_bad_arguments_3d_and_block_csr():
     W, q = random_problem(n=3)  # 6 x 6: two 3D contacts or three 2D contacts
     with pytest.raises(InputError, match=r"W: expected a square matrix of size dim \* n_contacts"):
-        nlgs.solve(W[:5, :5], q[:5], 0.3, dim=3)
+        face_solve(W[:5, :5], q[:5], 0.3, dim=3)
     with pytest.raises(InputError, match="q: expected finite values"):
-        nlgs.solve(W, np.full(6, np.nan), 0.3, dim=3)
+        face_solve(W, np.full(6, np.nan), 0.3, dim=3)
     with pytest.raises(InputError, match="r0: expected finite values"):
-        nlgs.solve(W, q, 0.3, dim=3, r0=np.full(6, np.inf))
-    B2 = nlgs.to_block_csr(W, 2)
+        face_solve(W, q, 0.3, dim=3, r0=np.full(6, np.inf))
+    B2 = to_block_csr(W, 2)
     with pytest.raises(InputError, match="dim = 3: W is a BlockCSR of 2x2 blocks"):
-        nlgs.solve(B2, q, 0.3, dim=3)
+        face_solve(B2, q, 0.3, dim=3)
 
 
 # ----------------------------------------------------------------------------- 3D local solver
@@ -266,7 +275,7 @@ def test_3d_body_on_three_supports_balances_the_load():
     W = G @ Minv @ G.T
     q = G @ (Minv @ wrench)
     for dense in (True, False):
-        res = nlgs.solve(W if dense else sp.csr_matrix(W), q, mu=0.6, dim=3, tol=1e-14, criterion="residual",
+        res = face_solve(W if dense else sp.csr_matrix(W), q, mu=0.6, dim=3, tol=1e-14, criterion="residual",
                          max_sweeps=100000)
         assert res.converged and res.residual <= 1e-14
         np.testing.assert_allclose(G.T @ res.r, -wrench, rtol=0, atol=1e-12 * np.linalg.norm(wrench))
@@ -284,7 +293,7 @@ def test_3d_incline_one_step(phi):
     q = np.array([-h * g * np.cos(alpha), *(h * g * np.sin(alpha) * e)])
     W = np.eye(3) / m
     for mu in (0.3, 0.7):
-        res = nlgs.solve(W, q, mu=mu, dim=3, tol=1e-14, criterion="residual")
+        res = face_solve(W, q, mu=mu, dim=3, tol=1e-14, criterion="residual")
         vt = h * g * (np.sin(alpha) - mu * np.cos(alpha)) if mu < np.tan(alpha) else 0.0
         np.testing.assert_allclose(res.u, [0.0, *(vt * e)], atol=1e-15)
         assert res.r[0] == pytest.approx(m * h * g * np.cos(alpha), rel=1e-14)
@@ -302,37 +311,37 @@ def test_3d_orders_deterministic_warm_start_relaxation():
     W, q = random_problem_3d()
     base = None
     for order in ("given", "reversed", "shuffled"):
-        r1 = nlgs.solve(W, q, 0.3, dim=3, tol=1e-12, order=order, seed=7, criterion="residual")
-        r2 = nlgs.solve(W, q, 0.3, dim=3, tol=1e-12, order=order, seed=7, criterion="residual")
+        r1 = face_solve(W, q, 0.3, dim=3, tol=1e-12, order=order, seed=7, criterion="residual")
+        r2 = face_solve(W, q, 0.3, dim=3, tol=1e-12, order=order, seed=7, criterion="residual")
         assert r1.converged and r1.residual <= 1e-12
         assert np.array_equal(r1.r, r2.r)
         R = fclib.residual(W, q, 0.3, r1.r, dim=3)  # independent numpy natural map
         assert R.rel_q <= 1e-12 and r1.residual == pytest.approx(R.rel_q, rel=1e-6, abs=1e-15)
         base = r1.r if base is None else base
         np.testing.assert_allclose(r1.r, base, atol=1e-9)
-    s1 = nlgs.solve(W, q, 0.3, dim=3, tol=1e-12, order="shuffled", seed=1)
-    s2 = nlgs.solve(W, q, 0.3, dim=3, tol=1e-12, order="shuffled", seed=2)
+    s1 = face_solve(W, q, 0.3, dim=3, tol=1e-12, order="shuffled", seed=1)
+    s2 = face_solve(W, q, 0.3, dim=3, tol=1e-12, order="shuffled", seed=2)
     assert not np.array_equal(s1.r, s2.r)
-    cold = nlgs.solve(W, q, 0.3, dim=3, tol=1e-10)
-    warm = nlgs.solve(W, q, 0.3, dim=3, tol=1e-10, r0=cold.r)
+    cold = face_solve(W, q, 0.3, dim=3, tol=1e-10)
+    warm = face_solve(W, q, 0.3, dim=3, tol=1e-10, r0=cold.r)
     assert cold.converged and warm.converged and warm.sweeps <= 2 < cold.sweeps
-    relaxed = nlgs.solve(W, q, 0.3, dim=3, tol=1e-10, omega=0.8, criterion="residual")
+    relaxed = face_solve(W, q, 0.3, dim=3, tol=1e-10, omega=0.8, criterion="residual")
     assert relaxed.converged and relaxed.residual <= 1e-10
-    bad = nlgs.solve(W, q, 0.3, dim=3, tol=1e-15, max_sweeps=2, criterion="residual")
+    bad = face_solve(W, q, 0.3, dim=3, tol=1e-15, max_sweeps=2, criterion="residual")
     assert not bad.converged and "not converged after 2 sweeps" in bad.message
 
 
 def test_sweep_and_block_csr_path_match_solve():
-    """The raw kernel path (to_block_csr + sweep / solve_block_csr) gives the same reactions as solve."""
+    """The raw kernel path (to_block_csr + sweep / solve_block_csr) gives the same reactions as solver.solve."""
     W, q = random_problem_3d(n=10, seed=4)
-    B = nlgs.to_block_csr(sp.csr_matrix(W), 3)
+    B = to_block_csr(sp.csr_matrix(W), 3)
     assert B.blocks.shape == (B.indices.size, 3, 3) and B.blocks.flags["C_CONTIGUOUS"]
     np.testing.assert_array_equal(B.indices[B.diag_pos], np.arange(10))
     np.testing.assert_allclose(B.to_scipy().toarray(), W, rtol=0, atol=0)
     r = np.zeros(30)
     for k in range(5):
         nlgs.sweep(B.indptr, B.indices, B.blocks, B.diag_pos, q, np.full(10, 0.3), r, np.arange(10))
-    ref = nlgs.solve(W, q, 0.3, dim=3, tol=1e-300, max_sweeps=5)
+    ref = face_solve(W, q, 0.3, dim=3, tol=1e-300, max_sweeps=5)
     np.testing.assert_array_equal(r, ref.r)
     res = nlgs.solve_block_csr(B, q, 0.3, r0=np.zeros(30), tol=1e-300, max_sweeps=5)
     np.testing.assert_array_equal(res.r, ref.r)

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from fem_blocks.solver import nlgs, parallel
+from fem_blocks.linalg import to_block_csr
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from test_nlgs import random_problem, random_problem_3d  # noqa: E402
@@ -18,7 +19,7 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 def test_colouring_separates_coupled_contacts():
     W, q = random_problem(n=200, seed=5)
-    B = nlgs.to_block_csr(W, 2)
+    B = to_block_csr(W, 2)
     colour = parallel.colour_contacts(B)
     rows = np.repeat(np.arange(B.n), np.diff(B.indptr))
     off = rows != B.indices
@@ -31,7 +32,7 @@ def test_colouring_separates_coupled_contacts():
 @pytest.mark.parametrize("dim", [2, 3])
 def test_serial_run_equals_gauss_seidel_in_colour_order(dim):
     W, q = random_problem(n=80, seed=2) if dim == 2 else random_problem_3d(n=40, seed=2)
-    B = nlgs.to_block_csr(W, dim)
+    B = to_block_csr(W, dim)
     res = parallel.solve_parallel(B, q, 0.4, tol=1e-10, max_sweeps=5000, check_every=1)
     assert res.converged
     order, _ = parallel.colour_order(parallel.colour_contacts(B))
@@ -45,7 +46,7 @@ def test_serial_run_equals_gauss_seidel_in_colour_order(dim):
 @pytest.mark.skipif(shutil.which("mpirun") is None, reason="no mpirun")
 def test_mpirun_two_ranks_reaches_the_serial_result(tmp_path):
     W, q = random_problem(n=300, seed=7)
-    B = nlgs.to_block_csr(W, 2)
+    B = to_block_csr(W, 2)
     mu = np.full(B.n, 0.5)
     prob = tmp_path / "p.npz"
     np.savez(prob, indptr=B.indptr, indices=B.indices, blocks=B.blocks, diag_pos=B.diag_pos, q=q, mu=mu, tol=1e-10)

@@ -127,9 +127,10 @@ def test_dissipated_energy_tends_to_G_I():
 def test_newton_returns_the_viscous_damage():
     """Global Newton with damage inside (one joint pulled open past the peak by q): converged, the returned damage
     is the viscous law at the returned jump, below the rate-independent damage of the same problem."""
-    from fem_blocks.solver import newton, nlgs
+    from fem_blocks.solver import newton
+    from fem_blocks.linalg import to_block_csr
     h, th = 1e-3, 1.0
-    W = nlgs.to_block_csr(np.array([[2.0, 0.3], [0.3, 1.5]]) * 1e-2, 2)
+    W = to_block_csr(np.array([[2.0, 0.3], [0.3, 1.5]]) * 1e-2, 2)
     law = np.array([MIXED])
     area = np.array([1e-3])
     q = np.array([40 * DI / (h * th), 5 * DII / (h * th)])

@@ -213,8 +213,8 @@ def _assemble_rows3(nc, order, ent_contact, ent_side, starts, side_body, side_do
 def assemble_delassus(G: GBlocks3D, W_flat, W_offset, W_size, nb: int):
     """Block-CSR 3D Delassus operator w^{ab} = G^a W H^b (3 x 3 blocks, local order (n, t, s)) from the G blocks
     and the per-body dense W stored flat (row-major square block of size W_size[b] at W_offset[b]; deformable:
-    3 dofs per boundary node, rigid: 6 x 6). Returns solver.nlgs.BlockCSR."""
-    from ..solver.nlgs import BlockCSR
+    3 dofs per boundary node, rigid: 6 x 6). Returns linalg.BlockCSR."""
+    from ..linalg import BlockCSR
 
     nc = G.side_body.shape[0]
     W_size = np.asarray(W_size, dtype=np.int64)

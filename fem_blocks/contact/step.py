@@ -307,7 +307,7 @@ class ContactStep:
         local problem, solver, law commit. Returns the step's ContactResult (statistics, impulses, gaps, status,
         law state, velocity corrections); the simulation applies the corrections."""
         from time import perf_counter
-        from ..solver import nlgs
+        from ..solver import ContactProblem, InterfaceLaws, solve
         tm = self.timers
         c0 = perf_counter()
         first = self.scene is None
@@ -341,40 +341,24 @@ class ContactStep:
         q[:, 0] += gbar / (h * th)
         c2 = perf_counter()
         tm["local"] += c2 - c1
+        laws = None
         if self.cohesive:
             from ..laws import NSTATE, S_UN, S_UT
             ueff = self.state[:, [S_UN, S_UT] + ([NSTATE] if d == 3 else [])] + h * (1 - th) * vi
             ueff[:, 0] -= gbar  # u = u_eff + h theta v_shifted (v_shifted = v_N + gbar/(h theta))
-            if self.opts.solver == "newton":
-                from ..solver.newton import solve_cohesive_newton
-                res, trial = solve_cohesive_newton(self.Wdel, q.ravel(), self.mu, self.law, self.par, self.state,
-                                                   ueff, cs.area, h, th, r0=self.P.ravel(), tol=self.opts.tol,
-                                                   max_sweeps_total=self.opts.max_sweeps)
-            else:
-                res, trial = nlgs.solve_cohesive(self.Wdel, q.ravel(), self.mu, self.law, self.par, self.state,
-                                                 ueff, cs.area, h, th, r0=self.P.ravel(), tol=self.opts.tol,
-                                                 max_sweeps=self.opts.max_sweeps, omega=self.opts.omega,
-                                                 order=self.opts.order, seed=self.opts.seed + self.steps,
-                                                 criterion=self.opts.criterion, check_every=self.opts.check_every)
+            laws = InterfaceLaws(self.law, self.par, self.state, ueff, cs.area, h, th)
+        coarse = None
+        if self.opts.coarse == "interfaces":
+            if self._coarse is None:
+                from ..solver.coarse import InterfaceCoarse
+                self._coarse = InterfaceCoarse.from_contacts(cs, self.opts.coarse_every)
+            coarse = self._coarse
+        res = solve(ContactProblem(self.Wdel, q.ravel(), self.mu, laws=laws),
+                    dataclasses.replace(self.opts, seed=self.opts.seed + self.steps), r0=self.P.ravel(), coarse=coarse)
+        if self.cohesive:
             from ..laws import commit_step  # crushing at the cap, then the laws' commit (any dimension)
-            commit_step(self.law, self.par, self.state, trial, ueff, res.r, res.u, cs.area, h, th)
+            commit_step(self.law, self.par, self.state, res.trial, ueff, res.r, res.u, cs.area, h, th)
         else:
-            if self.opts.solver == "newton":
-                from ..solver.newton import solve_newton
-                res = solve_newton(self.Wdel, q.ravel(), self.mu, r0=self.P.ravel(), tol=self.opts.tol,
-                                   max_sweeps_total=self.opts.max_sweeps)
-            else:
-                coarse = None
-                if self.opts.coarse == "interfaces":
-                    if self._coarse is None:
-                        from ..solver.coarse import InterfaceCoarse
-                        self._coarse = InterfaceCoarse.from_contacts(cs, self.opts.coarse_every)
-                    coarse = self._coarse
-                res = nlgs.solve_block_csr(self.Wdel, q.ravel(), self.mu, r0=self.P.ravel(), tol=self.opts.tol,
-                                           max_sweeps=self.opts.max_sweeps, omega=self.opts.omega,
-                                           order=self.opts.order, seed=self.opts.seed + self.steps,
-                                           criterion=self.opts.criterion, check_every=self.opts.check_every,
-                                           fallback=self.opts.fallback, coarse=coarse)
             from ..laws import NSTATE, S_UN, S_UT
             vs = res.u.reshape(-1, d)
             self.state[:, S_UN] += h * ((1 - th) * vi[:, 0] + th * (vs[:, 0] - gbar / (h * th)))

@@ -44,7 +44,8 @@ import scipy.sparse.linalg as spla
 from numba import njit
 
 from ..errors import InputError
-from .nlgs import clip_to_cone_2d, matvec_bcsr, natural_map_2d
+from ..linalg import matvec_bcsr
+from .nlgs import clip_to_cone_2d, natural_map_2d
 
 M2 = 3  # coarse unknowns per interface in 2D
 FACTOR_MUMPS = 3000  # coarse unknowns: from here on MUMPS Cholesky (linalg.Factor), below SuperLU

@@ -54,10 +54,11 @@ closed joint slides, F_T = P̃_T, σ_T ~ 1e5) the first search failed at every i
 after 200 iterations); the second accepts the full step (5 iterations). Searching on either merit at once cost
 470–630 instead of ≤ 99 iterations on some steps of the mixed-mode shear wall.
 
-Choosing the solver: `solve_newton` (20 NLGS sweeps, then Newton) where W couples contacts strongly (stacks,
-packings, stiff walls: Gauss–Seidel stalls or cycles there); `nlgs.solve(..., criterion="residual",
-fallback="newton")` keeps Gauss–Seidel where it converges and hands over to this Newton when a window of 200 sweeps
-does not halve the residual. Every 3D FCLIB problem reaches 1e-8 both ways (tests/test_newton3d.py).
+Choosing the solver (solver.solve, driver.py): `SolverOptions(solver="newton")` (20 NLGS sweeps, then Newton) where W
+couples contacts strongly (stacks, packings, stiff walls: Gauss–Seidel stalls or cycles there);
+`SolverOptions(criterion="residual", fallback="newton")` keeps Gauss–Seidel where it converges and hands over to this
+Newton when a window of 200 sweeps does not halve the residual (driver.nlgs_then_newton). Every 3D FCLIB problem
+reaches 1e-8 both ways (tests/test_newton3d.py).
 """
 from __future__ import annotations
 
@@ -69,9 +70,9 @@ from numba import njit
 from ..errors import InputError
 from ..laws import MIXED, P_CN, P_CT, S_BETA, S_BROKEN, cap_stress, compression_stiffness, linear_part, \
     mixed_damage_gradient, viscous_damage
-from ..linalg import lu_solve
+from ..linalg import BlockCSR, lu_solve, matvec_bcsr
 from . import nlgs
-from .nlgs import BlockCSR, NLGSResult
+from .problem import SolverResult
 
 
 def _rho(W: BlockCSR):
@@ -348,12 +349,12 @@ def _newton(W: BlockCSR, q, mu, r, tol, max_iter, gs, max_sweeps_total, coh=None
 
 
 def solve_newton(W: BlockCSR, q, mu, r0=None, tol: float = 1e-8, max_iter: int = 200,
-                 gs_sweeps: int = 20, max_sweeps_total: int = 100000, memory: int | None = None) -> NLGSResult:
+                 gs_sweeps: int = 20, max_sweeps_total: int = 100000, memory: int | None = None) -> SolverResult:
     """Semismooth Newton on the Alart–Curnier function, NLGS-started (`gs_sweeps` sweeps) and NLGS fallback.
     2D or 3D from the blocks of W (2×2 or 3×3). `memory`: length of the non-monotone line search (default 1 in
     2D, 10 in 3D; 1 = monotone Armijo).
 
-    Returns an NLGSResult; `sweeps` counts Newton iterations + Gauss–Seidel sweeps (message says which)."""
+    Returns a SolverResult; `sweeps` counts Newton iterations + Gauss–Seidel sweeps (message says which)."""
     q, mu, r = _prepare(W, q, mu, r0, tol, dims=(2, 3))
     if memory is None:
         memory = 1 if W.dim == 2 else 10
@@ -364,7 +365,7 @@ def solve_newton(W: BlockCSR, q, mu, r0=None, tol: float = 1e-8, max_iter: int =
         if int(v) != v or v < lo:
             raise InputError(f"{name} = {v!r}: expected an integer >= {lo}")
     if W.n == 0:
-        return NLGSResult(r, q.copy(), 0, True, 0.0, 0.0, 0.0, "no contact", solver="Newton")
+        return SolverResult(r, q.copy(), 0, True, 0.0, 0.0, 0.0, "no contact", solver="Newton")
 
     def gs(r_, k):
         res = nlgs.solve_block_csr(W, q, mu, r0=r_, tol=tol, max_sweeps=k, criterion="residual", check_every=k)
@@ -398,7 +399,7 @@ def solve_cohesive_newton(W: BlockCSR, q, mu, law, par, st, ueff, area, h: float
     selects the least damaged solution where a large step makes the coupled iteration jump between branches of
     the softening law. The whole step is bounded by `max_total_iter` Newton iterations (default 10 x max_iter) and
     `max_sweeps_total` fallback sweeps over all passes; beyond, it reports non-convergence.
-    Returns (NLGSResult, trial internal variables)."""
+    Returns (SolverResult, trial internal variables)."""
     q, mu, r = _prepare(W, q, mu, r0, tol)
     law = np.ascontiguousarray(law, dtype=np.int64)
     par = np.ascontiguousarray(par, dtype=np.float64)
@@ -407,7 +408,7 @@ def solve_cohesive_newton(W: BlockCSR, q, mu, law, par, st, ueff, area, h: float
     ueff = np.ascontiguousarray(ueff, dtype=np.float64)
     area = np.ascontiguousarray(area, dtype=np.float64)
     if W.n == 0:
-        return NLGSResult(r, q.copy(), 0, True, 0.0, 0.0, 0.0, "no contact", solver="Newton"), x
+        return SolverResult(r, q.copy(), 0, True, 0.0, 0.0, 0.0, "no contact", solver="Newton"), x
     from ..laws import FREMOND
     inside = bool(damage_inside) and bool(np.any(law == MIXED))
     n = W.n
@@ -417,7 +418,7 @@ def solve_cohesive_newton(W: BlockCSR, q, mu, law, par, st, ueff, area, h: float
     def refresh(r_):
         """x_α = D(u(r_)) for the mixed-mode contacts (damage inside)."""
         u_ = np.empty_like(q)
-        nlgs.matvec_bcsr(W.indptr, W.indices, W.blocks, r_, u_)
+        matvec_bcsr(W.indptr, W.indices, W.blocks, r_, u_)
         u_ += q
         S_, c_, m_, cmp_, cap_, T_ = scratch
         _cohesive_terms(law, par, st, x, ueff, u_, area, float(h), float(theta), S_, c_, m_, cmp_, cap_, True, T_)
@@ -487,14 +488,14 @@ def solve_cohesive_newton(W: BlockCSR, q, mu, law, par, st, ueff, area, h: float
 
 def _prepare(W, q, mu, r0, tol, dims=(2,)):
     if not isinstance(W, BlockCSR):
-        raise InputError(f"W: expected a BlockCSR (nlgs.to_block_csr), got {type(W).__name__}")
+        raise InputError(f"W: expected a BlockCSR (linalg.to_block_csr), got {type(W).__name__}")
     if W.dim not in dims:
         raise InputError(f"newton: dim = {W.dim}: expected {' or '.join(map(str, dims))} "
                          f"({'the interface-law Newton solver is 2D' if dims == (2,) else '2×2 or 3×3 blocks'})")
     q, mu = nlgs._check(W, q, mu, tol, 1, 1.0, "given", 1)
     n, d = W.n, W.dim
     if n and np.any(W.diag_pos < 0):
-        raise InputError("W: every contact needs a diagonal block (nlgs.to_block_csr adds missing ones)")
+        raise InputError("W: every contact needs a diagonal block (linalg.to_block_csr adds missing ones)")
     r = np.zeros(d * n) if r0 is None else np.array(r0, dtype=np.float64).ravel()
     if r.size != d * n or not np.all(np.isfinite(r)):
         raise InputError(f"r0: expected {d * n} finite values")
@@ -506,5 +507,5 @@ def _result(r, u, n_it, n_gs, n_fb, change, res, tol, q):
     msg = (f"{'converged' if converged else 'not converged'}: {n_it} Newton iterations, {n_gs} Gauss-Seidel "
            f"sweeps ({n_fb} fallbacks), residual {res:.3g} (tolerance {tol:g})")
     qnorm = float(np.linalg.norm(q)) or 1.0
-    return NLGSResult(r, u, n_it + n_gs, bool(converged), change, res, res * qnorm, msg,
+    return SolverResult(r, u, n_it + n_gs, bool(converged), change, res, res * qnorm, msg,
                       solver="Newton + NLGS fallback" if n_fb > 0 else "Newton")

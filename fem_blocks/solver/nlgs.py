@@ -16,71 +16,20 @@ Measures (both reported): relative change ‖Δr‖/‖r‖ over a sweep, and th
 residual ‖F‖/‖q‖ with F_α = r_α - P_K(r_α - (u_α + [mu‖u_T‖, 0])) (README of data/fclib).
 The residual reported is always recomputed from the returned reactions.
 
-W is stored as block-CSR arrays (indptr, indices, blocks (nnzb, d, d), diag_pos) so the time
+W is stored as block-CSR arrays (linalg.BlockCSR: indptr, indices, blocks (nnzb, d, d), diag_pos) so the time
 stepper calls the kernel without scipy objects.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
-import scipy.sparse as sp
 from numba import njit
 
 from ..errors import InputError
+from ..linalg import BlockCSR, matvec_bcsr, to_block_csr
 from .local import _proj_cone2, _proj_cone3, _solve3, local_3d
+from .problem import SolverResult
 
 ORDERS = {"given": 0, "reversed": 1, "shuffled": 2}
-
-
-@dataclass
-class BlockCSR:
-    indptr: np.ndarray   # (nc+1,) int64
-    indices: np.ndarray  # (nnzb,) int64, sorted per row
-    blocks: np.ndarray   # (nnzb, d, d) float64, C-contiguous
-    diag_pos: np.ndarray  # (nc,) int64: position of the diagonal block of each row
-
-    @property
-    def n(self) -> int:
-        return len(self.indptr) - 1
-
-    @property
-    def dim(self) -> int:
-        return self.blocks.shape[1]
-
-    def to_scipy(self) -> sp.csr_matrix:
-        d = self.dim
-        return sp.bsr_matrix((self.blocks, self.indices, self.indptr), shape=(d * self.n, d * self.n)).tocsr()
-
-
-def to_block_csr(W, dim: int = 2) -> BlockCSR:
-    """Block-CSR of a dense or sparse W (m x m, m = dim * nc); a missing diagonal block is added as zeros."""
-    if isinstance(W, BlockCSR):
-        return W
-    if sp.issparse(W):
-        Ws = W.tocsr()
-    else:
-        Wd = np.asarray(W, dtype=float)
-        if Wd.ndim != 2:
-            raise InputError(f"W: expected a square matrix, got shape {Wd.shape}")
-        Ws = sp.csr_matrix(Wd)
-    m = Ws.shape[0]
-    if Ws.shape[1] != m or m % dim:
-        raise InputError(f"W: expected a square matrix of size dim * n_contacts, got shape {Ws.shape} (dim {dim})")
-    nc = m // dim
-    c = Ws.tocoo()  # explicit zero diagonal entries (a csr sum would drop them): every row gets its diagonal block
-    Ws = sp.coo_matrix((np.r_[c.data, np.zeros(m)], (np.r_[c.row, np.arange(m)], np.r_[c.col, np.arange(m)])),
-                       shape=(m, m)).tocsr()
-    B = Ws.tobsr(blocksize=(dim, dim))
-    B.sort_indices()
-    indptr = B.indptr.astype(np.int64)
-    indices = B.indices.astype(np.int64)
-    blocks = np.ascontiguousarray(B.data, dtype=np.float64)
-    diag_pos = np.full(nc, -1, dtype=np.int64)
-    rows = np.repeat(np.arange(nc), np.diff(indptr))
-    on = rows == indices
-    diag_pos[rows[on]] = np.flatnonzero(on)
-    return BlockCSR(indptr, indices, blocks, diag_pos)
 
 
 # ----------------------------------------------------------------------------- compiled kernels
@@ -203,23 +152,6 @@ def _sweep(indptr, indices, blocks, diag_pos, q, mu, r, order, omega):
         r[2 * a] = rn
         r[2 * a + 1] = rt
     return dr2, r2
-
-
-@njit(cache=True)
-def matvec_bcsr(indptr, indices, blocks, x, y):
-    """y = W x (block-CSR, d x d blocks, d = blocks.shape[1])."""
-    n = indptr.shape[0] - 1
-    dd = blocks.shape[1]
-    for a in range(n):
-        for i in range(dd):
-            y[dd * a + i] = 0.0
-        for k in range(indptr[a], indptr[a + 1]):
-            b = indices[k]
-            for i in range(dd):
-                s = 0.0
-                for j in range(dd):
-                    s += blocks[k, i, j] * x[dd * b + j]
-                y[dd * a + i] += s
 
 
 @njit(cache=True)
@@ -361,20 +293,6 @@ def _run(indptr, indices, blocks, diag_pos, q, mu, r, order_kind, omega, tol, ma
 
 
 # ----------------------------------------------------------------------------- public API
-@dataclass
-class NLGSResult:
-    r: np.ndarray
-    u: np.ndarray
-    sweeps: int
-    converged: bool
-    change: float    # ‖Δr‖/‖r‖ over the last sweep
-    residual: float  # FCLIB ‖F‖ / ‖q‖ recomputed from the returned r
-    residual_abs: float  # ‖F‖
-    message: str
-    local_cases: np.ndarray | None = None  # 3D: counts of local cases (failed, open, stick, Newton, search, proj.)
-    solver: str = "NLGS"  # what produced r: "NLGS", "Newton", "Newton + NLGS fallback", "NLGS + Newton fallback"
-
-
 def _check(bcsr: BlockCSR, q, mu, tol, max_sweeps, omega, order, check_every):
     n = bcsr.n
     d = bcsr.dim
@@ -406,8 +324,7 @@ def _check(bcsr: BlockCSR, q, mu, tol, max_sweeps, omega, order, check_every):
 
 def solve_block_csr(W: BlockCSR, q, mu, r0=None, tol: float = 1e-8, max_sweeps: int = 10000,
                     omega: float = 1.0, order: str = "given", seed: int = 0, criterion: str = "change",
-                    check_every: int = 1, fallback: str = "none", stall_sweeps: int = 200,
-                    stall_factor: float = 0.5, newton_max_iter: int = 200, coarse=None) -> NLGSResult:
+                    check_every: int = 1, coarse=None) -> SolverResult:
     """NLGS on block-CSR arrays (2x2 or 3x3 blocks). criterion "change": stop when ‖Δr‖/‖r‖ <= tol over a
     sweep; "residual": stop when the FCLIB residual ‖F‖/‖q‖ <= tol (checked every `check_every` sweeps).
 
@@ -415,29 +332,10 @@ def solve_block_csr(W: BlockCSR, q, mu, r0=None, tol: float = 1e-8, max_sweeps: 
     `coarse.every` sweeps that did not converge, its Galerkin correction on the sticking contacts (two-level NLGS).
     The stopping test is unchanged; `sweeps` counts the Gauss–Seidel sweeps only.
 
-    fallback "newton" (criterion "residual" only): Gauss–Seidel runs in windows of `stall_sweeps` sweeps; when a
-    window does not reduce the residual below `stall_factor` times its value at the window's start (stagnation:
-    slow convergence or a cycle), or `max_sweeps` is spent, the global semismooth Newton (solver/newton.py,
-    `newton_max_iter` iterations, no further Gauss–Seidel start) continues from the current reactions. The
-    message says which solver finished; `sweeps` counts sweeps + Newton iterations + Newton's fallback sweeps."""
+    The hand-over to the global Newton when Gauss–Seidel stagnates is driver.nlgs_then_newton (options.fallback).
+    """
     if criterion not in ("change", "residual"):
         raise InputError(f"criterion = {criterion!r}: expected 'change' or 'residual'")
-    if fallback not in ("none", "newton"):
-        raise InputError(f"fallback = {fallback!r}: expected 'none' or 'newton'")
-    if fallback == "newton":
-        if criterion != "residual":
-            raise InputError("fallback = 'newton' needs criterion = 'residual' (stagnation is measured on the "
-                             "FCLIB residual)")
-        if int(stall_sweeps) != stall_sweeps or stall_sweeps < 1:
-            raise InputError(f"stall_sweeps = {stall_sweeps!r}: expected an integer >= 1")
-        if not (0.0 < stall_factor < 1.0):
-            raise InputError(f"stall_factor = {stall_factor!r}: expected 0 < stall_factor < 1")
-        if int(newton_max_iter) != newton_max_iter or newton_max_iter < 1:
-            raise InputError(f"newton_max_iter = {newton_max_iter!r}: expected an integer >= 1")
-        if coarse is not None:
-            raise InputError("coarse: not available with fallback = 'newton'")
-        return _solve_with_newton_fallback(W, q, mu, r0, tol, max_sweeps, omega, order, seed, check_every,
-                                           int(stall_sweeps), float(stall_factor), int(newton_max_iter))
     q, mu = _check(W, q, mu, tol, max_sweeps, omega, order, check_every)
     if coarse is not None and W.dim != 2:
         raise InputError(f"coarse: the interface coarse space is 2D only (W has {W.dim}x{W.dim} blocks)")
@@ -451,7 +349,7 @@ def solve_block_csr(W: BlockCSR, q, mu, r0=None, tol: float = 1e-8, max_sweeps: 
         raise InputError("r0: expected finite values")
     qnorm = float(np.linalg.norm(q)) or 1.0
     if n == 0:
-        return NLGSResult(r, q.copy(), 0, True, 0.0, 0.0, 0.0, "no contact")
+        return SolverResult(r, q.copy(), 0, True, 0.0, 0.0, 0.0, "no contact")
     cases = np.zeros(6, dtype=np.int64)
     if coarse is None:
         sweeps, change, converged = _run(W.indptr, W.indices, W.blocks, W.diag_pos, q, mu, r, ORDERS[order],
@@ -482,62 +380,8 @@ def solve_block_csr(W: BlockCSR, q, mu, r0=None, tol: float = 1e-8, max_sweeps: 
                f"tolerance {tol:g} on the {criterion})")
     if d == 3 and cases[0]:
         msg += f"; {cases[0]} local solves without a positive diagonal block"
-    return NLGSResult(r, u, int(sweeps), bool(converged), float(change), res, res_abs, msg,
+    return SolverResult(r, u, int(sweeps), bool(converged), float(change), res, res_abs, msg,
                       cases if d == 3 else None)
-
-
-def _solve_with_newton_fallback(W, q, mu, r0, tol, max_sweeps, omega, order, seed, check_every, window,
-                                factor, newton_max_iter):
-    """Gauss–Seidel in windows of `window` sweeps, then global Newton once it stagnates (see solve_block_csr)."""
-    total = 0
-    res = solve_block_csr(W, q, mu, r0=r0, tol=tol, max_sweeps=min(window, max_sweeps), omega=omega, order=order,
-                          seed=seed, criterion="residual", check_every=check_every)
-    total += res.sweeps
-    cases = res.local_cases.copy() if res.local_cases is not None else None
-    k = 0
-    while not res.converged and total < max_sweeps:
-        k += 1
-        start = res.residual
-        res = solve_block_csr(W, q, mu, r0=res.r, tol=tol, max_sweeps=min(window, max_sweeps - total),
-                              omega=omega, order=order, seed=seed + k, criterion="residual",
-                              check_every=check_every)
-        total += res.sweeps
-        if cases is not None:
-            cases += res.local_cases
-        if not res.converged and res.residual > factor * start:
-            break
-    if res.converged:
-        res.sweeps = total
-        res.message = f"converged in {total} sweeps (Gauss-Seidel alone)"
-        res.local_cases = cases
-        return res
-    from .newton import solve_newton  # noqa: PLC0415 (newton imports this module)
-    nt = solve_newton(W, q, mu, r0=res.r, tol=tol, max_iter=newton_max_iter, gs_sweeps=0)
-    nt.message = (f"Gauss-Seidel stagnated at residual {res.residual:.3g} after {total} sweeps, then Newton: "
-                  f"{nt.message}")
-    nt.sweeps += total
-    nt.local_cases = cases
-    nt.solver = "NLGS + Newton fallback"
-    return nt
-
-
-def solve(W, q, mu, dim: int = 2, tol: float = 1e-8, max_sweeps: int = 10000, r0=None, omega: float = 1.0,
-          order: str = "given", seed: int = 0, criterion: str = "change", check_every: int = 1,
-          fallback: str = "none", **fallback_options) -> NLGSResult:
-    """Solve u = W r + q with Signorini–Coulomb per contact (FCLIB ordering, normal first, dim = 2 or 3).
-    W: dense array, scipy sparse matrix or BlockCSR. Never raises on non-convergence: see `converged`.
-    fallback = "newton": hand over to the global Newton when Gauss–Seidel stagnates (see solve_block_csr;
-    `fallback_options`: stall_sweeps, stall_factor, newton_max_iter)."""
-    if dim not in (2, 3):
-        raise InputError(f"dim = {dim!r}: expected 2 or 3")
-    if isinstance(W, BlockCSR) and W.dim != dim:
-        raise InputError(f"dim = {dim}: W is a BlockCSR of {W.dim}x{W.dim} blocks")
-    bad = set(fallback_options) - {"stall_sweeps", "stall_factor", "newton_max_iter"}
-    if bad:
-        raise InputError(f"unknown options {sorted(bad)}: expected stall_sweeps, stall_factor, newton_max_iter")
-    return solve_block_csr(to_block_csr(W, dim), q, mu, r0=r0, tol=tol, max_sweeps=max_sweeps, omega=omega,
-                           order=order, seed=seed, criterion=criterion, check_every=check_every,
-                           fallback=fallback, **fallback_options)
 
 
 def fclib_residual(W, q, mu, r, dim: int = 2) -> tuple[float, float]:
@@ -1026,7 +870,7 @@ def solve_cohesive(W: BlockCSR, q, mu, law, par, st, ueff, area, h: float, theta
                    seed: int = 0, max_outer: int = 100, criterion: str = "change", check_every: int = 10,
                    x0=None):
     """NLGS with interface laws (laws.py) per contact, 2D (2x2 blocks) or 3D (3x3 blocks, u = (u_N, u_T, u_S)).
-    Returns (NLGSResult, trial internal variables). `q` includes the Signorini shift; `ueff` = u_i + h(1-θ)v_i - hθ
+    Returns (SolverResult, trial internal variables). `q` includes the Signorini shift; `ueff` = u_i + h(1-θ)v_i - hθ
     shift e_N per contact (nc, d); `st` the committed states (nc, NSTATE) in 2D, (nc, NSTATE3) in 3D."""
     if criterion not in ("change", "residual"):
         raise InputError(f"criterion = {criterion!r}: expected 'change' or 'residual'")
@@ -1043,7 +887,7 @@ def solve_cohesive(W: BlockCSR, q, mu, law, par, st, ueff, area, h: float, theta
     ueff = np.ascontiguousarray(ueff, dtype=np.float64)
     area = np.ascontiguousarray(area, dtype=np.float64)
     if n == 0:
-        return NLGSResult(r, q.copy(), 0, True, 0.0, 0.0, 0.0, "no contact"), trial
+        return SolverResult(r, q.copy(), 0, True, 0.0, 0.0, 0.0, "no contact"), trial
     # staggered: NLGS at fixed internal variables (starting from the committed, least damaged state), then
     # update them from the converged jumps, until they stop changing (selects the least damaged solution)
     total = 0
@@ -1073,5 +917,5 @@ def solve_cohesive(W: BlockCSR, q, mu, law, par, st, ueff, area, h: float, theta
                                          float(h), float(theta)))
     msg = f"converged in {sweeps} sweeps" if converged else \
         f"not converged after {sweeps} sweeps (change {change:.3g}, tolerance {tol:g})"
-    return NLGSResult(r, u, int(sweeps), bool(converged), float(change), res_abs / qnorm, res_abs, msg,
+    return SolverResult(r, u, int(sweeps), bool(converged), float(change), res_abs / qnorm, res_abs, msg,
                       cases if d == 3 else None), trial

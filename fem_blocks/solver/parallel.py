@@ -19,8 +19,9 @@ import numpy as np
 from numba import njit
 
 from ..errors import InputError
+from ..linalg import BlockCSR, matvec_bcsr
 from . import nlgs
-from .nlgs import BlockCSR, NLGSResult
+from .problem import SolverResult
 
 
 @njit(cache=True)
@@ -59,7 +60,7 @@ def colour_order(colour: np.ndarray):
 
 
 def solve_parallel(W: BlockCSR, q, mu, comm=None, r0=None, tol: float = 1e-8, max_sweeps: int = 10000,
-                   check_every: int = 10) -> NLGSResult:
+                   check_every: int = 10) -> SolverResult:
     """Colour-parallel NLGS (2D or 3D blocks) with the residual criterion; every rank returns the same result.
     comm: an mpi4py communicator (None: serial, the same iterates)."""
     q, mu = nlgs._check(W, q, mu, tol, max_sweeps, 1.0, "given", check_every)
@@ -89,18 +90,18 @@ def solve_parallel(W: BlockCSR, q, mu, comm=None, r0=None, tol: float = 1e-8, ma
                 r.reshape(-1, d)[idx] = recv.reshape(-1, d)
         sweeps += 1
         if sweeps % check_every == 0 or sweeps == max_sweeps:
-            nlgs.matvec_bcsr(W.indptr, W.indices, W.blocks, r, u)
+            matvec_bcsr(W.indptr, W.indices, W.blocks, r, u)
             u += q
             res = float(nlgs.natural_map(r, u, mu, d)) / qnorm
             if res <= tol:
                 converged = True
                 break
-    nlgs.matvec_bcsr(W.indptr, W.indices, W.blocks, r, u)
+    matvec_bcsr(W.indptr, W.indices, W.blocks, r, u)
     u += q
     res = float(nlgs.natural_map(r, u, mu, d)) / qnorm
     msg = (f"{'converged' if converged else 'not converged'} in {sweeps} colour-parallel sweeps on {size} ranks "
            f"({len(parts)} colours), residual {res:.3g}")
-    return NLGSResult(r, u, sweeps, converged, 0.0, res, res * qnorm, msg)
+    return SolverResult(r, u, sweeps, converged, 0.0, res, res * qnorm, msg)
 
 
 def _mpi_double():
