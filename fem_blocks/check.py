@@ -42,28 +42,11 @@ def check_case(path: str, quick: bool = False) -> tuple[list[str], list[str]]:
         sim = Simulation(model.bodies, h=st0.h, theta=st0.theta, gravity=model.gravity,
                          velocity_reset=st0.velocity_reset, contact=model.contact)
         warnings = list(case.warnings) + groups_without_interface(case, model, sim)
-        per_interface = _initial_contacts(model, sim)
+        per_interface = model.contact.initial_contacts(sim) if model.contact is not None else {}
     except InputError as e:  # found while building the model (meshes, overlaps): name the case file
         msg = str(e)
         raise InputError(msg if msg.startswith(case.source) else f"{case.source}: {msg}") from None
     return _report(case, model, per_interface), warnings
-
-
-def _initial_contacts(model, sim):
-    """Contact points per interface in the initial configuration, with the checks of a run's first step (bodies
-    overlapping, points penetrating deeper than the alert distance): the interface names -> count."""
-    c = model.contact
-    if c is None:
-        return {}
-    c._setup(sim)
-    bx = c.scene.positions(reference=True)
-    c.cs = c._detect(bx)
-    c._check_initial_penetration(True, bx)
-    c._assign_laws()
-    n = np.bincount(c.cs.interface, minlength=len(c.interfaces)) if len(c.cs.gap) else \
-        np.zeros(len(c.interfaces), dtype=int)
-    c.scene = None  # a run sets the contact step up again
-    return {itf.name: int(k) for itf, k in zip(c.interfaces, n)}
 
 
 def _report(case: Case, model, per_interface: dict) -> list[str]:

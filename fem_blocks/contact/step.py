@@ -225,6 +225,22 @@ class ContactStep:
         """Per interface: joints closed as built (reference gap = initial gap, frozen geometry only)."""
         return np.array([itf.reference == "as_built" for itf in self.interfaces], dtype=bool)
 
+    def initial_contacts(self, sim) -> dict:
+        """Contact points per interface in the initial configuration (interface name -> count), with the checks of
+        a run's first step (bodies overlapping, points penetrating deeper than the alert distance): what
+        `fem-blocks check` reports. The step is left unset (a run sets itself up at its first step)."""
+        try:
+            self._setup(sim)
+            bx = self.scene.positions(reference=True)
+            self.cs = self._detect(bx)
+            self._check_initial_penetration(True, bx)
+            self._assign_laws()
+            n = (np.bincount(self.cs.interface, minlength=len(self.interfaces)) if len(self.cs.gap)
+                 else np.zeros(len(self.interfaces), dtype=int))
+        finally:
+            self.scene, self.cs = None, None
+        return {itf.name: int(k) for itf, k in zip(self.interfaces, n)}
+
     def _setup(self, sim):
         self.dim = sim.dim
         self._det, self._kin = (det, kin) if self.dim == 2 else (det3, kin3)
