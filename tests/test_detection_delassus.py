@@ -5,6 +5,7 @@ import pytest
 from fem_blocks import delassus
 from fem_blocks.contact import detection as det
 from fem_blocks.contact import kinematics as kin
+from fem_blocks.contact.matching import match
 from fem_blocks.contact.step import InterfaceSpec
 from fem_blocks.errors import InputError
 
@@ -71,7 +72,7 @@ def test_grid_of_blocks_contact_count_and_match():
     assert len(cs) == 2 * (2 * n * (n - 1))  # 2 points per internal face
     assert len(np.unique(cs.key)) == len(cs)
     cs2 = det.detect(bx + 1e-4, body, local, edges, ebody, np.zeros(n * n, int), np.zeros(n * n, int), table())
-    m = det.match(cs, cs2)
+    m = match(cs, cs2)
     assert np.all(m >= 0) and np.array_equal(cs.key[m], cs2.key)
 
 

@@ -490,21 +490,6 @@ def update_geometry(cs: ContactSet, bx, bedges) -> ContactSet:
     return out
 
 
-def match(old: ContactSet, new: ContactSet) -> np.ndarray:
-    """Index into `old` of each contact of `new` with the same key and the same antagonist body, or -1."""
-    if len(old) == 0 or len(new) == 0:
-        return -np.ones(len(new), dtype=np.int64)
-    o = np.argsort(old.key, kind="stable")
-    ks = old.key[o]
-    pos = np.searchsorted(ks, new.key)
-    pos = np.minimum(pos, len(ks) - 1)
-    hit = (ks[pos] == new.key)
-    idx = np.where(hit, o[pos], -1)
-    same_body = np.zeros(len(new), dtype=bool)
-    same_body[hit] = old.ant_body[idx[hit]] == new.ant_body[hit]
-    return np.where(same_body, idx, -1).astype(np.int64)
-
-
 PLACEMENT_CODE = {"positions": 0, "nodes": 1, "overlap": 2, None: 2}  # None: the 2D default, "overlap"
 
 

@@ -934,20 +934,6 @@ def _empty_set() -> ContactSet3D:
                         interface=zi, cand_face=zi, ant_face=zi, ant_ref=np.zeros((0, 2)), key=zi)
 
 
-def match(old: ContactSet3D, new: ContactSet3D) -> np.ndarray:
-    """Index into `old` of each contact of `new` with the same (key, antagonist body), or -1."""
-    if len(old) == 0 or len(new) == 0:
-        return -np.ones(len(new), dtype=np.int64)
-    rows = np.concatenate([np.column_stack([old.key, old.ant_body]), np.column_stack([new.key, new.ant_body])])
-    _, cid = np.unique(rows, axis=0, return_inverse=True)
-    cid = cid.ravel()
-    co, cn = cid[:len(old)], cid[len(old):]
-    o = np.argsort(co, kind="stable")
-    pos = np.minimum(np.searchsorted(co[o], cn), len(co) - 1)
-    hit = co[o][pos] == cn
-    return np.where(hit, o[pos], -1).astype(np.int64)
-
-
 @njit(cache=True)
 def _update(bx, bfaces, coef, nv, cand_face, cand_slots, cand_w, ant_face, point, n, t, s, gap, ref, ant_w):
     """Candidate points from their weights, re-projected on the same antagonist faces (see update_geometry)."""

@@ -35,6 +35,7 @@ from . import detection as det
 from . import detection3d as det3
 from . import kinematics as kin
 from . import kinematics3d as kin3
+from .matching import match
 from .scene import ContactScene
 
 STATUS_NAMES = ("open", "stick", "slip")
@@ -196,8 +197,6 @@ class ContactStep:
 
     def _delassus(self, W_flat, W_offset, W_size):
         from .. import delassus
-        if self.dim == 3:
-            return kin3.assemble_delassus(self.G, W_flat, W_offset, W_size, self.scene.nb)
         return delassus.assemble(self.G, W_flat, W_offset, W_size, self.scene.nb)
 
     def _initial_state(self):
@@ -254,7 +253,7 @@ class ContactStep:
             self.P = np.zeros((nc, self.dim))
             st = self._initial_state()
             if old is not None and oldP is not None and nc:
-                m = self._det.match(old, self.cs)
+                m = match(old, self.cs)
                 ok = m >= 0
                 self.P[ok] = oldP[m[ok]]
                 st[ok] = self.state[m[ok]]
