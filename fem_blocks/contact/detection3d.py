@@ -52,7 +52,7 @@ differ in group; else a deformable body is candidate against a rigid one; else t
 Interface id: pair_iface of the two groups; `split_head` swaps in the head-joint interface when the normal
 is closer to horizontal than to vertical (|n·e_vertical| < √½, vertical axis z by default).
 
-Broad phase: body boxes enlarged by max(g0 + alert) on a uniform 3D grid (`box_pairs`, numba, linear in
+Broad phase: body boxes enlarged by max(g0 + alert) on a uniform 3D grid (`box_pairs` -> contact/broadphase.py, linear in
 the number of bodies); per body pair only the faces whose box meets the other body's enlarged box are
 examined, and a point is projected only on antagonist faces whose enlarged box contains it.
 """
@@ -64,6 +64,7 @@ import numpy as np
 from numba import njit
 
 from ..errors import InputError
+from .broadphase import grid_pairs
 
 PROBE = 1e-2  # node points: fraction of the way from the node toward its candidate face's centre (tie-break probe)
 
@@ -485,83 +486,6 @@ def _outside(coef, nv, f, out, tol, w):
 
 
 # ----------------------------------------------------------------------------- broad phase
-@njit(cache=True)
-def _grid_pairs3(lo, hi, cell, origin, dims):
-    """Pairs (i, j), i < j, of boxes that overlap (closed boxes), each pair once: uniform grid, a pair is
-    reported only from the cell holding the min corner of the two boxes' intersection."""
-    n = lo.shape[0]
-    ny, nz = dims[1], dims[2]
-    cnt = np.zeros(n, dtype=np.int64)
-    rng = np.empty((n, 6), dtype=np.int64)
-    for e in range(n):
-        for c in range(3):
-            i0 = int((lo[e, c] - origin[c]) / cell)
-            i1 = int((hi[e, c] - origin[c]) / cell)
-            rng[e, 2 * c] = min(max(i0, 0), dims[c] - 1)
-            rng[e, 2 * c + 1] = min(max(i1, 0), dims[c] - 1)
-        cnt[e] = (rng[e, 1] - rng[e, 0] + 1) * (rng[e, 3] - rng[e, 2] + 1) * (rng[e, 5] - rng[e, 4] + 1)
-    total = cnt.sum()
-    keys = np.empty(total, dtype=np.int64)
-    vals = np.empty(total, dtype=np.int64)
-    k = 0
-    for e in range(n):
-        for i in range(rng[e, 0], rng[e, 1] + 1):
-            for j in range(rng[e, 2], rng[e, 3] + 1):
-                for l in range(rng[e, 4], rng[e, 5] + 1):
-                    keys[k] = (i * ny + j) * nz + l
-                    vals[k] = e
-                    k += 1
-    order = np.argsort(keys, kind="mergesort")
-    keys = keys[order]
-    vals = vals[order]
-    cap = 1024
-    out = np.empty((cap, 2), dtype=np.int64)
-    m = 0
-    s = 0
-    while s < total:
-        t = s
-        while t < total and keys[t] == keys[s]:
-            t += 1
-        for a in range(s, t):
-            ea = vals[a]
-            for b in range(a + 1, t):
-                eb = vals[b]
-                sep = False
-                for c in range(3):
-                    if lo[ea, c] > hi[eb, c] or lo[eb, c] > hi[ea, c]:
-                        sep = True
-                if sep:
-                    continue
-                own = _owner(keys[s], lo, ea, eb, origin, cell, dims)
-                if not own:
-                    continue
-                if m == cap:
-                    cap *= 2
-                    new = np.empty((cap, 2), dtype=np.int64)
-                    new[:m] = out[:m]
-                    out = new
-                out[m, 0] = min(ea, eb)
-                out[m, 1] = max(ea, eb)
-                m += 1
-        s = t
-    return out[:m]
-
-
-@njit(cache=True)
-def _cell_of(x, o, cell, d):
-    return min(max(int((x - o) / cell), 0), d - 1)
-
-
-@njit(cache=True)
-def _owner(key, lo, ea, eb, origin, cell, dims):
-    ny = dims[1]
-    nz = dims[2]
-    i = _cell_of(max(lo[ea, 0], lo[eb, 0]), origin[0], cell, dims[0])
-    j = _cell_of(max(lo[ea, 1], lo[eb, 1]), origin[1], cell, dims[1])
-    l = _cell_of(max(lo[ea, 2], lo[eb, 2]), origin[2], cell, dims[2])
-    return (i * ny + j) * nz + l == key
-
-
 def box_pairs(lo, hi, cell=None) -> np.ndarray:
     """All pairs (i, j), i < j, of axis-aligned boxes [lo_i, hi_i] that overlap (touching counts), sorted.
 
@@ -580,8 +504,7 @@ def box_pairs(lo, hi, cell=None) -> np.ndarray:
     if cell is None:
         cell = float(np.median(np.max(hi - lo, axis=1)))
     cell = max(float(cell), ext / 512.0, 1e-12 * max(ext, 1.0), 1e-300)
-    dims = (np.floor((hi.max(axis=0) - origin) / cell).astype(np.int64) + 1)
-    pairs = _grid_pairs3(lo, hi, cell, origin, dims)
+    pairs = grid_pairs(lo, hi, np.arange(len(lo)), cell)
     if len(pairs):
         pairs = pairs[np.lexsort((pairs[:, 1], pairs[:, 0]))]
     return pairs
