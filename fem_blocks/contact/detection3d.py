@@ -52,8 +52,8 @@ differ in group; else a deformable body is candidate against a rigid one; else t
 Interface id: pair_iface of the two groups; `split_head` swaps in the head-joint interface when the normal
 is closer to horizontal than to vertical (|n·e_vertical| < √½, vertical axis z by default).
 
-Broad phase: body boxes enlarged by max(g0 + alert) on a uniform 3D grid (`box_pairs` -> contact/broadphase.py, linear in
-the number of bodies); per body pair only the faces whose box meets the other body's enlarged box are
+Broad phase: body boxes enlarged by max(g0 + alert) on a uniform 3D grid (`box_pairs`, contact/broadphase.py;
+linear in the number of bodies); per body pair only the faces whose box meets the other body's enlarged box are
 examined, and a point is projected only on antagonist faces whose enlarged box contains it.
 """
 from __future__ import annotations
