@@ -81,9 +81,9 @@ MUTATIONS = [
     Mutation("stop_after_peak", "stop-after-peak threshold (1 − drop)·peak → drop·peak", "fem_blocks/runner.py",
              "f < (1 - drop) * pk:", "f < drop * pk:",
              ("tests/test_stop_after_peak.py",)),
-    Mutation("von_mises_2d", "2D von Mises 3σxy² → σxy²", "fem_blocks/output/paraview.py",
-             "                         + 3.0 * sig[:, 2] ** 2)", "                         + sig[:, 2] ** 2)",
-             ("tests/test_stress2d.py",)),
+    Mutation("von_mises_2d", "2D von Mises 3σxy² → σxy²", "fem_blocks/fem_backend.py",
+             "(szz - s[:, 0]) ** 2) + 3.0 * s[:, 2] ** 2)", "(szz - s[:, 0]) ** 2) + s[:, 2] ** 2)",
+             ("tests/test_stress2d.py", "tests/test_fem_backend.py")),
     Mutation("rotated_clamp_component", "single-component clamp on a block rotated by ±90°: global x/y not swapped "
              "to the type frame", "fem_blocks/bodies.py",
              "                    comp = 1 - comp\n", "                    comp = comp\n",
