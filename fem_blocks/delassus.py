@@ -2,8 +2,8 @@
 
     w^{αβ} = Σ_{sides on a shared body} G^α_s W_body G^β_s'ᵀ
 
-with d x d blocks (d = 2: local order (n, t); d = 3: (n, t, s)) and the G blocks of contact/kinematics.py (2D)
-or contact/kinematics3d.py (3D).
+with d x d blocks (d = 2: local order (n, t); d = 3: (n, t, s)) and the G blocks of contact/kinematics_2d.py (2D)
+or contact/kinematics_3d.py (3D).
 
 W_body is dense per body in its W numbering (deformable: the type's boundary block B Mhat⁻¹ Bᵀ, shared by
 all instances of a type and clamp set; rigid: diag(1/m, 1/m, 1/I) in 2D, the 6 x 6 inverse mass in 3D, with

@@ -4,8 +4,8 @@ import pytest
 from scipy.optimize import minimize
 
 from fem_blocks import delassus
-from fem_blocks.contact import detection3d as d3
-from fem_blocks.contact import kinematics3d as k3
+from fem_blocks.contact import detection_3d as d3
+from fem_blocks.contact import kinematics_3d as k3
 from fem_blocks.contact.matching import match
 from fem_blocks.errors import InputError
 

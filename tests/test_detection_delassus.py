@@ -3,8 +3,8 @@ import numpy as np
 import pytest
 
 from fem_blocks import delassus
-from fem_blocks.contact import detection as det
-from fem_blocks.contact import kinematics as kin
+from fem_blocks.contact import detection_2d as det
+from fem_blocks.contact import kinematics_2d as kin
 from fem_blocks.contact.matching import match
 from fem_blocks.contact.step import InterfaceSpec
 from fem_blocks.errors import InputError

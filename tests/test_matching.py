@@ -4,8 +4,8 @@ built from the geometry (candidate body, antagonist body, candidate point in the
 out by hand, never from the contact keys."""
 import numpy as np
 
-from fem_blocks.contact import detection as det
-from fem_blocks.contact import detection3d as d3
+from fem_blocks.contact import detection_2d as det
+from fem_blocks.contact import detection_3d as d3
 from fem_blocks.contact.matching import match
 from test_detection3d import box, detect
 from test_detection_delassus import squares, table

@@ -1,7 +1,7 @@
 """Broad phase of the contact detection, both dimensions: all pairs of axis-aligned boxes that overlap.
 
-Boxes [lo_i, hi_i] (n, d), d = 2 (boundary edges, contact/detection.py; bodies, find_overlap) or 3 (bodies,
-contact/detection3d.py), closed (touching counts). Uniform grid of cells of size `cell` from origin = min lo:
+Boxes [lo_i, hi_i] (n, d), d = 2 (boundary edges, contact/detection_2d.py; bodies, find_overlap) or 3 (bodies,
+contact/detection_3d.py), closed (touching counts). Uniform grid of cells of size `cell` from origin = min lo:
 box i covers the cells floor((lo_i - origin) / cell) .. floor((hi_i - origin) / cell) per axis; the boxes of one
 cell are tested pairwise and a pair (i, j), i < j, of different groups is reported only from the cell holding the
 min corner max(lo_i, lo_j) of their intersection, so each pair once. Cost linear in n for boxes of comparable

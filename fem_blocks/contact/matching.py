@@ -5,8 +5,8 @@ antagonist body,
     m[j] = i  if (key_i, ant_body_i) = (key_j, ant_body_j),  else -1,
 
 the lowest such i if several (detection keeps one contact per (key, antagonist body) in 3D and one per key in 2D,
-so there is at most one). Keys are the detection modules' stable candidate-point ids (contact/detection.py,
-contact/detection3d.py: position points from their edge/face and index, node points from the node).
+so there is at most one). Keys are the detection modules' stable candidate-point ids (contact/detection_2d.py,
+contact/detection_3d.py: position points from their edge/face and index, node points from the node).
 """
 from __future__ import annotations
 

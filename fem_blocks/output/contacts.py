@@ -58,7 +58,7 @@ class ContactsWriter(SeriesWriter):
 
 
 class ContactsWriter3D(SeriesWriter):
-    """3D contact points (detection3d.ContactSet3D) as a vertex cloud per frame in `contacts.pvd`.
+    """3D contact points (detection_3d.ContactSet) as a vertex cloud per frame in `contacts.pvd`.
 
     Point data: reaction = r_N n + r_t t + r_s s (force of the antagonist on the candidate, global frame, N),
     r_local (r_N, r_t, r_s), r_N, r_T = |(r_t, r_s)|, normal n, t, s, gap (joint-corrected gap, default

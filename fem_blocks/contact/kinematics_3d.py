@@ -23,13 +23,13 @@ import numpy as np
 from numba import njit
 
 from ..errors import InputError
-from . import kinematics as _kin2
+from . import kinematics_2d as _kin2
 
 ND = 12  # padded dofs per side: 4 nodes x 3 components (rigid: 6)
 
 
 @dataclass
-class GBlocks3D:
+class GBlocks:
     side_body: np.ndarray  # (nc, 2) int64
     side_dofs: np.ndarray  # (nc, 2, 12) int64, -1 padding
     side_G: np.ndarray     # (nc, 2, 3, 12) float64, rows (n, t, s)
@@ -80,8 +80,8 @@ def _build(side_body, nodes, wts, xs, frame, kind, rot, center, bidx, boff, iden
     return -1
 
 
-def build_G(cs, kind, rot=None, center=None, bnode_index_flat=None, bnode_offset=None) -> GBlocks3D:
-    """G blocks of a ContactSet3D. kind[b] 0 deformable / 1 rigid; rot (nb, 3, 3) type frame -> global of the
+def build_G(cs, kind, rot=None, center=None, bnode_index_flat=None, bnode_offset=None) -> GBlocks:
+    """G blocks of a ContactSet. kind[b] 0 deformable / 1 rigid; rot (nb, 3, 3) type frame -> global of the
     deformable bodies (default identity); center (nb, 3) reference point of the rigid bodies; optional
     boundary numbering (bnode_index_flat, bnode_offset) as in the 2D scene (default: dof 3*node + c)."""
     nc = len(cs.gap)
@@ -108,7 +108,7 @@ def build_G(cs, kind, rot=None, center=None, bnode_index_flat=None, bnode_offset
     bad = _build(side_body, nodes, wts, xs, frame, kind, rot, center, bidx, boff, identity, side_dofs, side_G)
     if bad >= 0:
         raise InputError(f"contact {bad}: references a node that is not a boundary node of its body")
-    return GBlocks3D(side_body, side_dofs, side_G)
+    return GBlocks(side_body, side_dofs, side_G)
 
 
 @njit(cache=True)
@@ -145,11 +145,11 @@ def _accumulate(side_body, side_dofs, side_G, P, U_offset, out):
                         + side_G[a, s, 2, j] * P[a, 2]
 
 
-def local_velocity(G: GBlocks3D, U_flat, U_offset) -> np.ndarray:
+def local_velocity(G: GBlocks, U_flat, U_offset) -> np.ndarray:
     """(nc, 3) local velocities (v_N, v_T, v_S) = G u from the flat W-numbered body velocities."""
     return _kin2.local_velocity(G, U_flat, U_offset, _local_velocity)
 
 
-def accumulate_impulse(G: GBlocks3D, P, n_total: int, U_offset) -> np.ndarray:
+def accumulate_impulse(G: GBlocks, P, n_total: int, U_offset) -> np.ndarray:
     """H P: flat W-numbered vector of the contact impulses (nc, 3) on the bodies."""
     return _kin2.accumulate_impulse(G, P, n_total, U_offset, _accumulate)

@@ -74,7 +74,7 @@ _GW = np.array([0.3478548451374538, 0.6521451548625461, 0.6521451548625461, 0.34
 
 
 @dataclass
-class InterfaceTable3D:
+class InterfaceTable:
     """pair_iface[gi, gj] -> interface id (-1: no contact). `positions (ni, P)` relative positions along
     each edge of a quad (tensor product), padded with -1; `tri_rule` 3 (three interior points) or 1
     (centroid); `placement` 0 positions, 1 nodes; `split_head[i]` interface used instead of i when the
@@ -116,8 +116,8 @@ class InterfaceTable3D:
             raise InputError("interfaces.positions: expected at least one position")
 
     @classmethod
-    def from_2d(cls, table, tri_rule=3) -> "InterfaceTable3D":
-        """From the 2D `detection.InterfaceTable` (built by `detection.build_table`): same groups, g0, alert,
+    def from_2d(cls, table, tri_rule=3) -> "InterfaceTable":
+        """From the 2D `detection_2d.InterfaceTable` (built by `detection_2d.build_table`): same groups, g0, alert,
         placement, positions (used along both directions of a quad), candidate rule, max angle and bed/head
         split; `tri_rule` for triangular faces (scalar or per interface)."""
         ni = len(table.g0)
@@ -131,10 +131,10 @@ class InterfaceTable3D:
 
 
 def simple_table(g0=0.0, alert=1e-3, positions=(0.25, 0.75), placement="positions", tri_rule=3,
-                 max_angle=30.0) -> InterfaceTable3D:
+                 max_angle=30.0) -> InterfaceTable:
     """One interface between all bodies (a single group 0)."""
     pos = np.asarray(positions, dtype=float).reshape(1, -1)
-    return InterfaceTable3D(pair_iface=np.zeros((1, 1), dtype=np.int64), g0=np.array([float(g0)]),
+    return InterfaceTable(pair_iface=np.zeros((1, 1), dtype=np.int64), g0=np.array([float(g0)]),
                             alert=np.array([float(alert)]),
                             placement=np.array([0 if placement == "positions" else 1], dtype=np.int64),
                             positions=pos, tri_rule=np.array([tri_rule], dtype=np.int64),
@@ -143,7 +143,7 @@ def simple_table(g0=0.0, alert=1e-3, positions=(0.25, 0.75), placement="position
 
 
 @dataclass
-class ContactSet3D:
+class ContactSet:
     """One row per contact point (architecture.md "3D contact")."""
 
     cand_body: np.ndarray   # (nc,)
@@ -168,8 +168,8 @@ class ContactSet3D:
     def __len__(self):
         return len(self.gap)
 
-    def subset(self, idx) -> "ContactSet3D":
-        return ContactSet3D(**{k: v[idx] for k, v in self.__dict__.items()})
+    def subset(self, idx) -> "ContactSet":
+        return ContactSet(**{k: v[idx] for k, v in self.__dict__.items()})
 
 
 # ----------------------------------------------------------------------------- input
@@ -512,7 +512,7 @@ def box_pairs(lo, hi, cell=None) -> np.ndarray:
 
 # ----------------------------------------------------------------------------- narrow phase
 @njit(cache=True)
-def _narrow3(bpairs, bx, bfaces, face_order, face_start, coef, nv, nrm, farea, flo, fhi, blo, bhi,
+def _narrow(bpairs, bx, bfaces, face_order, face_start, coef, nv, nrm, farea, flo, fhi, blo, bhi,
              kind, body_group, pair_iface, g0, alert, placement, positions, npos, tri_rule, cand_group, cos_max,
              reach_frac, tol, KP, gx, gw):
     """Raw matches: for each body pair, each candidate point of the candidate body's faces near the other
@@ -747,8 +747,8 @@ def project_point(bx, bfaces, face: int, p):
                 s=out[11:14].copy(), gap=float(out[14]), inside=inside, ok=bool(ok), w=w)
 
 
-def detect(bx, bnode_body, bnode_local, bfaces, bface_body, kind, body_group, table: InterfaceTable3D,
-           reach_frac: float = 0.25, inside_tol: float = 1e-9, vertical: int = 2) -> ContactSet3D:
+def detect(bx, bnode_body, bnode_local, bfaces, bface_body, kind, body_group, table: InterfaceTable,
+           reach_frac: float = 0.25, inside_tol: float = 1e-9, vertical: int = 2) -> ContactSet:
     """Contact points between 3D bodies (module docstring). Flat inputs as returned by `flatten_boundaries`;
     kind[b] 0 deformable / 1 rigid; body_group[b] group id (rows of table.pair_iface)."""
     bx, bnode_body, bfaces, bface_body = _check_flat(bx, bnode_body, bfaces, bface_body)
@@ -798,7 +798,7 @@ def detect(bx, bnode_body, bnode_local, bfaces, bface_body, kind, body_group, ta
     face_order = np.argsort(bface_body, kind="stable").astype(np.int64)
     face_start = np.zeros(nb + 1, dtype=np.int64)
     face_start[1:] = np.cumsum(np.bincount(bface_body, minlength=nb))
-    ri, rf = _narrow3(bpairs, bx, bfaces, face_order, face_start, coef, nv, nrm, farea, flo, fhi, blo, bhi,
+    ri, rf = _narrow(bpairs, bx, bfaces, face_order, face_start, coef, nv, nrm, farea, flo, fhi, blo, bhi,
                       kind, body_group, np.ascontiguousarray(table.pair_iface, dtype=np.int64),
                       np.asarray(table.g0, float), np.asarray(table.alert, float),
                       np.asarray(table.placement, np.int64), pos, npos, np.asarray(table.tri_rule, np.int64),
@@ -840,7 +840,7 @@ def detect(bx, bnode_body, bnode_local, bfaces, bface_body, kind, body_group, ta
     hsplit = table.split_head[itf]
     use_head = (hsplit >= 0) & (np.abs(n[:, vertical]) < np.sqrt(0.5))
     itf = np.where(use_head, hsplit, itf)
-    return ContactSet3D(
+    return ContactSet(
         cand_body=bface_body[cf], ant_body=bface_body[af], cand_nodes=cnodes, cand_w=cw, ant_nodes=anodes,
         ant_w=R[:, 18:22].copy(), point=R[:, 2:5].copy(), n=n.copy(), t=R[:, 8:11].copy(), s=R[:, 11:14].copy(),
         gap=R[:, 0].copy(), g0=np.asarray(table.g0, float)[itf], area=area, interface=itf.astype(np.int64),
@@ -848,10 +848,10 @@ def detect(bx, bnode_body, bnode_local, bfaces, bface_body, kind, body_group, ta
         key=key.astype(np.int64))
 
 
-def _empty_set() -> ContactSet3D:
+def _empty_set() -> ContactSet:
     z = np.zeros(0)
     zi = np.zeros(0, dtype=np.int64)
-    return ContactSet3D(cand_body=zi, ant_body=zi, cand_nodes=np.zeros((0, 4), np.int64), cand_w=np.zeros((0, 4)),
+    return ContactSet(cand_body=zi, ant_body=zi, cand_nodes=np.zeros((0, 4), np.int64), cand_w=np.zeros((0, 4)),
                         ant_nodes=np.zeros((0, 4), np.int64), ant_w=np.zeros((0, 4)), point=np.zeros((0, 3)),
                         n=np.zeros((0, 3)), t=np.zeros((0, 3)), s=np.zeros((0, 3)), gap=z, g0=z, area=z,
                         interface=zi, cand_face=zi, ant_face=zi, ant_ref=np.zeros((0, 2)), key=zi)
@@ -887,7 +887,7 @@ def _update(bx, bfaces, coef, nv, cand_face, cand_slots, cand_w, ant_face, point
     return bad
 
 
-def update_geometry(cs: ContactSet3D, bx, bfaces) -> ContactSet3D:
+def update_geometry(cs: ContactSet, bx, bfaces) -> ContactSet:
     """Same pairs, candidate weights and areas; candidate points, projections (same antagonist faces, weights
     clamped into the face), frames and gaps recomputed from the current positions `bx` (small-sliding mode).
     bfaces as given to `detect`."""
@@ -903,7 +903,7 @@ def update_geometry(cs: ContactSet3D, bx, bfaces) -> ContactSet3D:
     node_pt = cs.key < 0
     slots[node_pt] = -1
     slots[node_pt, 0] = -cs.key[node_pt] - 1
-    out = ContactSet3D(**dict(cs.__dict__))
+    out = ContactSet(**dict(cs.__dict__))
     out.point, out.n, out.t, out.s = (np.zeros((nc, 3)) for _ in range(4))
     out.gap, out.ant_ref, out.ant_w = np.zeros(nc), np.zeros((nc, 2)), np.zeros((nc, 4))
     bad = _update(bx, bfaces, coef, nv, cs.cand_face, np.ascontiguousarray(slots), cs.cand_w, cs.ant_face,
