@@ -204,11 +204,14 @@ class BlockType:
 
     @property
     def stress_operator(self) -> sp.csr_matrix:
-        """S (3 nc x 2n): cell-centroid stress (sxx, syy, sxy) in the type frame from q."""
+        """S: cell-centroid stresses σ = D B q in the type frame from q (built once), Voigt order: 2D (3 nc x 2n)
+        (sxx, syy, sxy) in the material's plane stress or strain; 3D (6 nc x 3n) (sxx, syy, szz, syz, sxz, sxy)."""
         if self._stress is None:
             from . import fem_backend
             m = self.material
-            self._stress = fem_backend.stress_operator(self.mesh, m.E, m.nu, m.plane).tocsr()
+            S = (fem_backend.stress_operator(self.mesh, m.E, m.nu, m.plane) if self.mesh.points.shape[1] == 2
+                 else fem_backend.stress_operator_3d(self.mesh, m.E, m.nu))
+            self._stress = S.tocsr()
         return self._stress
 
     def gravity_load(self, g_type: np.ndarray) -> np.ndarray:
@@ -561,14 +564,6 @@ class BlockType3D(BlockType):
         meshing.validate3d(mesh, source=name)
         self._setup(mesh, material, mass, name, fem_backend.assemble_operators_3d(mesh, material.E, material.nu,
                                                                                   material.rho), 3)
-
-    @property
-    def stress_operator(self) -> sp.csr_matrix:
-        """S (6 nc x 3n): cell-centroid stress (sxx, syy, szz, syz, sxz, sxy) in the type frame from q."""
-        if self._stress is None:
-            from . import fem_backend
-            self._stress = fem_backend.stress_operator_3d(self.mesh, self.material.E, self.material.nu).tocsr()
-        return self._stress
 
     def traction_load(self, tag: str, traction: np.ndarray) -> np.ndarray:
         """Nodal forces of a uniform traction (type frame, N/m^2) on the faces tagged `tag`:

@@ -201,11 +201,23 @@ def stress_operator(mesh, E, nu, plane="stress") -> sp.csr_matrix:
     return sp.csr_matrix((DB.ravel(), (rows.ravel(), cols.ravel())), shape=(3 * nc, 2 * mesh.points.shape[0]))
 
 
-def von_mises(s: np.ndarray, nu: float, plane: str) -> np.ndarray:
-    """von Mises stress of (sxx, syy, sxy) rows; plane strain includes szz = nu (sxx + syy)."""
-    s = np.asarray(s).reshape(-1, 3)
-    szz = nu * (s[:, 0] + s[:, 1]) if plane == "strain" else 0.0
-    return np.sqrt(0.5 * ((s[:, 0] - s[:, 1]) ** 2 + (s[:, 1] - szz) ** 2 + (szz - s[:, 0]) ** 2) + 3 * s[:, 2] ** 2)
+def von_mises(s: np.ndarray, nu=0.0, plane_strain=False) -> np.ndarray:
+    """von Mises stress of Voigt stress rows, both dimensions (the only definition):
+
+        sigma_vm = sqrt(((sxx - syy)² + (syy - szz)² + (szz - sxx)²) / 2 + 3 (syz² + sxz² + sxy²))
+
+    3D rows (..., 6) = (sxx, syy, szz, syz, sxz, sxy); 2D rows (..., 3) = (sxx, syy, sxy) with syz = sxz = 0 and
+    szz = nu (sxx + syy) in plane strain, 0 in plane stress (`nu`, `plane_strain`: scalars or one per row).
+    Returns (n,) for the n rows."""
+    s = np.asarray(s, dtype=float)
+    s = s.reshape(-1, s.shape[-1])
+    if s.shape[1] == 6:
+        return np.sqrt(0.5 * ((s[:, 0] - s[:, 1]) ** 2 + (s[:, 1] - s[:, 2]) ** 2 + (s[:, 2] - s[:, 0]) ** 2)
+                       + 3.0 * (s[:, 3] ** 2 + s[:, 4] ** 2 + s[:, 5] ** 2))
+    if s.shape[1] != 3:
+        raise ValueError(f"von_mises: expected Voigt rows of 3 (2D) or 6 (3D) components, got {s.shape[1]}")
+    szz = np.where(plane_strain, nu * (s[:, 0] + s[:, 1]), 0.0)
+    return np.sqrt(0.5 * ((s[:, 0] - s[:, 1]) ** 2 + (s[:, 1] - szz) ** 2 + (szz - s[:, 0]) ** 2) + 3.0 * s[:, 2] ** 2)
 
 
 # ============================================================================= 3D
@@ -290,10 +302,3 @@ def stress_operator_3d(mesh, E, nu) -> sp.csr_matrix:
     rows = np.broadcast_to((6 * np.arange(nc))[:, None, None] + np.arange(6)[None, :, None], DB.shape)
     cols = np.broadcast_to(dofs[:, None, :], DB.shape)
     return sp.csr_matrix((DB.ravel(), (rows.ravel(), cols.ravel())), shape=(6 * nc, 3 * mesh.points.shape[0]))
-
-
-def von_mises_3d(s: np.ndarray) -> np.ndarray:
-    """von Mises stress of (sxx, syy, szz, syz, sxz, sxy) rows."""
-    s = np.asarray(s).reshape(-1, 6)
-    return np.sqrt(0.5 * ((s[:, 0] - s[:, 1]) ** 2 + (s[:, 1] - s[:, 2]) ** 2 + (s[:, 2] - s[:, 0]) ** 2)
-                   + 3 * (s[:, 3] ** 2 + s[:, 4] ** 2 + s[:, 5] ** 2))

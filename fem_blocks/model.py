@@ -150,7 +150,7 @@ def groups_without_interface(case: Case, model: Model, sim) -> list[str]:
     scene = ContactScene(sim)
     bx = scene.positions(reference=True)
     if scene.dim == 2:
-        from .contact import detection as det
+        from .contact import detection_2d as det
         table = det.InterfaceTable(pair_iface=pair, g0=np.zeros(1), alert=np.array([search]),
                                    placement=np.ones(1, dtype=np.int64), positions=-np.ones((1, 1)),
                                    cand_group=-np.ones(1, dtype=np.int64), thickness=np.ones(1),
@@ -158,7 +158,7 @@ def groups_without_interface(case: Case, model: Model, sim) -> list[str]:
         cs = det.detect(bx, scene.bnode_body, scene.bnode_local, scene.bedges, scene.bedge_body, scene.kind,
                         body_group, table)
     else:
-        from .contact import detection3d as det3
+        from .contact import detection_3d as det3
         table = det3.simple_table(g0=0.0, alert=search, placement="nodes", max_angle=60.0)
         table.pair_iface = pair
         cs = det3.detect(bx, scene.bnode_body, scene.bnode_local, scene.bfaces, scene.bface_body, scene.kind,

@@ -8,7 +8,7 @@ from fem_blocks.bodies import (BlockType3D, Clamp3D, DeformableBody3D, Driver, M
                                box_inertia, rotation3d, solid_properties)
 from fem_blocks.errors import InputError
 from fem_blocks.fem_backend import (assemble_operators_3d, elasticity_matrix_3d, stress_operator_3d,
-                                    von_mises_3d)
+                                    von_mises)
 from fem_blocks.meshing import (HEX_SIDES, BlockMesh3D, box_corners, load_msh3d,
                                 mesh_box, mesh_hexahedron, validate3d)
 
@@ -442,9 +442,9 @@ def test_hooke_closed_forms_and_von_mises():
     # uniaxial stress: eps = (1, -nu, -nu) sigma / E
     sig = 3e6
     assert np.allclose(D @ np.array([1, -NU, -NU, 0, 0, 0]) * sig / E, [sig, 0, 0, 0, 0, 0], atol=1e-9 * sig)
-    assert von_mises_3d(np.array([sig, 0, 0, 0, 0, 0]))[0] == pytest.approx(sig, rel=1e-14)
-    assert von_mises_3d(np.array([0, 0, 0, 0, 0, sig]))[0] == pytest.approx(np.sqrt(3) * sig, rel=1e-14)
-    assert von_mises_3d(np.array([sig, sig, sig, 0, 0, 0]))[0] == pytest.approx(0.0, abs=1e-9)
+    assert von_mises(np.array([sig, 0, 0, 0, 0, 0]))[0] == pytest.approx(sig, rel=1e-14)
+    assert von_mises(np.array([0, 0, 0, 0, 0, sig]))[0] == pytest.approx(np.sqrt(3) * sig, rel=1e-14)
+    assert von_mises(np.array([sig, sig, sig, 0, 0, 0]))[0] == pytest.approx(0.0, abs=1e-9)
 
 
 def test_operator_input_errors():

@@ -3,8 +3,10 @@ import numpy as np
 import pytest
 from scipy.optimize import minimize
 
-from fem_blocks.contact import detection3d as d3
-from fem_blocks.contact import kinematics3d as k3
+from fem_blocks import delassus
+from fem_blocks.contact import detection_3d as d3
+from fem_blocks.contact import kinematics_3d as k3
+from fem_blocks.contact.matching import match
 from fem_blocks.errors import InputError
 
 HEX_FACES = np.array([[0, 3, 2, 1], [4, 5, 6, 7], [0, 1, 5, 4], [1, 2, 6, 5], [2, 3, 7, 6], [3, 0, 4, 7]])
@@ -119,7 +121,7 @@ def test_node_placement_areas_summed_over_faces():
     # re-detection after a small motion: every contact matched by (key, antagonist body)
     V2 = V + [1e-5, -2e-5, 1e-5]
     cs2, _ = detect([(V2, F), (V1, F1)], d3.simple_table(placement="nodes"))
-    m = d3.match(cs, cs2)
+    m = match(cs, cs2)
     assert np.all(m >= 0) and np.array_equal(cs.key[m], cs2.key)
 
 
@@ -400,7 +402,7 @@ def test_delassus3d_vs_dense():
     rng = np.random.default_rng(4)
     Ws = [(lambda A: A @ A.T)(rng.normal(size=(m, m))) for m in size]
     W_offset = np.concatenate([[0], np.cumsum(size ** 2)[:-1]])
-    D = k3.assemble_delassus(G, np.concatenate([w.ravel() for w in Ws]), W_offset, size, 3)
+    D = delassus.assemble(G, np.concatenate([w.ravel() for w in Ws]), W_offset, size, 3)
     Gd = np.zeros((3 * len(cs), off[-1]))
     for j in range(off[-1]):
         e = np.zeros(off[-1])
@@ -433,7 +435,7 @@ def test_update_geometry_rigid_motion_and_redetect(placement):
     bx3[:8] += [0.01, -0.02, 3e-4]
     up = d3.update_geometry(cs, bx3, flat[3])
     fresh = d3.detect(bx3, *flat[1:], np.zeros(2, int), np.zeros(2, int), table)
-    m = d3.match(cs, fresh)
+    m = match(cs, fresh)
     assert np.all(m >= 0)
     for f in ("point", "n", "t", "s", "gap", "ant_w", "ant_ref", "area"):
         assert np.abs(getattr(up, f)[m] - getattr(fresh, f)).max() < 1e-14, f

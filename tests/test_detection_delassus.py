@@ -3,8 +3,9 @@ import numpy as np
 import pytest
 
 from fem_blocks import delassus
-from fem_blocks.contact import detection as det
-from fem_blocks.contact import kinematics as kin
+from fem_blocks.contact import detection_2d as det
+from fem_blocks.contact import kinematics_2d as kin
+from fem_blocks.contact.matching import match
 from fem_blocks.contact.step import InterfaceSpec
 from fem_blocks.errors import InputError
 
@@ -71,7 +72,7 @@ def test_grid_of_blocks_contact_count_and_match():
     assert len(cs) == 2 * (2 * n * (n - 1))  # 2 points per internal face
     assert len(np.unique(cs.key)) == len(cs)
     cs2 = det.detect(bx + 1e-4, body, local, edges, ebody, np.zeros(n * n, int), np.zeros(n * n, int), table())
-    m = det.match(cs, cs2)
+    m = match(cs, cs2)
     assert np.all(m >= 0) and np.array_equal(cs.key[m], cs2.key)
 
 
@@ -194,3 +195,20 @@ def test_rigid_lever_arm_closed_form():
     assert D[0, 0] == pytest.approx(1 / m + d * d / I, rel=1e-14)
     assert D[1, 1] == pytest.approx(1 / m, rel=1e-14)
     assert D[0, 1] == pytest.approx(0.0, abs=1e-15)
+
+
+def test_grid_pairs_2d_groups_vs_brute_force():
+    # the broad phase shared with 3D, in 2D: every overlapping (touching) pair of boxes of different groups, once
+    from fem_blocks.contact.broadphase import grid_pairs
+    rng = np.random.default_rng(3)
+    n = 300
+    lo = rng.integers(0, 15, (n, 2)).astype(float)
+    hi = lo + rng.integers(0, 4, (n, 2))
+    lo[:2], hi[:2] = [[0, 0], [7, -2]], [[20, 1], [8, 18]]  # two long boxes
+    group = rng.integers(0, 60, n)
+    ov = np.all((lo[:, None] <= hi[None]) & (lo[None] <= hi[:, None]), axis=2) & (group[:, None] != group[None])
+    i, j = np.nonzero(np.triu(ov, 1))
+    assert len(i) > 300
+    for cell in (0.5, 3.0, 50.0):
+        pairs = grid_pairs(lo, hi, group, cell)
+        assert np.array_equal(pairs[np.lexsort((pairs[:, 1], pairs[:, 0]))], np.column_stack([i, j]))

@@ -219,14 +219,19 @@ def test_plane_strain_thickness_scaling():
 
 def test_von_mises_closed_forms():
     s = 3.0e6
-    assert von_mises(np.array([s, 0, 0]), NU, "stress")[0] == pytest.approx(s, rel=1e-14)
-    assert von_mises(np.array([0, 0, s]), NU, "stress")[0] == pytest.approx(np.sqrt(3) * s, rel=1e-14)
-    assert von_mises(np.array([s, s, 0]), NU, "stress")[0] == pytest.approx(s, rel=1e-14)
+    assert von_mises(np.array([s, 0, 0]), NU, plane_strain=False)[0] == pytest.approx(s, rel=1e-14)
+    assert von_mises(np.array([0, 0, s]), NU, plane_strain=False)[0] == pytest.approx(np.sqrt(3) * s, rel=1e-14)
+    assert von_mises(np.array([s, s, 0]), NU, plane_strain=False)[0] == pytest.approx(s, rel=1e-14)
     # plane strain, equibiaxial: szz = 2 nu s, vM = |s - 2 nu s|
-    assert von_mises(np.array([s, s, 0]), NU, "strain")[0] == pytest.approx(s * (1 - 2 * NU), rel=1e-14)
+    assert von_mises(np.array([s, s, 0]), NU, plane_strain=True)[0] == pytest.approx(s * (1 - 2 * NU), rel=1e-14)
     # plane strain, uniaxial: principal (s, 0, nu s)
     ref = np.sqrt(0.5 * (s ** 2 + (NU * s) ** 2 + (s - NU * s) ** 2))
-    assert von_mises(np.array([[s, 0, 0], [s, 0, 0]]), NU, "strain") == pytest.approx([ref, ref], rel=1e-14)
+    assert von_mises(np.array([[s, 0, 0], [s, 0, 0]]), NU, plane_strain=True) == pytest.approx([ref, ref], rel=1e-14)
+    # one row per cell with its own nu and plane (as the 2D writer passes them): equibiaxial rows
+    vm = von_mises(np.array([[s, s, 0], [s, s, 0], [s, s, 0]]), np.array([NU, NU, 0.1]), np.array([False, True, True]))
+    assert vm == pytest.approx([s, s * (1 - 2 * NU), s * (1 - 0.2)], rel=1e-14)
+    with pytest.raises(ValueError, match="3 .2D. or 6 .3D."):
+        von_mises(np.zeros((2, 4)))
 
 
 def test_stress_operator_shape_and_rigid_motion():

@@ -8,7 +8,7 @@ import pytest
 
 from fem_blocks.bodies import BlockType3D, DeformableBody3D, Material, RigidBody3D, rotation3d
 from fem_blocks.builders3d import dome
-from fem_blocks.contact.detection3d import ContactSet3D
+from fem_blocks.contact.detection_3d import ContactSet
 from fem_blocks.errors import InputError
 from fem_blocks.laws import BRITTLE, COULOMB, DUGDALE, ELASTIC, FREMOND, MIXED, NSTATE, S_BETA, S_DISS, S_UN, S_UP, S_UT
 from fem_blocks.meshing import mesh_box, mesh_hexahedron
@@ -116,7 +116,7 @@ def _contact_set(rng, nc):
     s = np.cross(n, t)
     i4 = rng.integers(0, 9, (nc, 4))
     w4 = rng.random((nc, 4))
-    return ContactSet3D(rng.integers(0, 5, nc), rng.integers(0, 5, nc), i4, w4, i4, w4, rng.random((nc, 3)), n, t, s,
+    return ContactSet(rng.integers(0, 5, nc), rng.integers(0, 5, nc), i4, w4, i4, w4, rng.random((nc, 3)), n, t, s,
                         1e-3 * rng.standard_normal(nc), np.full(nc, 0.03), rng.random(nc), rng.integers(0, 3, nc),
                         rng.integers(0, 9, nc), rng.integers(0, 9, nc), rng.random((nc, 2)), np.arange(nc))
 

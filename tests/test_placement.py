@@ -10,7 +10,7 @@ import pytest
 from types import SimpleNamespace
 
 from fem_blocks.bodies import BlockType, DeformableBody, Driver, Material, RigidBody
-from fem_blocks.contact import detection as det
+from fem_blocks.contact import detection_2d as det
 from fem_blocks.contact.step import ContactOptions, ContactStep, InterfaceSpec
 from fem_blocks.dynamics import Simulation
 from fem_blocks.errors import InputError

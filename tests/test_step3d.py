@@ -5,7 +5,7 @@ import pytest
 
 from fem_blocks.bodies import (BlockType3D, DeformableBody3D, Driver, History, Material, RigidBody3D,
                                rotation3d)
-from fem_blocks.contact.detection3d import update_geometry
+from fem_blocks.contact.detection_3d import update_geometry
 from fem_blocks.contact.step import ContactOptions, ContactStep, InterfaceSpec
 from fem_blocks.dynamics import Simulation
 from fem_blocks.errors import InputError
@@ -120,7 +120,7 @@ def test_stack_of_three_deformable_blocks(geometry):
     gravity, quasi-static (velocity reset, θ = 1): at equilibrium the floor reaction (driver reaction and the sum
     of the contact forces) equals the total weight and the joint between blocks k and k+1 carries the weight of
     the blocks above, to 1e-9 relative (brief: 1e-6; measured 2e-15). Frozen geometry, or updated (re-detection
-    every 5 steps, detection3d.update_geometry on the deformed boundaries in between)."""
+    every 5 steps, detection_3d.update_geometry on the deformed boundaries in between)."""
     bt = BlockType3D(mesh_box(1.0, 1.0, 0.5, divisions=(2, 2, 2)), Material(1e8, 0.25, 2000.0))
     blocks = [DeformableBody3D(bt, position=(-0.5, -0.5, 0.5 * k), name=f"b{k}") for k in range(3)]
     floor = floor_on(np.eye(3))
@@ -162,7 +162,7 @@ def drop_scene(redetect_every=4):
 
 @pytest.mark.parametrize("theta", [0.5, 1.0])
 def test_rigid_block_dropped_flat(theta):
-    """Drop from 2 cm, updated geometry (re-detection every 4 steps, detection3d.update_geometry in between):
+    """Drop from 2 cm, updated geometry (re-detection every 4 steps, detection_3d.update_geometry in between):
     the contact points never penetrate the floor beyond the solver tolerance (gaps recomputed from the current
     positions after every step), free flight changes the energy by exactly -(θ - 1/2) m h² g² per step
     (conserved for θ = 1/2), and the total energy never grows (per step <= 1e-9 m g z0, the NLGS residual being 1e-10).
@@ -201,7 +201,7 @@ def test_rigid_block_dropped_flat(theta):
 
 
 def test_checkpoint_round_trip_3d():
-    """export_state / restore_state in 3D (rigid orientation, ContactSet3D, GBlocks3D, warm start): a run
+    """export_state / restore_state in 3D (rigid orientation, ContactSet, GBlocks, warm start): a run
     restored at step 40 of the drop continues exactly as the uninterrupted run."""
     sim, blk, cst = drop_scene()
     for _ in range(40):

@@ -1,5 +1,5 @@
 """2D `geometry = "updated"` with `redetect_every > 1`: between two re-detections the contact pairs are kept and
-their points, frames, gaps and G follow the current positions (detection.update_geometry). Before, the 2D steps in
+their points, frames, gaps and G follow the current positions (detection_2d.update_geometry). Before, the 2D steps in
 between kept the gaps of the last detection: a block dropped 2 cm onto a rigid floor sank 4.7 mm and bounced back
 0.30 m up with redetect_every = 5 (12 mm and 1.17 m with 20)."""
 import numpy as np

@@ -1,12 +1,12 @@
 """Updated contact geometry in 3D (contact.geometry = "updated": re-detection from the current configuration,
-detection3d.update_geometry in between): at small displacements it agrees with frozen geometry, closed contacts
+detection_3d.update_geometry in between): at small displacements it agrees with frozen geometry, closed contacts
 survive re-detection (points on or just past a face edge: Poisson expansion, sliding across the boundary between
 two antagonist faces) and nothing penetrates."""
 import numpy as np
 import pytest
 
 from fem_blocks.bodies import BlockType3D, DeformableBody3D, Driver, Material, RigidBody3D
-from fem_blocks.contact import detection3d as det3
+from fem_blocks.contact import detection_3d as det3
 from fem_blocks.contact.step import ContactOptions, ContactStep, InterfaceSpec
 from fem_blocks.dynamics import Simulation
 from fem_blocks.meshing import box_corners, mesh_box

@@ -27,7 +27,7 @@ OUT_FIELDS = ("gt_end", "v", "r", "status")  # checkpointed under "contact.out.<
 class ContactResult:
     dim: int
     stats: dict                 # contacts, active, slip, sweeps, change, residual, converged, solver, message
-    cs: object = None           # ContactSet / ContactSet3D solved on (None: no contact detected yet)
+    cs: object = None           # ContactSet (detection_2d / detection_3d) solved on (None: no contact detected yet)
     P: np.ndarray = None        # (nc, d) impulses
     r: np.ndarray = None        # (nc, d) reactions P / h
     v: np.ndarray = None        # (nc, d) shifted local velocities at the end of the step

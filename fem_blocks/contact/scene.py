@@ -4,7 +4,7 @@ Bodies 0..nb-1 (deformable and rigid in one list), dimension d = sim.dim (2 or 3
 bodies are concatenated in `bx (nbn, d)` (deformable: the type's boundary nodes in
 `BlockType.boundary_nodes` order; rigid: polygon vertices in 2D, the points of its polyhedron in 3D).
 2D: `bedges` index `bx`, counter-clockwise per body. 3D: `bfaces (nf, 4)` index `bx` (-1 in column 3 for
-a triangle), outward by the right-hand rule, `bface_body (nf,)` (detection3d.flatten_boundaries layout).
+a triangle), outward by the right-hand rule, `bface_body (nf,)` (detection_3d.flatten_boundaries layout).
 Velocities and impulses are exchanged in the *W numbering*: deformable body = its type's boundary dofs
 `d*bnode_index + c` in the type frame, rigid body = (vx, vy, omega) in 2D, (v, ω) (6 dofs) in 3D at its
 centre of mass. `U_offset[b]` locates body b in flat vectors.

@@ -15,10 +15,10 @@ Geometry: "frozen" (small displacements; detection, frames, G and W_del once in 
 configuration; gaps follow the displacement jumps gt = gt_ref + (G q)_N) or "updated" (re-detection
 from the current configuration every `redetect_every` steps, reactions carried over by contact key;
 the steps in between keep the pairs and recompute points, frames, gaps and G from the current positions by
-detection.update_geometry (2D) / detection3d.update_geometry (3D)).
+detection_2d.update_geometry (2D) / detection_3d.update_geometry (3D)).
 
 Dimension d = sim.dim: the same step in 2D (detection, kinematics, delassus: local (n, t)) and 3D
-(detection3d, kinematics3d: local (n, t, s), 3x3 Delassus blocks); impulses P (nc, d), law state
+(detection_3d, kinematics_3d: local (n, t, s), 3x3 Delassus blocks); impulses P (nc, d), law state
 (nc, NSTATE) in 2D, (nc, NSTATE + 1) in 3D (the extra column is the second tangential jump u_S).
 3D: every interface law with NLGS (nlgs.solve_cohesive on 3x3 blocks, laws.commit_step), or Coulomb with
 the global Newton (solver/newton.py); the 3D Newton for interface laws is not written yet (InputError).
@@ -31,10 +31,11 @@ import numpy as np
 
 from ..errors import InputError
 from ..specs import ContactOptions, InterfaceSpec  # noqa: F401 (the engine's spec classes; defined in specs.py)
-from . import detection as det
-from . import detection3d as det3
-from . import kinematics as kin
-from . import kinematics3d as kin3
+from . import detection_2d as det
+from . import detection_3d as det3
+from . import kinematics_2d as kin
+from . import kinematics_3d as kin3
+from .matching import match
 from .result import OUT_FIELDS, ContactResult
 from .scene import ContactScene
 
@@ -102,7 +103,7 @@ class ContactStep:
                                  f"in 3D")
             if itf.placement is None:
                 table.placement[k] = 0
-        return det3.InterfaceTable3D.from_2d(table)
+        return det3.InterfaceTable.from_2d(table)
 
     def _detect(self, bx):
         s = self.scene
@@ -116,8 +117,6 @@ class ContactStep:
 
     def _delassus(self, W_flat, W_offset, W_size):
         from .. import delassus
-        if self.dim == 3:
-            return kin3.assemble_delassus(self.G, W_flat, W_offset, W_size, self.scene.nb)
         return delassus.assemble(self.G, W_flat, W_offset, W_size, self.scene.nb)
 
     def _initial_state(self):
@@ -176,7 +175,7 @@ class ContactStep:
             self.P = np.zeros((nc, self.dim))
             st = self._initial_state()
             if old is not None and oldP is not None and nc:
-                m = self._det.match(old, self.cs)
+                m = match(old, self.cs)
                 ok = m >= 0
                 self.P[ok] = oldP[m[ok]]
                 st[ok] = self.state[m[ok]]
@@ -244,8 +243,8 @@ class ContactStep:
     def _setup(self, sim):
         self.dim = sim.dim
         self._det, self._kin = (det, kin) if self.dim == 2 else (det3, kin3)
-        self._cs_cls = det.ContactSet if self.dim == 2 else det3.ContactSet3D
-        self._g_cls = kin.GBlocks if self.dim == 2 else kin3.GBlocks3D
+        self._cs_cls = det.ContactSet if self.dim == 2 else det3.ContactSet
+        self._g_cls = kin.GBlocks if self.dim == 2 else kin3.GBlocks
         if self.dim == 3 and self.opts.coarse != "none":
             raise InputError(f"contact.coarse = {self.opts.coarse!r}: the interface coarse space is 2D only; expected "
                              "'none' in 3D")

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..fem_backend import von_mises
 from .pvd import SeriesWriter
 
 # Voigt order of the stresses: 2D (xx, yy, xy), 3D (xx, yy, zz, yz, xz, xy)
@@ -31,12 +32,6 @@ def rotate_voigt(s: np.ndarray, R: np.ndarray) -> np.ndarray:
         T[..., i, j] = T[..., j, i] = s[..., c]
     Tg = np.einsum("kij,kcjl,kml->kcim", R, T, R)
     return np.stack([Tg[..., i, j] for i, j in _VOIGT[d]], -1)
-
-
-def von_mises_3d(s: np.ndarray) -> np.ndarray:
-    """sqrt(((sxx-syy)^2 + (syy-szz)^2 + (szz-sxx)^2)/2 + 3 (syz^2 + sxz^2 + sxy^2)) of Voigt stresses (..., 6)."""
-    return np.sqrt(0.5 * ((s[..., 0] - s[..., 1]) ** 2 + (s[..., 1] - s[..., 2]) ** 2 + (s[..., 2] - s[..., 0]) ** 2)
-                   + 3.0 * (s[..., 3] ** 2 + s[..., 4] ** 2 + s[..., 5] ** 2))
 
 
 def _type_fields(bodies, members, offs, block_type, disp, vel, stress: bool):
@@ -141,12 +136,8 @@ class BodiesWriter(SeriesWriter):
                 else:
                     parts.append(np.concatenate(stress[name]))
             sig = np.concatenate(parts)
-            nu = self._cell_nu()
-            szz = np.where(self._cell_plane_strain(), nu * (sig[:, 0] + sig[:, 1]), 0.0)
-            vm = np.sqrt(0.5 * ((sig[:, 0] - sig[:, 1]) ** 2 + (sig[:, 1] - szz) ** 2 + (szz - sig[:, 0]) ** 2)
-                         + 3.0 * sig[:, 2] ** 2)
             cell_data["stress"] = sig
-            cell_data["von_mises"] = vm
+            cell_data["von_mises"] = von_mises(sig, self._cell_nu(), self._cell_plane_strain())
         return point_data, cell_data
 
     def _cell_nu(self):
@@ -253,7 +244,7 @@ class BodiesWriter3D(SeriesWriter):
         cell_data = {"body_id": self.cell_body, "body_kind": self.cell_kind}
         if self.stress:
             cell_data["stress"] = sig
-            cell_data["von_mises"] = von_mises_3d(sig)
+            cell_data["von_mises"] = von_mises(sig)
         return point_data, cell_data
 
     def write(self, time: float) -> str:

@@ -22,15 +22,14 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from ..delassus import _row_pattern, body_entities
 from ..errors import InputError
-from . import kinematics as _kin2
+from . import kinematics_2d as _kin2
 
 ND = 12  # padded dofs per side: 4 nodes x 3 components (rigid: 6)
 
 
 @dataclass
-class GBlocks3D:
+class GBlocks:
     side_body: np.ndarray  # (nc, 2) int64
     side_dofs: np.ndarray  # (nc, 2, 12) int64, -1 padding
     side_G: np.ndarray     # (nc, 2, 3, 12) float64, rows (n, t, s)
@@ -81,8 +80,8 @@ def _build(side_body, nodes, wts, xs, frame, kind, rot, center, bidx, boff, iden
     return -1
 
 
-def build_G(cs, kind, rot=None, center=None, bnode_index_flat=None, bnode_offset=None) -> GBlocks3D:
-    """G blocks of a ContactSet3D. kind[b] 0 deformable / 1 rigid; rot (nb, 3, 3) type frame -> global of the
+def build_G(cs, kind, rot=None, center=None, bnode_index_flat=None, bnode_offset=None) -> GBlocks:
+    """G blocks of a ContactSet. kind[b] 0 deformable / 1 rigid; rot (nb, 3, 3) type frame -> global of the
     deformable bodies (default identity); center (nb, 3) reference point of the rigid bodies; optional
     boundary numbering (bnode_index_flat, bnode_offset) as in the 2D scene (default: dof 3*node + c)."""
     nc = len(cs.gap)
@@ -109,7 +108,7 @@ def build_G(cs, kind, rot=None, center=None, bnode_index_flat=None, bnode_offset
     bad = _build(side_body, nodes, wts, xs, frame, kind, rot, center, bidx, boff, identity, side_dofs, side_G)
     if bad >= 0:
         raise InputError(f"contact {bad}: references a node that is not a boundary node of its body")
-    return GBlocks3D(side_body, side_dofs, side_G)
+    return GBlocks(side_body, side_dofs, side_G)
 
 
 @njit(cache=True)
@@ -146,85 +145,11 @@ def _accumulate(side_body, side_dofs, side_G, P, U_offset, out):
                         + side_G[a, s, 2, j] * P[a, 2]
 
 
-def local_velocity(G: GBlocks3D, U_flat, U_offset) -> np.ndarray:
+def local_velocity(G: GBlocks, U_flat, U_offset) -> np.ndarray:
     """(nc, 3) local velocities (v_N, v_T, v_S) = G u from the flat W-numbered body velocities."""
     return _kin2.local_velocity(G, U_flat, U_offset, _local_velocity)
 
 
-def accumulate_impulse(G: GBlocks3D, P, n_total: int, U_offset) -> np.ndarray:
+def accumulate_impulse(G: GBlocks, P, n_total: int, U_offset) -> np.ndarray:
     """H P: flat W-numbered vector of the contact impulses (nc, 3) on the bodies."""
     return _kin2.accumulate_impulse(G, P, n_total, U_offset, _accumulate)
-
-
-# ----------------------------------------------------------------------------- Delassus operator (3D)
-@njit(cache=True)
-def _assemble_rows3(nc, order, ent_contact, ent_side, starts, side_body, side_dofs, side_G, W_flat, W_offset,
-                    W_size):
-    """Row-by-row block-CSR assembly of w^{ab} = Σ_{shared body} G^a_s W_b G^b_s'ᵀ (3 x 3 blocks), columns
-    sorted (pattern: delassus._row_pattern), duplicates (both sides on one body) summed in place."""
-    nd = side_dofs.shape[2]
-    indptr, indices, diag_pos = _row_pattern(nc, order, ent_contact, starts, side_body)
-    blocks = np.zeros((indptr[nc], 3, 3))
-    pos_of = -np.ones(nc, dtype=np.int64)
-    maxsz = 0
-    for b in range(W_size.shape[0]):
-        maxsz = max(maxsz, W_size[b])
-    GW = np.zeros((3, maxsz))
-    for a in range(nc):
-        for kk in range(indptr[a], indptr[a + 1]):
-            pos_of[indices[kk]] = kk
-        for s in range(2):
-            b = side_body[a, s]
-            off = W_offset[b]
-            sz = W_size[b]
-            # GW = G^a_s W_b over all of body b's dofs (once per side), then one 3 x 3 product per neighbour
-            for r in range(3):
-                for j in range(sz):
-                    GW[r, j] = 0.0
-            for i in range(nd):
-                di = side_dofs[a, s, i]
-                if di < 0:
-                    continue
-                g0 = side_G[a, s, 0, i]
-                g1 = side_G[a, s, 1, i]
-                g2 = side_G[a, s, 2, i]
-                base = off + di * sz
-                for j in range(sz):
-                    w = W_flat[base + j]
-                    GW[0, j] += g0 * w
-                    GW[1, j] += g1 * w
-                    GW[2, j] += g2 * w
-            for e in range(starts[b], starts[b + 1]):
-                ee = order[e]
-                c = ent_contact[ee]
-                sc = ent_side[ee]
-                kk = pos_of[c]
-                for j in range(nd):
-                    dj = side_dofs[c, sc, j]
-                    if dj < 0:
-                        continue
-                    for r in range(3):
-                        gw = GW[r, dj]
-                        for q in range(3):
-                            blocks[kk, r, q] += gw * side_G[c, sc, q, j]
-    return indptr, indices, blocks, diag_pos
-
-
-def assemble_delassus(G: GBlocks3D, W_flat, W_offset, W_size, nb: int):
-    """Block-CSR 3D Delassus operator w^{ab} = G^a W H^b (3 x 3 blocks, local order (n, t, s)) from the G blocks
-    and the per-body dense W stored flat (row-major square block of size W_size[b] at W_offset[b]; deformable:
-    3 dofs per boundary node, rigid: 6 x 6). Returns linalg.BlockCSR."""
-    from ..linalg import BlockCSR
-
-    nc = G.side_body.shape[0]
-    W_size = np.asarray(W_size, dtype=np.int64)
-    if len(W_size) != nb or np.asarray(W_offset).shape != (nb,):
-        raise InputError(f"W_offset / W_size: expected {nb} entries (one per body)")
-    if nc and np.any(G.side_dofs.max(axis=2) >= W_size[G.side_body]):
-        raise InputError("G blocks: a dof index exceeds its body's W size")
-    ent_contact, ent_side, order, starts = body_entities(G.side_body, nb)
-    indptr, indices, blocks, diag_pos = _assemble_rows3(
-        nc, order, ent_contact, ent_side, starts, np.ascontiguousarray(G.side_body, dtype=np.int64),
-        np.ascontiguousarray(G.side_dofs, dtype=np.int64), np.ascontiguousarray(G.side_G, dtype=np.float64),
-        np.ascontiguousarray(W_flat, dtype=float), np.asarray(W_offset, dtype=np.int64), W_size)
-    return BlockCSR(indptr, indices, blocks, diag_pos)

@@ -25,8 +25,8 @@ Each point carries its tributary length x thickness (`area`). A point is paired 
 antagonist edge (angle between outward normals within `max_angle` of opposite) onto which it projects inside
 the edge, with -(reach) <= g <= g0 + alert.
 
-Broad phase: uniform grid over edge boxes enlarged by the search distance (numba, linear in the
-number of edges); each edge pair is examined once.
+Broad phase: edge boxes enlarged by the search distance on a uniform grid (contact/broadphase.py, shared with
+3D; numba, linear in the number of edges); each edge pair of two bodies is examined once.
 """
 from __future__ import annotations
 
@@ -36,6 +36,7 @@ import numpy as np
 from numba import njit
 
 from ..errors import InputError
+from .broadphase import grid_pairs
 
 
 @dataclass
@@ -100,80 +101,6 @@ class ContactSet:
 
     def subset(self, idx) -> "ContactSet":
         return ContactSet(**{k: v[idx] for k, v in self.__dict__.items()})
-
-
-# ----------------------------------------------------------------------------- broad phase
-@njit(cache=True)
-def _grid_pairs(box, body, cell):
-    """Pairs (i, j), i < j, of edges of different bodies whose boxes overlap; each pair once."""
-    ne = box.shape[0]
-    x0 = box[:, 0].min()
-    y0 = box[:, 1].min()
-    nx = int((box[:, 2].max() - x0) / cell) + 1
-    ny = int((box[:, 3].max() - y0) / cell) + 1
-    # count cells per edge
-    cnt = np.zeros(ne, dtype=np.int64)
-    for e in range(ne):
-        i0 = int((box[e, 0] - x0) / cell)
-        i1 = int((box[e, 2] - x0) / cell)
-        j0 = int((box[e, 1] - y0) / cell)
-        j1 = int((box[e, 3] - y0) / cell)
-        cnt[e] = (i1 - i0 + 1) * (j1 - j0 + 1)
-    total = cnt.sum()
-    keys = np.empty(total, dtype=np.int64)
-    vals = np.empty(total, dtype=np.int64)
-    k = 0
-    for e in range(ne):
-        i0 = int((box[e, 0] - x0) / cell)
-        i1 = int((box[e, 2] - x0) / cell)
-        j0 = int((box[e, 1] - y0) / cell)
-        j1 = int((box[e, 3] - y0) / cell)
-        for i in range(i0, i1 + 1):
-            for j in range(j0, j1 + 1):
-                keys[k] = i * ny + j
-                vals[k] = e
-                k += 1
-    order = np.argsort(keys, kind="mergesort")
-    keys = keys[order]
-    vals = vals[order]
-    # pairs within each cell; keep a pair only in the cell holding the min corner of the boxes' intersection
-    cap = 1024
-    out = np.empty((cap, 2), dtype=np.int64)
-    m = 0
-    s = 0
-    while s < total:
-        t = s
-        while t < total and keys[t] == keys[s]:
-            t += 1
-        ci = keys[s] // ny
-        cj = keys[s] % ny
-        for a in range(s, t):
-            ea = vals[a]
-            for b in range(a + 1, t):
-                eb = vals[b]
-                if body[ea] == body[eb]:
-                    continue
-                if box[ea, 0] > box[eb, 2] or box[eb, 0] > box[ea, 2] or box[ea, 1] > box[eb, 3] \
-                        or box[eb, 1] > box[ea, 3]:
-                    continue
-                mx = max(box[ea, 0], box[eb, 0])
-                my = max(box[ea, 1], box[eb, 1])
-                if int((mx - x0) / cell) != ci or int((my - y0) / cell) != cj:
-                    continue
-                if m == cap:
-                    cap *= 2
-                    new = np.empty((cap, 2), dtype=np.int64)
-                    new[:m] = out[:m]
-                    out = new
-                if ea < eb:
-                    out[m, 0] = ea
-                    out[m, 1] = eb
-                else:
-                    out[m, 0] = eb
-                    out[m, 1] = ea
-                m += 1
-        s = t
-    return out[:m]
 
 
 # ----------------------------------------------------------------------------- narrow phase
@@ -335,9 +262,9 @@ def detect(bx, bnode_body, bnode_local, bedges, bedge_body, kind, body_group, ta
         e = int(np.flatnonzero(L <= 1e-12 * max(1.0, float(np.ptp(bx))))[0])
         raise InputError(f"body {int(bedge_body[e])}: boundary edge {e} has zero length (degenerate edge)")
     search = float(np.max(table.g0 + table.alert)) if len(table.g0) else 0.0
-    box = np.column_stack([np.minimum(a, b) - search, np.maximum(a, b) + search])
     cell = max(float(np.median(L)) if len(L) else 1.0, 2 * search, 1e-12)
-    pairs = _grid_pairs(box, bedge_body, cell) if len(L) > 1 else np.zeros((0, 2), dtype=np.int64)
+    pairs = grid_pairs(np.minimum(a, b) - search, np.maximum(a, b) + search, bedge_body, cell) if len(L) > 1 \
+        else np.zeros((0, 2), dtype=np.int64)
     ce, ae, sk, lam, gap, itf, pk, tr = _narrow(pairs, bx, bedges, bedge_body, kind, body_group,
                                             np.ascontiguousarray(table.pair_iface, dtype=np.int64),
                                             table.g0.astype(float), table.alert.astype(float),
@@ -461,9 +388,8 @@ def find_overlap(bx, bnode_body, bedges, bedge_body, tol: float):
     hi = np.full((nb, 2), -np.inf)
     np.minimum.at(lo, bnode_body, bx)
     np.maximum.at(hi, bnode_body, bx)
-    box = np.column_stack([lo, hi])
     size = float(np.median(np.max(hi - lo, axis=1)))
-    pairs = _grid_pairs(box, np.arange(nb, dtype=np.int64), max(size, 1e-12))
+    pairs = grid_pairs(lo, hi, np.arange(nb, dtype=np.int64), max(size, 1e-12))
     if len(pairs) == 0:
         return None
     depth = _inside_depth(pairs, bx, bedges, node_start, edge_start, float(tol))
@@ -488,21 +414,6 @@ def update_geometry(cs: ContactSet, bx, bedges) -> ContactSet:
     out = ContactSet(**dict(cs.__dict__))
     out.point, out.n, out.t, out.gap = xc, n, t, gap
     return out
-
-
-def match(old: ContactSet, new: ContactSet) -> np.ndarray:
-    """Index into `old` of each contact of `new` with the same key and the same antagonist body, or -1."""
-    if len(old) == 0 or len(new) == 0:
-        return -np.ones(len(new), dtype=np.int64)
-    o = np.argsort(old.key, kind="stable")
-    ks = old.key[o]
-    pos = np.searchsorted(ks, new.key)
-    pos = np.minimum(pos, len(ks) - 1)
-    hit = (ks[pos] == new.key)
-    idx = np.where(hit, o[pos], -1)
-    same_body = np.zeros(len(new), dtype=bool)
-    same_body[hit] = old.ant_body[idx[hit]] == new.ant_body[hit]
-    return np.where(same_body, idx, -1).astype(np.int64)
 
 
 PLACEMENT_CODE = {"positions": 0, "nodes": 1, "overlap": 2, None: 2}  # None: the 2D default, "overlap"

@@ -52,8 +52,8 @@ differ in group; else a deformable body is candidate against a rigid one; else t
 Interface id: pair_iface of the two groups; `split_head` swaps in the head-joint interface when the normal
 is closer to horizontal than to vertical (|n·e_vertical| < √½, vertical axis z by default).
 
-Broad phase: body boxes enlarged by max(g0 + alert) on a uniform 3D grid (`box_pairs`, numba, linear in
-the number of bodies); per body pair only the faces whose box meets the other body's enlarged box are
+Broad phase: body boxes enlarged by max(g0 + alert) on a uniform 3D grid (`box_pairs`, contact/broadphase.py;
+linear in the number of bodies); per body pair only the faces whose box meets the other body's enlarged box are
 examined, and a point is projected only on antagonist faces whose enlarged box contains it.
 """
 from __future__ import annotations
@@ -64,6 +64,7 @@ import numpy as np
 from numba import njit
 
 from ..errors import InputError
+from .broadphase import grid_pairs
 
 PROBE = 1e-2  # node points: fraction of the way from the node toward its candidate face's centre (tie-break probe)
 
@@ -73,7 +74,7 @@ _GW = np.array([0.3478548451374538, 0.6521451548625461, 0.6521451548625461, 0.34
 
 
 @dataclass
-class InterfaceTable3D:
+class InterfaceTable:
     """pair_iface[gi, gj] -> interface id (-1: no contact). `positions (ni, P)` relative positions along
     each edge of a quad (tensor product), padded with -1; `tri_rule` 3 (three interior points) or 1
     (centroid); `placement` 0 positions, 1 nodes; `split_head[i]` interface used instead of i when the
@@ -115,8 +116,8 @@ class InterfaceTable3D:
             raise InputError("interfaces.positions: expected at least one position")
 
     @classmethod
-    def from_2d(cls, table, tri_rule=3) -> "InterfaceTable3D":
-        """From the 2D `detection.InterfaceTable` (built by `detection.build_table`): same groups, g0, alert,
+    def from_2d(cls, table, tri_rule=3) -> "InterfaceTable":
+        """From the 2D `detection_2d.InterfaceTable` (built by `detection_2d.build_table`): same groups, g0, alert,
         placement, positions (used along both directions of a quad), candidate rule, max angle and bed/head
         split; `tri_rule` for triangular faces (scalar or per interface)."""
         ni = len(table.g0)
@@ -130,10 +131,10 @@ class InterfaceTable3D:
 
 
 def simple_table(g0=0.0, alert=1e-3, positions=(0.25, 0.75), placement="positions", tri_rule=3,
-                 max_angle=30.0) -> InterfaceTable3D:
+                 max_angle=30.0) -> InterfaceTable:
     """One interface between all bodies (a single group 0)."""
     pos = np.asarray(positions, dtype=float).reshape(1, -1)
-    return InterfaceTable3D(pair_iface=np.zeros((1, 1), dtype=np.int64), g0=np.array([float(g0)]),
+    return InterfaceTable(pair_iface=np.zeros((1, 1), dtype=np.int64), g0=np.array([float(g0)]),
                             alert=np.array([float(alert)]),
                             placement=np.array([0 if placement == "positions" else 1], dtype=np.int64),
                             positions=pos, tri_rule=np.array([tri_rule], dtype=np.int64),
@@ -142,7 +143,7 @@ def simple_table(g0=0.0, alert=1e-3, positions=(0.25, 0.75), placement="position
 
 
 @dataclass
-class ContactSet3D:
+class ContactSet:
     """One row per contact point (architecture.md "3D contact")."""
 
     cand_body: np.ndarray   # (nc,)
@@ -167,8 +168,8 @@ class ContactSet3D:
     def __len__(self):
         return len(self.gap)
 
-    def subset(self, idx) -> "ContactSet3D":
-        return ContactSet3D(**{k: v[idx] for k, v in self.__dict__.items()})
+    def subset(self, idx) -> "ContactSet":
+        return ContactSet(**{k: v[idx] for k, v in self.__dict__.items()})
 
 
 # ----------------------------------------------------------------------------- input
@@ -485,83 +486,6 @@ def _outside(coef, nv, f, out, tol, w):
 
 
 # ----------------------------------------------------------------------------- broad phase
-@njit(cache=True)
-def _grid_pairs3(lo, hi, cell, origin, dims):
-    """Pairs (i, j), i < j, of boxes that overlap (closed boxes), each pair once: uniform grid, a pair is
-    reported only from the cell holding the min corner of the two boxes' intersection."""
-    n = lo.shape[0]
-    ny, nz = dims[1], dims[2]
-    cnt = np.zeros(n, dtype=np.int64)
-    rng = np.empty((n, 6), dtype=np.int64)
-    for e in range(n):
-        for c in range(3):
-            i0 = int((lo[e, c] - origin[c]) / cell)
-            i1 = int((hi[e, c] - origin[c]) / cell)
-            rng[e, 2 * c] = min(max(i0, 0), dims[c] - 1)
-            rng[e, 2 * c + 1] = min(max(i1, 0), dims[c] - 1)
-        cnt[e] = (rng[e, 1] - rng[e, 0] + 1) * (rng[e, 3] - rng[e, 2] + 1) * (rng[e, 5] - rng[e, 4] + 1)
-    total = cnt.sum()
-    keys = np.empty(total, dtype=np.int64)
-    vals = np.empty(total, dtype=np.int64)
-    k = 0
-    for e in range(n):
-        for i in range(rng[e, 0], rng[e, 1] + 1):
-            for j in range(rng[e, 2], rng[e, 3] + 1):
-                for l in range(rng[e, 4], rng[e, 5] + 1):
-                    keys[k] = (i * ny + j) * nz + l
-                    vals[k] = e
-                    k += 1
-    order = np.argsort(keys, kind="mergesort")
-    keys = keys[order]
-    vals = vals[order]
-    cap = 1024
-    out = np.empty((cap, 2), dtype=np.int64)
-    m = 0
-    s = 0
-    while s < total:
-        t = s
-        while t < total and keys[t] == keys[s]:
-            t += 1
-        for a in range(s, t):
-            ea = vals[a]
-            for b in range(a + 1, t):
-                eb = vals[b]
-                sep = False
-                for c in range(3):
-                    if lo[ea, c] > hi[eb, c] or lo[eb, c] > hi[ea, c]:
-                        sep = True
-                if sep:
-                    continue
-                own = _owner(keys[s], lo, ea, eb, origin, cell, dims)
-                if not own:
-                    continue
-                if m == cap:
-                    cap *= 2
-                    new = np.empty((cap, 2), dtype=np.int64)
-                    new[:m] = out[:m]
-                    out = new
-                out[m, 0] = min(ea, eb)
-                out[m, 1] = max(ea, eb)
-                m += 1
-        s = t
-    return out[:m]
-
-
-@njit(cache=True)
-def _cell_of(x, o, cell, d):
-    return min(max(int((x - o) / cell), 0), d - 1)
-
-
-@njit(cache=True)
-def _owner(key, lo, ea, eb, origin, cell, dims):
-    ny = dims[1]
-    nz = dims[2]
-    i = _cell_of(max(lo[ea, 0], lo[eb, 0]), origin[0], cell, dims[0])
-    j = _cell_of(max(lo[ea, 1], lo[eb, 1]), origin[1], cell, dims[1])
-    l = _cell_of(max(lo[ea, 2], lo[eb, 2]), origin[2], cell, dims[2])
-    return (i * ny + j) * nz + l == key
-
-
 def box_pairs(lo, hi, cell=None) -> np.ndarray:
     """All pairs (i, j), i < j, of axis-aligned boxes [lo_i, hi_i] that overlap (touching counts), sorted.
 
@@ -580,8 +504,7 @@ def box_pairs(lo, hi, cell=None) -> np.ndarray:
     if cell is None:
         cell = float(np.median(np.max(hi - lo, axis=1)))
     cell = max(float(cell), ext / 512.0, 1e-12 * max(ext, 1.0), 1e-300)
-    dims = (np.floor((hi.max(axis=0) - origin) / cell).astype(np.int64) + 1)
-    pairs = _grid_pairs3(lo, hi, cell, origin, dims)
+    pairs = grid_pairs(lo, hi, np.arange(len(lo)), cell)
     if len(pairs):
         pairs = pairs[np.lexsort((pairs[:, 1], pairs[:, 0]))]
     return pairs
@@ -589,7 +512,7 @@ def box_pairs(lo, hi, cell=None) -> np.ndarray:
 
 # ----------------------------------------------------------------------------- narrow phase
 @njit(cache=True)
-def _narrow3(bpairs, bx, bfaces, face_order, face_start, coef, nv, nrm, farea, flo, fhi, blo, bhi,
+def _narrow(bpairs, bx, bfaces, face_order, face_start, coef, nv, nrm, farea, flo, fhi, blo, bhi,
              kind, body_group, pair_iface, g0, alert, placement, positions, npos, tri_rule, cand_group, cos_max,
              reach_frac, tol, KP, gx, gw):
     """Raw matches: for each body pair, each candidate point of the candidate body's faces near the other
@@ -824,8 +747,8 @@ def project_point(bx, bfaces, face: int, p):
                 s=out[11:14].copy(), gap=float(out[14]), inside=inside, ok=bool(ok), w=w)
 
 
-def detect(bx, bnode_body, bnode_local, bfaces, bface_body, kind, body_group, table: InterfaceTable3D,
-           reach_frac: float = 0.25, inside_tol: float = 1e-9, vertical: int = 2) -> ContactSet3D:
+def detect(bx, bnode_body, bnode_local, bfaces, bface_body, kind, body_group, table: InterfaceTable,
+           reach_frac: float = 0.25, inside_tol: float = 1e-9, vertical: int = 2) -> ContactSet:
     """Contact points between 3D bodies (module docstring). Flat inputs as returned by `flatten_boundaries`;
     kind[b] 0 deformable / 1 rigid; body_group[b] group id (rows of table.pair_iface)."""
     bx, bnode_body, bfaces, bface_body = _check_flat(bx, bnode_body, bfaces, bface_body)
@@ -875,7 +798,7 @@ def detect(bx, bnode_body, bnode_local, bfaces, bface_body, kind, body_group, ta
     face_order = np.argsort(bface_body, kind="stable").astype(np.int64)
     face_start = np.zeros(nb + 1, dtype=np.int64)
     face_start[1:] = np.cumsum(np.bincount(bface_body, minlength=nb))
-    ri, rf = _narrow3(bpairs, bx, bfaces, face_order, face_start, coef, nv, nrm, farea, flo, fhi, blo, bhi,
+    ri, rf = _narrow(bpairs, bx, bfaces, face_order, face_start, coef, nv, nrm, farea, flo, fhi, blo, bhi,
                       kind, body_group, np.ascontiguousarray(table.pair_iface, dtype=np.int64),
                       np.asarray(table.g0, float), np.asarray(table.alert, float),
                       np.asarray(table.placement, np.int64), pos, npos, np.asarray(table.tri_rule, np.int64),
@@ -917,7 +840,7 @@ def detect(bx, bnode_body, bnode_local, bfaces, bface_body, kind, body_group, ta
     hsplit = table.split_head[itf]
     use_head = (hsplit >= 0) & (np.abs(n[:, vertical]) < np.sqrt(0.5))
     itf = np.where(use_head, hsplit, itf)
-    return ContactSet3D(
+    return ContactSet(
         cand_body=bface_body[cf], ant_body=bface_body[af], cand_nodes=cnodes, cand_w=cw, ant_nodes=anodes,
         ant_w=R[:, 18:22].copy(), point=R[:, 2:5].copy(), n=n.copy(), t=R[:, 8:11].copy(), s=R[:, 11:14].copy(),
         gap=R[:, 0].copy(), g0=np.asarray(table.g0, float)[itf], area=area, interface=itf.astype(np.int64),
@@ -925,27 +848,13 @@ def detect(bx, bnode_body, bnode_local, bfaces, bface_body, kind, body_group, ta
         key=key.astype(np.int64))
 
 
-def _empty_set() -> ContactSet3D:
+def _empty_set() -> ContactSet:
     z = np.zeros(0)
     zi = np.zeros(0, dtype=np.int64)
-    return ContactSet3D(cand_body=zi, ant_body=zi, cand_nodes=np.zeros((0, 4), np.int64), cand_w=np.zeros((0, 4)),
+    return ContactSet(cand_body=zi, ant_body=zi, cand_nodes=np.zeros((0, 4), np.int64), cand_w=np.zeros((0, 4)),
                         ant_nodes=np.zeros((0, 4), np.int64), ant_w=np.zeros((0, 4)), point=np.zeros((0, 3)),
                         n=np.zeros((0, 3)), t=np.zeros((0, 3)), s=np.zeros((0, 3)), gap=z, g0=z, area=z,
                         interface=zi, cand_face=zi, ant_face=zi, ant_ref=np.zeros((0, 2)), key=zi)
-
-
-def match(old: ContactSet3D, new: ContactSet3D) -> np.ndarray:
-    """Index into `old` of each contact of `new` with the same (key, antagonist body), or -1."""
-    if len(old) == 0 or len(new) == 0:
-        return -np.ones(len(new), dtype=np.int64)
-    rows = np.concatenate([np.column_stack([old.key, old.ant_body]), np.column_stack([new.key, new.ant_body])])
-    _, cid = np.unique(rows, axis=0, return_inverse=True)
-    cid = cid.ravel()
-    co, cn = cid[:len(old)], cid[len(old):]
-    o = np.argsort(co, kind="stable")
-    pos = np.minimum(np.searchsorted(co[o], cn), len(co) - 1)
-    hit = co[o][pos] == cn
-    return np.where(hit, o[pos], -1).astype(np.int64)
 
 
 @njit(cache=True)
@@ -978,7 +887,7 @@ def _update(bx, bfaces, coef, nv, cand_face, cand_slots, cand_w, ant_face, point
     return bad
 
 
-def update_geometry(cs: ContactSet3D, bx, bfaces) -> ContactSet3D:
+def update_geometry(cs: ContactSet, bx, bfaces) -> ContactSet:
     """Same pairs, candidate weights and areas; candidate points, projections (same antagonist faces, weights
     clamped into the face), frames and gaps recomputed from the current positions `bx` (small-sliding mode).
     bfaces as given to `detect`."""
@@ -994,7 +903,7 @@ def update_geometry(cs: ContactSet3D, bx, bfaces) -> ContactSet3D:
     node_pt = cs.key < 0
     slots[node_pt] = -1
     slots[node_pt, 0] = -cs.key[node_pt] - 1
-    out = ContactSet3D(**dict(cs.__dict__))
+    out = ContactSet(**dict(cs.__dict__))
     out.point, out.n, out.t, out.s = (np.zeros((nc, 3)) for _ in range(4))
     out.gap, out.ant_ref, out.ant_w = np.zeros(nc), np.zeros((nc, 2)), np.zeros((nc, 4))
     bad = _update(bx, bfaces, coef, nv, cs.cand_face, np.ascontiguousarray(slots), cs.cand_w, cs.ant_face,

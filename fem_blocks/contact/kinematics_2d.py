@@ -89,7 +89,7 @@ def _accumulate(side_body, side_dofs, side_G, P, U_offset, out):
 
 def local_velocity(G, U_flat, U_offset, kernel=None) -> np.ndarray:
     """(nc, d) local velocities G u from the flat W-numbered body velocities; d = G.side_G.shape[2]. `kernel`:
-    the compiled loop for that d (default the 2D `_local_velocity`; kinematics3d passes its own: a kernel
+    the compiled loop for that d (default the 2D `_local_velocity`; kinematics_3d passes its own: a kernel
     generic in d measured 3x slower on the 2D case, so each dimension keeps its unrolled loop)."""
     out = np.zeros((G.side_body.shape[0], G.side_G.shape[2]))
     (kernel or _local_velocity)(G.side_body, G.side_dofs, G.side_G, np.ascontiguousarray(U_flat, dtype=float),

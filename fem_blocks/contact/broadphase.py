@@ -1,0 +1,101 @@
+"""Broad phase of the contact detection, both dimensions: all pairs of axis-aligned boxes that overlap.
+
+Boxes [lo_i, hi_i] (n, d), d = 2 (boundary edges, contact/detection_2d.py; bodies, find_overlap) or 3 (bodies,
+contact/detection_3d.py), closed (touching counts). Uniform grid of cells of size `cell` from origin = min lo:
+box i covers the cells floor((lo_i - origin) / cell) .. floor((hi_i - origin) / cell) per axis; the boxes of one
+cell are tested pairwise and a pair (i, j), i < j, of different groups is reported only from the cell holding the
+min corner max(lo_i, lo_j) of their intersection, so each pair once. Cost linear in n for boxes of comparable
+size and cell about that size.
+"""
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True)
+def _cell_of(x, o, cell, n):
+    return min(max(int((x - o) / cell), 0), n - 1)
+
+
+@njit(cache=True)
+def _grid_pairs(lo, hi, group, cell, origin, dims):
+    n, d = lo.shape
+    rng = np.empty((n, 2 * d), dtype=np.int64)
+    cnt = np.ones(n, dtype=np.int64)
+    for e in range(n):
+        for c in range(d):
+            rng[e, 2 * c] = _cell_of(lo[e, c], origin[c], cell, dims[c])
+            rng[e, 2 * c + 1] = _cell_of(hi[e, c], origin[c], cell, dims[c])
+            cnt[e] *= rng[e, 2 * c + 1] - rng[e, 2 * c] + 1
+    total = cnt.sum()
+    keys = np.empty(total, dtype=np.int64)
+    vals = np.empty(total, dtype=np.int64)
+    idx = np.empty(d, dtype=np.int64)
+    k = 0
+    for e in range(n):
+        # the cells of box e, last axis fastest; key = (i_0 dims_1 + i_1) dims_2 + i_2 ...
+        for c in range(d):
+            idx[c] = rng[e, 2 * c]
+        for _ in range(cnt[e]):
+            key = 0
+            for c in range(d):
+                key = key * dims[c] + idx[c]
+            keys[k] = key
+            vals[k] = e
+            k += 1
+            c = d - 1
+            while c >= 0:
+                idx[c] += 1
+                if idx[c] <= rng[e, 2 * c + 1]:
+                    break
+                idx[c] = rng[e, 2 * c]
+                c -= 1
+    order = np.argsort(keys, kind="mergesort")
+    keys = keys[order]
+    vals = vals[order]
+    cap = 1024
+    out = np.empty((cap, 2), dtype=np.int64)
+    m = 0
+    s = 0
+    while s < total:
+        t = s
+        while t < total and keys[t] == keys[s]:
+            t += 1
+        for a in range(s, t):
+            ea = vals[a]
+            for b in range(a + 1, t):
+                eb = vals[b]
+                if group[ea] == group[eb]:
+                    continue
+                sep = False
+                for c in range(d):
+                    if lo[ea, c] > hi[eb, c] or lo[eb, c] > hi[ea, c]:
+                        sep = True
+                if sep:
+                    continue
+                key = 0
+                for c in range(d):
+                    key = key * dims[c] + _cell_of(max(lo[ea, c], lo[eb, c]), origin[c], cell, dims[c])
+                if key != keys[s]:
+                    continue
+                if m == cap:
+                    cap *= 2
+                    new = np.empty((cap, 2), dtype=np.int64)
+                    new[:m] = out[:m]
+                    out = new
+                out[m, 0] = min(ea, eb)
+                out[m, 1] = max(ea, eb)
+                m += 1
+        s = t
+    return out[:m]
+
+
+def grid_pairs(lo, hi, group, cell: float) -> np.ndarray:
+    """(m, 2) int64: every pair (i, j), i < j, of overlapping boxes [lo_i, hi_i] (n, d) with group[i] != group[j],
+    once, in the order of their grid cells (cells of size `cell`, see the module docstring); n >= 1."""
+    lo = np.ascontiguousarray(lo, dtype=float)
+    hi = np.ascontiguousarray(hi, dtype=float)
+    origin = lo.min(axis=0)
+    dims = np.floor((hi.max(axis=0) - origin) / cell).astype(np.int64) + 1
+    return _grid_pairs(lo, hi, np.ascontiguousarray(group, dtype=np.int64), float(cell), origin, dims)

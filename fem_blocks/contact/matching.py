@@ -1,0 +1,28 @@
+"""Matching an old contact set to a new one after a re-detection (both dimensions), to carry impulses and law
+states: the new contact j continues the old contact i when both have the same candidate point `key` and the same
+antagonist body,
+
+    m[j] = i  if (key_i, ant_body_i) = (key_j, ant_body_j),  else -1,
+
+the lowest such i if several (detection keeps one contact per (key, antagonist body) in 3D and one per key in 2D,
+so there is at most one). Keys are the detection modules' stable candidate-point ids (contact/detection_2d.py,
+contact/detection_3d.py: position points from their edge/face and index, node points from the node).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+
+def match(old, new) -> np.ndarray:
+    """(len(new),) int64: index into `old` of each contact of `new` with the same (key, ant_body), or -1. `old`
+    and `new` are ContactSets of either dimension (anything with int arrays `key` and `ant_body`)."""
+    if len(old) == 0 or len(new) == 0:
+        return -np.ones(len(new), dtype=np.int64)
+    rows = np.concatenate([np.column_stack([old.key, old.ant_body]), np.column_stack([new.key, new.ant_body])])
+    _, cid = np.unique(rows, axis=0, return_inverse=True)
+    cid = cid.ravel()
+    co, cn = cid[:len(old)], cid[len(old):]
+    o = np.argsort(co, kind="stable")
+    pos = np.minimum(np.searchsorted(co[o], cn), len(co) - 1)
+    hit = co[o][pos] == cn
+    return np.where(hit, o[pos], -1).astype(np.int64)
