@@ -66,7 +66,7 @@ MUTATIONS = [
              "mu = (1.0 - x) * par[P_MUR]", "mu = x * par[P_MUR]",
              ("tests/test_law_closed_forms.py",)),
     Mutation("mm_mass_factor", "mm-N-MPa mass factor 1e3 → 1", "fem_blocks/case.py",
-             "time=1.0, mass=1e3),", "time=1.0, mass=1),",
+             "time=1.0, mass=1e3, moment=1e-3)", "time=1.0, mass=1, moment=1e-3)",
              ("tests/test_units_mm.py",)),
     Mutation("mixed_mode_ratio", "mixed-mode ratio b²/λ² → |b|/λ", "fem_blocks/laws.py",
              "m = (uT / dII) ** 2 / lam2  # mode ratio", "m = abs(uT / dII) / lam  # mode ratio",
