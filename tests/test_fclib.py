@@ -19,9 +19,7 @@ from fem_blocks.errors import InputError
 from fem_blocks.io import fclib
 from fem_blocks.solver import nlgs
 
-# The data live beside the project (../shared/data/fclib from the project root): CI lays shared/ there.
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-FCLIB = os.path.normpath(os.path.join(ROOT, "..", "shared", "data", "fclib"))
+from _paths import FCLIB  # noqa: E402  (../shared/data/fclib beside the project: CI lays shared/ there)
 
 SUMMARY = {}
 if os.path.exists(os.path.join(FCLIB, "reference_solutions", "SUMMARY.json")):

@@ -13,7 +13,7 @@ from fem_blocks.solver import nlgs, parallel
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from test_nlgs import random_problem, random_problem_3d  # noqa: E402
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+from _paths import ROOT  # noqa: E402
 
 
 def test_colouring_separates_coupled_contacts():

@@ -24,7 +24,7 @@ pytestmark = pytest.mark.dolfinx
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from test_run_contact import CASE  # noqa: E402  (3-brick prism on a foundation, gravity to equilibrium)
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+from _paths import ROOT  # noqa: E402
 
 SETTLE = """
 name = "settle"

@@ -10,7 +10,7 @@ import pytest
 from fem_blocks.case import parse_case
 from fem_blocks.runner import _dof_control, _vertical_force
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+from _paths import ROOT  # noqa: E402
 with open(os.path.join(ROOT, "demos", "shear_wall.toml"), "rb") as f:
     DEMO = tomllib.load(f)
 
