@@ -3,7 +3,6 @@
 `solver = "newton"`."""
 import glob
 import os
-import sys
 
 import numpy as np
 import pytest
@@ -12,7 +11,6 @@ from fem_blocks.contact.step import ContactStep
 from fem_blocks.io import fclib
 from fem_blocks.solver import newton, nlgs
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import test_laws as tl  # noqa: E402
 from test_nlgs import random_problem  # noqa: E402
 

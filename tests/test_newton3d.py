@@ -8,7 +8,6 @@ fclib.residual (numpy). Every 3D problem whose Siconos reference reached 1e-8 is
 """
 import glob
 import os
-import sys
 
 import numpy as np
 import pytest
@@ -17,7 +16,6 @@ from fem_blocks.errors import InputError
 from fem_blocks.io import fclib
 from fem_blocks.solver import newton, nlgs
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from test_fclib import FCLIB, SUMMARY  # noqa: E402  (data location and Siconos reference summary)
 
 FILES = {os.path.splitext(os.path.basename(f))[0]: f

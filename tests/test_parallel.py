@@ -10,7 +10,6 @@ import pytest
 
 from fem_blocks.solver import nlgs, parallel
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from test_nlgs import random_problem, random_problem_3d  # noqa: E402
 
 from _paths import ROOT  # noqa: E402
