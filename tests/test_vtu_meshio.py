@@ -2,6 +2,7 @@
 
 * polygons of alternating node counts (3, 4, 3, 5, 3) keep their order and their cell data, read back cell by
   cell with VTK's own reader (catches grouping polygons by node count over the whole list, which reorders cells);
+* names with XML characters (&, <, ") stay valid XML (meshio 5 writes Name="..." unescaped);
 * the atomic write around a writer that wants a file name (`atomic.atomic_write_with`): a writer failing midway
   leaves the previous file and no temporary (catches a rename before the write completes, or a lost clean-up).
 """
@@ -50,3 +51,17 @@ def test_atomic_write_with_keeps_old_file_when_the_writer_fails(tmp_path):
     atomic.atomic_write_with(path, whole)
     assert path.read_text() == "new" and [p.name for p in tmp_path.iterdir()] == ["frame.vtu"]
     assert path.stat().st_mode & 0o777 == 0o640  # the replaced file's permissions are kept
+
+
+def test_field_names_with_xml_characters_round_trip(tmp_path):
+    """meshio 5 writes Name="..." as given: the names must be escaped for the file to stay valid XML."""
+    import meshio
+    name = 'a&b <1> "q"'
+    f = tmp_path / "names.vtu"
+    write_vtu(f, np.zeros((3, 2)), [("triangle", [[0, 1, 2]])], point_data={name: np.arange(3.0)},
+              cell_data={name: np.array([7])}, field_data={name: 1.5})
+    m = meshio.read(f)
+    assert np.array_equal(m.point_data[name], [0.0, 1.0, 2.0]) and np.array_equal(m.cell_data[name][0], [7])
+    assert np.array_equal(np.ravel(m.field_data[name]), [1.5])
+    g = _vtk_read(f)
+    assert g.GetPointData().GetArray(name).GetValue(2) == 2.0 and g.GetCellData().GetArray(name).GetValue(0) == 7

@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import base64
 import zlib
-from xml.sax.saxutils import quoteattr
+from xml.sax.saxutils import escape, quoteattr
 
 import meshio
 import numpy as np
@@ -72,6 +72,10 @@ def _field_data_xml(fd: dict) -> str:
         out.append(f'<DataArray type="{_VTK_DTYPES[a.dtype]}" Name={quoteattr(k)}{comps} '
                    f'NumberOfTuples="{a.shape[0]}" format="binary">\n{_b64(a)}\n</DataArray>\n')
     return "".join(out) + "</FieldData>\n"
+
+
+def _xml_name(name: str) -> str:
+    return escape(name, {'"': "&quot;"})
 
 
 def _numeric(what: str, a) -> np.ndarray:
@@ -178,8 +182,10 @@ def write_vtu(path, points, cells, point_data=None, cell_data=None, field_data=N
             raise InputError(f"field_data[{k!r}]: expected a scalar, (m,) or (m, k) array, got shape {a.shape}")
         fd[k] = a.reshape(-1) if a.ndim == 0 else a
     bounds = np.cumsum([0] + [len(c) for _, c in blocks])
-    mesh = meshio.Mesh(P, blocks, point_data=pd,
-                       cell_data={k: [a[b0:b1] for b0, b1 in zip(bounds[:-1], bounds[1:])] for k, a in cd.items()})
+    # meshio 5 writes Name="..." without escaping: escape the names here (XML readers give back the original)
+    mesh = meshio.Mesh(P, blocks, point_data={_xml_name(k): a for k, a in pd.items()},
+                       cell_data={_xml_name(k): [a[b0:b1] for b0, b1 in zip(bounds[:-1], bounds[1:])]
+                                  for k, a in cd.items()})
 
     def write_to(tmp):
         meshio.vtu.write(tmp, mesh, binary=True, compression=COMPRESSION, header_type=HEADER_TYPE)
