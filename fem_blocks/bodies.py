@@ -2,7 +2,7 @@
 
 A `BlockType` is a prototype: one gmsh mesh, one material, its stiffness K, mass M and damping
 C = a M + b K, assembled once. For a time step h and scheme parameter theta it provides (cached)
-the iteration matrix (DESIGN §2)
+the iteration matrix (docs/method.md §2)
 
     Mhat = M + h theta C + h^2 theta^2 K,   W = Mhat^-1
 

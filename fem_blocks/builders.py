@@ -4,7 +4,7 @@ A builder returns a `Layout`: rectangular blocks (length, height, lower-left cor
 group) and rigid polygons (foundation, top beam), plus the joint geometry actually used:
 
 * thick joints: blocks are the bricks, separated by gaps of the joint thickness t_j; the
-  interfaces get g0 = t_j (impenetrability on g - g0, DESIGN §1);
+  interfaces get g0 = t_j (impenetrability on g - g0, docs/method.md §1);
 * expanded bricks: each block is a brick enlarged by t_j (half a joint on each side), so blocks
   touch (g0 = 0) and the joint's flexibility is carried by the interface law or the block material.
 

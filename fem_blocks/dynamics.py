@@ -1,4 +1,4 @@
-"""Moreau–Jean theta-method time stepping for deformable blocks and rigid bodies (DESIGN §2), in 2D or 3D
+"""Moreau–Jean theta-method time stepping for deformable blocks and rigid bodies (docs/method.md §2), in 2D or 3D
 (dimension d from the bodies: DeformableBody/RigidBody or DeformableBody3D/RigidBody3D, not mixed).
 
 Per step [t_i, t_{i+1}], for every deformable body (type frame, clamped dofs eliminated):

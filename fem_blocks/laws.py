@@ -1,4 +1,4 @@
-"""Interface laws per contact point (thesis §5.2–5.3, DESIGN §4): Signorini–Coulomb plus cohesive parts.
+"""Interface laws per contact point (thesis §5.2–5.3, docs/method.md §4): Signorini–Coulomb plus cohesive parts.
 
 Every law is written with the change of variables of thesis §6.3.4: r̃ = r + r_adh, where
 (v_N shifted, r̃_N) ∈ Signorini and (v_T, r̃_T) ∈ Coulomb(μ r̃_N). Per unit area (then times the

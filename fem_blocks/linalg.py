@@ -7,7 +7,7 @@ scipy objects; `to_block_csr` builds it from a dense or scipy matrix, `matvec_bc
 Sparse direct factorizations with PETSc (petsc4py), shared by all instances of a block type:
 
 `Factor(A)` factors a symmetric positive definite scipy CSR matrix once (PETSc's own LU for small
-systems, CHOLMOD Cholesky from 1000 dofs up; superlu_dist is never used, see STACK-FACTS §2) and
+systems, CHOLMOD Cholesky from 1000 dofs up; superlu_dist is never used, see docs/stack-facts.md §2) and
 solves `A x = b` for one or many right-hand sides (`MatMatSolve` on a dense block).
 """
 from __future__ import annotations

@@ -279,7 +279,7 @@ def _policy(case: Case, st) -> str:
 
 
 class _Guards:
-    """Numerical safety checks after every step (DESIGN: a run never goes on silently from a wrong state).
+    """Numerical safety checks after every step (docs/method.md §5: a run never goes on silently from a wrong state).
 
     * NaN/Inf in any displacement, velocity or contact impulse;
     * penetration: -(g - g0) at a contact point with rigid compression (coulomb, brittle, fremond) or -g for the

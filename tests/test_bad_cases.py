@@ -9,7 +9,7 @@ overlapping at the start) only happen when the model is built. The files are tin
 coarse blocks, a two-step stage), so a case the validator wrongly accepts runs in a few seconds.
 
 Known gaps of the validator are listed in XFAIL (strict: a fix makes the test pass and XPASS
-fails, so the entry must then be removed); details in /work/notes/bad_cases_gaps.md.
+fails, so the entry must then be removed); each entry states the gap as its reason.
 """
 import glob
 import os

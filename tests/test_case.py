@@ -9,7 +9,7 @@ import pytest
 from fem_blocks.case import load_case, parse_case
 from fem_blocks.errors import InputError
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+from _paths import ROOT  # noqa: E402
 
 BASE = {
     "gravity": [0.0, -9.81],

@@ -18,7 +18,7 @@ from fem_blocks.output.history import read_history
 from fem_blocks.runner import run_case
 
 pytestmark = pytest.mark.dolfinx
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+from _paths import ROOT  # noqa: E402
 FIXED = """x = {kind = "velocity", history = 0.0}
 y = {kind = "velocity", history = 0.0}
 z = {kind = "velocity", history = 0.0}

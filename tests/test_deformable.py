@@ -2,7 +2,6 @@
 rotated instances, ParaView output. Closed forms and invariants with stated tolerances."""
 import dataclasses
 import json
-import os
 import subprocess
 import sys
 
@@ -17,7 +16,7 @@ from fem_blocks.meshing import mesh_rectangle
 from fem_blocks.output.history import read_history
 
 pytestmark = pytest.mark.dolfinx
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+from _paths import ROOT  # noqa: E402
 STONE = Material(E=5e9, nu=0.2, rho=1800.0, thickness=0.1, plane="stress")
 
 

@@ -1,13 +1,12 @@
 """Smoke test of the default demo (solid shear wall, p = 0.30 MPa) in reduced-resolution mode."""
 import json
-import os
 import subprocess
 import sys
 
 import pytest
 
 pytestmark = pytest.mark.dolfinx
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+from _paths import ROOT  # noqa: E402
 
 
 def test_default_demo_quick(tmp_path):

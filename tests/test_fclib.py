@@ -20,12 +20,8 @@ from fem_blocks.errors import InputError
 from fem_blocks.io import fclib
 from fem_blocks.solver import nlgs
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from _paths import FCLIB  # noqa: E402  (../shared/data/fclib beside the project: CI lays shared/ there)
 from test_nlgs import face_solve  # noqa: E402  (solver.solve with the former nlgs.solve defaults)
-
-# The data live beside the project (../shared/data/fclib from the project root): CI lays shared/ there.
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-FCLIB = os.path.normpath(os.path.join(ROOT, "..", "shared", "data", "fclib"))
 
 SUMMARY = {}
 if os.path.exists(os.path.join(FCLIB, "reference_solutions", "SUMMARY.json")):
@@ -82,7 +78,7 @@ def problem(path):
 
 
 @pytest.mark.skipif(not COULOMB, reason="FCLIB data not available")
-@pytest.mark.parametrize("path", COULOMB, ids=name_of)
+@pytest.mark.parametrize("path", COULOMB, ids=[name_of(p) for p in COULOMB])  # a list: with no data, no call
 def test_nlgs_on_fclib(path):
     p = problem(path)
     opts = dict(max_sweeps=MAX_SWEEPS)
@@ -129,7 +125,7 @@ def test_residual_matches_siconos_on_reference_solutions(name):
     assert abs(frel - R.rel_q) <= max(1e-6 * R.rel_q, err, 1e-14)
 
 
-def test_warm_start_from_guess_cuts_sweeps():
+def test_warm_start_from_guess_cuts_sweeps(fclib_dir):
     """README: warm-starting Capsules-i97-269 from /guesses/1 cuts Siconos' NSGS from 2423 to 98 sweeps."""
     p = problem(os.path.join(FCLIB, "Capsules-i97-269.hdf5"))
     assert p.guess_r is not None and p.guess_r.size == p.q.size
@@ -140,7 +136,7 @@ def test_warm_start_from_guess_cuts_sweeps():
     assert warm.sweeps < cold.sweeps / 2
 
 
-def test_condense_dense_and_sparse_paths_agree():
+def test_condense_dense_and_sparse_paths_agree(fclib_dir):
     g = fclib.read_global(os.path.join(FCLIB, "converted_from_siconos_dat",
                                        "gfc2d_granularflowonwall_00069_00350.hdf5"))
     assert g.dim == 2 and g.n_contacts == 69 and g.H.shape == (900, 138)
@@ -157,7 +153,7 @@ def test_condense_dense_and_sparse_paths_agree():
     np.testing.assert_allclose(dense.q, g.H.T @ v + g.w, rtol=1e-12, atol=1e-14)
 
 
-def test_read_local_fields():
+def test_read_local_fields(fclib_dir):
     p = fclib.read_local(os.path.join(FCLIB, "converted_from_siconos_dat", "Rover4396.hdf5"))
     assert (p.dim, p.n_contacts, p.W.shape, p.q.shape) == (3, 2, (6, 6), (6,))
     assert isinstance(p.W, sp.csr_matrix) and np.all(p.mu == 0.7)
@@ -183,7 +179,7 @@ def _csr_group(h, name, A):
     g["x"] = A.data
 
 
-def test_reader_errors(tmp_path):
+def test_reader_errors(tmp_path, fclib_dir):
     with pytest.raises(InputError, match="FCLIB file not found"):
         fclib.read(str(tmp_path / "none.hdf5"))
     (tmp_path / "x.hdf5").write_text("not hdf5")

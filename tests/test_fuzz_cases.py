@@ -26,7 +26,7 @@ from fem_blocks.case import load_case
 from fem_blocks.errors import InputError
 from fem_blocks.expand import expand
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+from _paths import ROOT  # noqa: E402
 DEMOS = ["vibrating_block.toml", "wall_settlement.toml", "arch.toml"]
 VARIANTS_PER_BASE = 600          # 4 bases -> 2400 variants
 SEED = 20240611

@@ -2,8 +2,6 @@
 the body or contact and the quantity, after writing the outputs and a checkpoint of the last good step; solver
 policies on_nonconvergence = "fail" | "refine"."""
 import json
-import os
-import sys
 
 import numpy as np
 import pytest
@@ -15,7 +13,6 @@ from fem_blocks.output.history import read_history
 from fem_blocks.runner import RunStopped, run_case
 
 pytestmark = pytest.mark.dolfinx
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from test_run_contact import CASE  # noqa: E402  (3-brick prism on a foundation, gravity to equilibrium)
 
 

@@ -8,8 +8,6 @@ independent solution (never against fem_blocks' own formula):
 * mixed-mode softening: the energy dissipated along a proportional opening + sliding path in closed form, with
   fracture energies G_I and G_II far apart so that any other blend of the two modes fails.
 """
-import os
-import sys
 
 import numpy as np
 import pytest
@@ -18,7 +16,6 @@ from scipy.optimize import brentq
 from fem_blocks.bodies import Driver
 from fem_blocks.laws import FREMOND, S_BETA, S_DISS, initial_state, internal_update, law_parameters
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from test_laws import A, CN, CT, W, driven, joint, ramp  # noqa: E402
 
 

@@ -8,7 +8,7 @@ import pytest
 
 from fem_blocks.meshing import load_geo
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+from _paths import ROOT  # noqa: E402
 
 
 def test_voussoir_geo_loads_with_tags():

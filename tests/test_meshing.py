@@ -7,7 +7,7 @@ import pytest
 from fem_blocks.errors import InputError
 from fem_blocks.meshing import BlockMesh, load_geo, load_msh, mesh_polygon, mesh_rectangle, validate
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+from _paths import ROOT  # noqa: E402
 
 
 def edge_lengths(m, edges=None):

@@ -3,7 +3,6 @@
 `solver = "newton"`."""
 import glob
 import os
-import sys
 
 import numpy as np
 import pytest
@@ -13,11 +12,10 @@ from fem_blocks.io import fclib
 from fem_blocks.solver import newton, nlgs
 from fem_blocks.linalg import to_block_csr
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import test_laws as tl  # noqa: E402
 from test_nlgs import random_problem  # noqa: E402
 
-FCLIB = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "..", "shared", "data", "fclib")
+from _paths import FCLIB  # noqa: E402
 # small 2D problems that NLGS solves: Newton must reach 1e-12 (the two large granular flows are degenerate:
 # many more contacts than dofs, a rank-deficient W on which neither NLGS nor Newton reaches 1e-8, see
 # docs/benchmarks.md)

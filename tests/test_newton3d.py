@@ -8,7 +8,6 @@ fclib.residual (numpy). Every 3D problem whose Siconos reference reached 1e-8 is
 """
 import glob
 import os
-import sys
 
 import numpy as np
 import pytest
@@ -19,7 +18,6 @@ from fem_blocks.linalg import to_block_csr
 from fem_blocks.solver import ContactProblem, SolverOptions, newton, nlgs
 from fem_blocks.solver.driver import nlgs_then_newton
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from test_fclib import FCLIB, SUMMARY  # noqa: E402  (data location and Siconos reference summary)
 from test_nlgs import face_solve  # noqa: E402
 

@@ -2,9 +2,7 @@
 in a few iterations with no Gauss–Seidel fallback (a wrong Newton direction makes every line search fail, and
 the fallback sweeps would then solve the problem while the other Newton tests still pass). The solution is
 checked against the Signorini–Coulomb conditions written out here, not against the solver's residual."""
-import os
 import re
-import sys
 
 import numpy as np
 import pytest
@@ -12,7 +10,6 @@ import pytest
 from fem_blocks.solver import newton, nlgs
 from fem_blocks.linalg import to_block_csr
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from test_nlgs import random_problem  # noqa: E402
 
 

@@ -11,10 +11,9 @@ import pytest
 from fem_blocks.solver import nlgs, parallel
 from fem_blocks.linalg import to_block_csr
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from test_nlgs import random_problem, random_problem_3d  # noqa: E402
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+from _paths import ROOT  # noqa: E402
 
 
 def test_colouring_separates_coupled_contacts():

@@ -22,10 +22,9 @@ from fem_blocks.output.history import read_history
 from fem_blocks.runner import run_case
 
 pytestmark = pytest.mark.dolfinx
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from test_run_contact import CASE  # noqa: E402  (3-brick prism on a foundation, gravity to equilibrium)
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+from _paths import ROOT  # noqa: E402
 
 SETTLE = """
 name = "settle"

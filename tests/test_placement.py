@@ -132,7 +132,8 @@ def demo_arch_stands(t, divisor, duration=0.3):
     import tomllib
     from fem_blocks.case import parse_case
     from fem_blocks.model import build_model
-    with open(os.path.join(os.path.dirname(__file__), "..", "demos", "arch.toml"), "rb") as f:
+    from _paths import DEMOS
+    with open(os.path.join(DEMOS, "arch.toml"), "rb") as f:
         doc = tomllib.load(f)
     doc["arch"]["ring_depth"], doc["arch"]["mesh_size"] = t, t / divisor
     case = parse_case(doc, "arch.toml")

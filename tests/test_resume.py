@@ -16,7 +16,7 @@ import pytest
 from fem_blocks.output.checkpoint import read_checkpoint
 
 pytestmark = pytest.mark.dolfinx
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+from _paths import ROOT  # noqa: E402
 
 # two courses of a running-bond wall between a foundation and a beam, Frémond–Cangémi joints, shuffled NLGS order:
 # pre-compression (h = 2e-3), then a horizontal push with another time step (h = 1e-3): every piece of state

@@ -13,7 +13,7 @@ from fem_blocks.errors import InputError
 from fem_blocks.output.history import read_history
 
 pytestmark = pytest.mark.dolfinx
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+from _paths import ROOT  # noqa: E402
 
 CASE = """
 name = "prism"

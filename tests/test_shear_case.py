@@ -11,7 +11,7 @@ import pytest
 from fem_blocks.output.history import read_history
 
 pytestmark = pytest.mark.dolfinx
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+from _paths import ROOT  # noqa: E402
 
 
 def reduced_case(text: str) -> str:

@@ -1,6 +1,5 @@
 """Potential brick cracks: [wall] split_bricks replaces every full brick by two halves joined by the pair's
 interface of orientation "crack" (Lourenço's micro-model)."""
-import os
 import sys
 
 import numpy as np
@@ -11,7 +10,6 @@ from fem_blocks.case import load_case
 from fem_blocks.expand import expand
 from fem_blocks.errors import InputError
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 CASE = """
 name = "split"

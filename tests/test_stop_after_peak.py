@@ -1,6 +1,6 @@
 """`[stages.stop_after_peak]` fires: a rigid block glued by a Frémond joint (rate-independent) to a fixed base is
 pulled off at a constant rate; the step and the force at which the run stops are computed by hand from the
-closed-form opening curve (thesis eq. 5.3.47, DESIGN §4):
+closed-form opening curve (thesis eq. 5.3.47, docs/method.md §4):
 
     r_N = A c_N u                 for u <= u_c = sqrt(w / c_N)   (β = 1)
     r_N = A w² / (c_N u³)         for u >  u_c                   (β = w / (c_N u²))

@@ -181,7 +181,7 @@ def test_wall3d_push_demo_frozen_vs_updated(tmp_path):
     import os
     from fem_blocks.cli import main
     from fem_blocks.output.history import read_history
-    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    from _paths import ROOT as root
     text = open(os.path.join(root, "demos", "wall3d_push.toml")).read().replace("value = 0.003", "value = 0.001")
     assert 'geometry = "frozen"' in text
     h = {}

@@ -12,7 +12,7 @@ from fem_blocks.laws import LAW_KEYS
 from fem_blocks.expand import expand
 from fem_blocks.runner import _dof_control, _vertical_force
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+from _paths import ROOT  # noqa: E402
 DEMO = casefile.read(os.path.join(ROOT, "demos", "shear_wall.toml"), LAW_KEYS)[0]  # with its base, laws resolved
 
 

@@ -1,6 +1,6 @@
 """2D contact detection on plain arrays: candidate points on candidate edges, projected on antagonist edges.
 
-Conventions (DESIGN §1, §6): boundary edges are counter-clockwise per body (body on the left), so the
+Conventions (docs/method.md §1, §6): boundary edges are counter-clockwise per body (body on the left), so the
 outward normal of an edge with unit direction e is (e_y, -e_x). For a contact, the normal n is the
 outward normal of the *antagonist* edge (it points toward the candidate), t = (-n_y, n_x) (the
 antagonist edge direction), local arrays are (n, t). Gap g = (x_c - x_a)·n, x_a the orthogonal

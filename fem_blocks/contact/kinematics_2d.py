@@ -1,4 +1,4 @@
-"""Contact kinematics G^α (DESIGN §3): local relative velocity from body velocities, and its transpose.
+"""Contact kinematics G^α (docs/method.md §3): local relative velocity from body velocities, and its transpose.
 
 Each contact α has two sides s = 0 (candidate, sign +) and s = 1 (antagonist, sign −):
 

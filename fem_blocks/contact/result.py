@@ -9,7 +9,7 @@ and keeps it as `sim.last_contact`; writers, run checks and figures read `sim.la
 arrays (copies: the contact step mutates its warm start and law state in place at the next step); `cs` is the
 contact set the step was solved on, shared with the step but never modified after its detection.
 
-Per contact (nc rows, local frame (n, t) in 2D, (n, t, s) in 3D, DESIGN §3–§5):
+Per contact (nc rows, local frame (n, t) in 2D, (n, t, s) in 3D, docs/method.md §3–§5):
 P impulses (nc, d) [N s], r = P / h reactions [N], v the shifted local velocity at the end of the step
 (normal v_N + gbar / (h theta)), gt_end = h theta v_N the joint-corrected gap g - g0 at the end of the step [m],
 status 0 open / 1 stick / 2 slip, law codes and the committed law state (laws.py columns).

@@ -1,6 +1,6 @@
 """Contact stage of a time step: detection -> G blocks -> Delassus -> NLGS -> velocity correction.
 
-Per step [t_i, t_{i+1}] (DESIGN §3–§5), with impulses P = h r as unknowns:
+Per step [t_i, t_{i+1}] (docs/method.md §3–§5), with impulses P = h r as unknowns:
 
     v = v_free + W_del P,   v_free = G u_free,   W_del = sum_bodies G W_k G^T,
     gt = g - g0 (thick joints),   gbar = gt_i + h (1 - theta) v_N,i,

@@ -1,5 +1,6 @@
 """Atomic file writes: temporary file in the same directory, write, flush, os.fsync, os.replace, fsync the
 directory.
+`atomic_write_with(path, write_to)` does the same for a writer that wants a file name (meshio).
 
 A crash (or an exception while writing) leaves either the complete old file or the complete new one, never a
 truncated file, and no temporary file is left behind by an exception. The new file gets the permissions of
@@ -35,6 +36,35 @@ def atomic_write_bytes(path, data: bytes, before_replace=None) -> None:
         os.chmod(tmp, mode)
         if before_replace is not None:
             before_replace()
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except FileNotFoundError:
+            pass
+        raise
+    fsync_dir(d)
+
+
+def atomic_write_with(path, write_to) -> None:
+    """Replace `path` atomically by the file that `write_to(tmp_path)` writes (for writers that want a file name,
+    e.g. meshio): the same temporary file, fsync, permissions, rename and clean-up as atomic_write_bytes."""
+    path = os.fspath(path)
+    d = os.path.dirname(os.path.abspath(path))
+    try:
+        mode = stat.S_IMODE(os.stat(path).st_mode)
+    except FileNotFoundError:
+        mode = 0o666 & ~_umask()
+    fd, tmp = tempfile.mkstemp(prefix=".tmp-" + os.path.basename(path) + "-", dir=d)
+    os.close(fd)
+    try:
+        write_to(tmp)
+        fd = os.open(tmp, os.O_RDONLY)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+        os.chmod(tmp, mode)
         os.replace(tmp, path)
     except BaseException:
         try:

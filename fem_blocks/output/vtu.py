@@ -1,41 +1,45 @@
-"""VTK XML UnstructuredGrid (.vtu) writer on plain numpy arrays (no dolfinx), binary and atomic.
+"""VTK XML UnstructuredGrid (.vtu) files on plain numpy arrays (no dolfinx), written by meshio, atomically.
 
-Format: `<VTKFile type="UnstructuredGrid" version="1.0" header_type="UInt64">`, every DataArray
-`format="binary"`: base64 of (UInt64 byte count of the payload) + (little-endian payload), inline.
-Readable by ParaView and by `meshio.read`.
+meshio (`meshio.vtu` writer) writes the file: `<VTKFile type="UnstructuredGrid" version="0.1"
+header_type="UInt64">`, every DataArray `format="binary"` inline (base64 of a UInt64 byte count followed by the
+little-endian payload; uncompressed: see COMPRESSION).
+This module validates the input (InputError naming the field or block), shapes it for ParaView and hands it to
+meshio; the file appears by an atomic rename (`atomic.atomic_write_with`). Readable by ParaView/VTK and by
+`meshio.read`.
 
 Cells are given as a list of blocks `(name, connectivity)`; VTK cell `k` is the k-th cell counted over the
-blocks in the given order, and `offsets[k]` = sum of the node counts of cells 0..k (VTK XML 1.0 convention).
-Names: vertex (k,) or (k,1), line (k,2), triangle (k,3), quad (k,4), tetra (k,4), hexahedron (k,8),
-polygon (ragged list of index arrays, each of at least 3 nodes -> VTK_POLYGON). A grid with no cell (a contact
+blocks in the given order. Names: vertex (k,) or (k,1), line (k,2), triangle (k,3), quad (k,4), tetra (k,4),
+hexahedron (k,8), polygon (ragged list of index arrays, each of at least 3 nodes -> VTK_POLYGON; consecutive
+polygons with the same node count form one meshio block, so the order is kept). A grid with no cell (a contact
 frame with no contact point) is written with one empty VTK_POLYGON (0 nodes), so that meshio 5 reads it too.
 
 Data: point_data / cell_data map a name to an array of shape (n,) or (n, k); 2-vectors (n, 2) are padded with a
 zero third component so ParaView shows them as vectors (glyphs, "Warp By Vector"); every other k is kept
 (a symmetric 2D stress (sxx, syy, sxy) stays 3 components under its given name). field_data: name -> scalar or
-array (whole-dataset values such as the time).
+array (whole-dataset values such as the time); meshio 5 reads `<FieldData>` but does not write it, so this module
+adds that element to meshio's file, encoded as meshio encodes the other arrays.
 """
 from __future__ import annotations
 
 import base64
-from xml.sax.saxutils import quoteattr
+import zlib
+from xml.sax.saxutils import escape, quoteattr
 
+import meshio
 import numpy as np
 
 from ..errors import InputError
-from .atomic import atomic_write_bytes
+from .atomic import atomic_write_with
 
+# None: uncompressed binary. "zlib" makes smaller files, but meshio 5.0 cannot read a zlib-compressed empty array
+# back (the contact frame with no point): docs/benchmarks.md "VTU writer".
+COMPRESSION = None
+HEADER_TYPE = "UInt64"
 VTK_TYPES = {"vertex": 1, "line": 3, "triangle": 5, "polygon": 7, "quad": 9, "tetra": 10, "hexahedron": 12}
 NODES = {"vertex": 1, "line": 2, "triangle": 3, "quad": 4, "tetra": 4, "hexahedron": 8}
 _VTK_DTYPES = {np.dtype(k): v for k, v in [
     ("<f8", "Float64"), ("<f4", "Float32"), ("<i8", "Int64"), ("<i4", "Int32"), ("<i2", "Int16"), ("i1", "Int8"),
     ("<u8", "UInt64"), ("<u4", "UInt32"), ("<u2", "UInt16"), ("u1", "UInt8")]}
-
-
-def _b64(arr: np.ndarray) -> str:
-    """base64(UInt64 little-endian byte count + raw little-endian bytes) of a contiguous array."""
-    raw = np.ascontiguousarray(arr).tobytes()
-    return base64.b64encode(np.array(len(raw), dtype="<u8").tobytes() + raw).decode("ascii")
 
 
 def _vtk_array(arr: np.ndarray) -> np.ndarray:
@@ -47,11 +51,31 @@ def _vtk_array(arr: np.ndarray) -> np.ndarray:
     return arr.astype(arr.dtype.newbyteorder("<"), copy=False)
 
 
-def _data_array(name: str, arr: np.ndarray, extra: str = "") -> str:
-    arr = _vtk_array(np.asarray(arr))
-    comps = "" if arr.ndim == 1 else f' NumberOfComponents="{arr.shape[1]}"'
-    return (f'<DataArray type="{_VTK_DTYPES[arr.dtype]}" Name={quoteattr(str(name))}{comps}{extra} '
-            f'format="binary">{_b64(arr)}</DataArray>\n')
+def _b64(arr: np.ndarray) -> str:
+    """A binary DataArray's text as meshio writes it: base64(UInt64 byte count + payload), or with zlib the
+    base64 block header (count, block size, last block size, compressed sizes) followed by base64(blocks)."""
+    raw = np.ascontiguousarray(arr).tobytes()
+    if not COMPRESSION:
+        return base64.b64encode(np.array(len(raw), dtype="<u8").tobytes() + raw).decode("ascii")
+    bs = 32768
+    blocks = [zlib.compress(raw[i:i + bs]) for i in range(0, len(raw), bs)]
+    head = np.array([len(blocks), bs, len(raw) - (len(blocks) - 1) * bs if blocks else 0]
+                    + [len(b) for b in blocks], dtype="<u8")
+    return base64.b64encode(head.tobytes()).decode("ascii") + base64.b64encode(b"".join(blocks)).decode("ascii")
+
+
+def _field_data_xml(fd: dict) -> str:
+    out = ["<FieldData>\n"]
+    for k, a in fd.items():
+        a = _vtk_array(a)
+        comps = "" if a.ndim == 1 else f' NumberOfComponents="{a.shape[1]}"'
+        out.append(f'<DataArray type="{_VTK_DTYPES[a.dtype]}" Name={quoteattr(k)}{comps} '
+                   f'NumberOfTuples="{a.shape[0]}" format="binary">\n{_b64(a)}\n</DataArray>\n')
+    return "".join(out) + "</FieldData>\n"
+
+
+def _xml_name(name: str) -> str:
+    return escape(name, {'"': "&quot;"})
 
 
 def _numeric(what: str, a) -> np.ndarray:
@@ -80,9 +104,10 @@ def _prepare_field(kind: str, name, arr, n: int) -> np.ndarray:
     return a
 
 
-def _cells(cells, n: int):
-    """Blocks -> (connectivity, offsets, types) flat VTK arrays, with validation naming the block."""
-    conn, sizes, types = [], [], []
+def _cells(cells, n: int) -> list:
+    """Blocks -> meshio blocks [(name, (m, k) int64 array)] in the given order, with validation naming the
+    block; a ragged polygon list becomes one block per run of polygons with the same node count."""
+    out = []
     if isinstance(cells, (str, bytes)) or not hasattr(cells, "__iter__"):
         raise InputError("cells: expected a list of (cell_type_name, connectivity) blocks")
     for i, blk in enumerate(cells):
@@ -101,9 +126,13 @@ def _cells(cells, n: int):
                 p = p.astype(np.int64).ravel()
                 if len(p) < 3:
                     raise InputError(f"{what}[{j}]: expected a polygon of at least 3 nodes, got {len(p)}")
-                conn.append(p)
-                sizes.append(np.array([len(p)], dtype=np.int64))
-                types.append(np.array([7], dtype=np.uint8))
+                if p.min() < 0 or p.max() >= n:
+                    raise InputError(f"cells (polygon): node index out of range: expected 0 <= index < {n}; "
+                                     "the connectivity refers to a point that does not exist")
+                if out and out[-1][0] == "polygon" and len(out[-1][1][0]) == len(p):  # same node count: same block
+                    out[-1][1].append(p)
+                else:
+                    out.append(("polygon", [p]))
             continue
         a = _numeric(what, c)
         if a.dtype.kind == "f" and not np.array_equal(a, np.round(a)):
@@ -115,19 +144,11 @@ def _cells(cells, n: int):
             a = a[:, None]
         if a.ndim != 2 or a.shape[1] != k:
             raise InputError(f"{what}: expected connectivity of shape (m, {k}), got shape {a.shape}")
-        conn.append(a.astype(np.int64).ravel())
-        sizes.append(np.full(len(a), k, dtype=np.int64))
-        types.append(np.full(len(a), VTK_TYPES[name], dtype=np.uint8))
         if a.min() < 0 or a.max() >= n:
             raise InputError(f"{what}: node index out of range: expected 0 <= index < {n} (number of points), "
                              f"got [{a.min()}, {a.max()}]; the connectivity refers to a point that does not exist")
-    connectivity = np.concatenate(conn) if conn else np.zeros(0, dtype=np.int64)
-    if connectivity.size and (connectivity.min() < 0 or connectivity.max() >= n):
-        raise InputError(f"cells (polygon): node index out of range: expected 0 <= index < {n}; "
-                         "the connectivity refers to a point that does not exist")
-    sizes = np.concatenate(sizes) if sizes else np.zeros(0, dtype=np.int64)
-    types = np.concatenate(types) if types else np.zeros(0, dtype=np.uint8)
-    return connectivity, np.cumsum(sizes, dtype=np.int64), types
+        out.append((name, a.astype(np.int64)))
+    return [(name, np.array(c, dtype=np.int64) if isinstance(c, list) else c) for name, c in out]
 
 
 def write_vtu(path, points, cells, point_data=None, cell_data=None, field_data=None) -> str:
@@ -142,15 +163,15 @@ def write_vtu(path, points, cells, point_data=None, cell_data=None, field_data=N
     if P.shape[1] == 2:
         P = np.column_stack([P, np.zeros(len(P))])
     n = len(P)
-    connectivity, offsets, types = _cells(cells, n)
-    ncells = len(types)
-    pd = {k: _prepare_field("point_data", k, v, n) for k, v in (point_data or {}).items()}
-    cd = {k: _prepare_field("cell_data", k, v, ncells) for k, v in (cell_data or {}).items()}
+    blocks = _cells(cells, n)
+    ncells = sum(len(c) for _, c in blocks)
+    pd = {k: _vtk_array(_prepare_field("point_data", k, v, n)) for k, v in (point_data or {}).items()}
+    cd = {k: _vtk_array(_prepare_field("cell_data", k, v, ncells)) for k, v in (cell_data or {}).items()}
     if ncells == 0:
         # A grid with no cell (e.g. a contact frame with no contact point) is valid VTK, but meshio 5 cannot
         # read it (IndexError on the empty `types`): write one empty polygon cell (0 nodes) instead, which VTK's
         # reader and meshio both read as a grid with no points; cell data get one zero row for it.
-        offsets, types, ncells = np.zeros(1, dtype=np.int64), np.full(1, VTK_TYPES["polygon"], dtype=np.uint8), 1
+        blocks = [("polygon", np.zeros((1, 0), dtype=np.int64))]
         cd = {k: np.zeros((1,) + a.shape[1:], dtype=a.dtype) for k, a in cd.items()}
     fd = {}
     for k, v in (field_data or {}).items():
@@ -160,20 +181,20 @@ def write_vtu(path, points, cells, point_data=None, cell_data=None, field_data=N
         if a.ndim > 2:
             raise InputError(f"field_data[{k!r}]: expected a scalar, (m,) or (m, k) array, got shape {a.shape}")
         fd[k] = a.reshape(-1) if a.ndim == 0 else a
-    out = ['<?xml version="1.0"?>\n<VTKFile type="UnstructuredGrid" version="1.0" byte_order="LittleEndian" '
-           'header_type="UInt64">\n<UnstructuredGrid>\n']
-    if fd:
-        out.append("<FieldData>\n")
-        out += [_data_array(k, a, f' NumberOfTuples="{a.shape[0]}"') for k, a in fd.items()]
-        out.append("</FieldData>\n")
-    out += [f'<Piece NumberOfPoints="{n}" NumberOfCells="{ncells}">\n<Points>\n',
-            _data_array("Points", P), "</Points>\n<Cells>\n",
-            _data_array("connectivity", connectivity), _data_array("offsets", offsets),
-            _data_array("types", types), "</Cells>\n"]
-    if pd:
-        out += ["<PointData>\n"] + [_data_array(k, a) for k, a in pd.items()] + ["</PointData>\n"]
-    if cd:
-        out += ["<CellData>\n"] + [_data_array(k, a) for k, a in cd.items()] + ["</CellData>\n"]
-    out.append("</Piece>\n</UnstructuredGrid>\n</VTKFile>\n")
-    atomic_write_bytes(path, "".join(out).encode("utf-8"))
+    bounds = np.cumsum([0] + [len(c) for _, c in blocks])
+    # meshio 5 writes Name="..." without escaping: escape the names here (XML readers give back the original)
+    mesh = meshio.Mesh(P, blocks, point_data={_xml_name(k): a for k, a in pd.items()},
+                       cell_data={_xml_name(k): [a[b0:b1] for b0, b1 in zip(bounds[:-1], bounds[1:])]
+                                  for k, a in cd.items()})
+
+    def write_to(tmp):
+        meshio.vtu.write(tmp, mesh, binary=True, compression=COMPRESSION, header_type=HEADER_TYPE)
+        if fd:  # meshio 5 does not write field data: insert <FieldData> as the grid's first child
+            with open(tmp, encoding="utf-8") as f:
+                text = f.read()
+            tag = "<UnstructuredGrid>\n"
+            i = text.index(tag) + len(tag)
+            with open(tmp, "w", encoding="utf-8") as f:
+                f.write(text[:i] + _field_data_xml(fd) + text[i:])
+    atomic_write_with(path, write_to)
     return path
