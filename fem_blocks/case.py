@@ -25,7 +25,7 @@ from . import casefile
 from .errors import InputError
 from .geometry import box_corners, check_hex_corners, rotation3d
 from .specs import (LAW_PARAMS, NONCONV, ChecksSpec, ContactOptions, InterfaceSpec, MaterialSpec,  # noqa: F401
-                    OutputSpec, StageSpec, controls_at, schema_fields, toml_key)
+                    OutputSpec, StageSpec, controls_at, default_of, schema_fields, toml_key)
 
 NUMBER = (int, float)
 
@@ -895,8 +895,9 @@ def _stage_stops(t: Table, D: int, st: StageSpec):
     eq = t.table("stop_at_equilibrium")
     if eq is not None:
         st.stop_at_equilibrium = True
-        st.equilibrium_velocity = eq.number("max_velocity", 1e-6, lo=0, lo_open=True, dim="length")
-        st.min_steps = eq.integer("min_steps", 10, lo=1)
+        st.equilibrium_velocity = eq.number("max_velocity", default_of(StageSpec, "equilibrium_velocity"), lo=0,
+                                            lo_open=True, dim="length")
+        st.min_steps = eq.integer("min_steps", default_of(StageSpec, "min_steps"), lo=1)
         eq.done()
 
 

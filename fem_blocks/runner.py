@@ -23,6 +23,7 @@ from .output.checkpoint import write_checkpoint
 from .output.contacts import ContactsWriter
 from .output.paraview import BodiesWriter, BodiesWriter3D
 from .output.summary import write_summary
+from .specs import ChecksSpec, OutputSpec, default_of
 
 DOFS = ("x", "y", "rz")  # 2D; model.dofs gives the dofs of the model's dimension (3D: x, y, z, rx, ry, rz)
 
@@ -144,7 +145,7 @@ def convergence_report(case: Case, cstats: dict, has_contact: bool = True) -> di
     run: EXIT_UNCONVERGED (3) when there are such steps and `[checks] accept_unconverged` is false, else 0."""
     n = int(cstats.get("unconverged_rows", 0)) if has_contact else 0
     w = cstats.get("worst_unconverged") if has_contact else None
-    accept = bool(case.checks.get("accept_unconverged", False))
+    accept = bool(case.checks.get("accept_unconverged", default_of(ChecksSpec, "accept_unconverged")))
     out = dict(unconverged_steps=n, solved_steps=int(cstats.get("rows", 0)) if has_contact else 0,
                accepted=accept, exit_status=EXIT_UNCONVERGED if n and not accept else 0,
                max_residual=float(cstats.get("max_residual", 0.0)) if has_contact else None,
@@ -292,7 +293,7 @@ class _Guards:
     def __init__(self, case: Case, model: Model, names):
         self.names = names
         self.max_pen = case.checks.get("max_penetration")
-        self.growth = case.checks.get("max_energy_growth", 10.0)
+        self.growth = case.checks.get("max_energy_growth", default_of(ChecksSpec, "max_energy_growth"))
         self.model = model
         self.alert = (np.array([itf.alert for itf in model.contact.interfaces], dtype=float)
                       if model.contact is not None else None)  # per interface (detection.build_table)
@@ -448,7 +449,7 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
     pc = ContactsWriter(pdir, case.dimension, locate=model.contact.contact_points if case.dimension == 2 else None,
                         append=resume, keep_until_time=t_resume) \
         if case.output["paraview"] and model.contact is not None else None
-    ckpt_every = case.output.get("checkpoint_every", 0)
+    ckpt_every = case.output.get("checkpoint_every", default_of(OutputSpec, "checkpoint_every"))
     cv = case.output.get("curve")
     curve_body = model.bodies[model.index(cv["body"])] if cv else None
     cols = history_columns(model)
@@ -742,7 +743,7 @@ def _figures(case, sim, model, out_dir, hist: dict, conv=None) -> dict:
         from .output.figures import write_blocks_3d
         write_blocks_3d(os.path.join(out_dir, "blocks.png"), sim, title=case.name, backend="auto")
         out["blocks_png"] = "blocks.png"
-    elif case.output.get("crack_pattern", True) and any(b.kind == 0 for b in model.bodies):
+    elif case.output.get("crack_pattern", default_of(OutputSpec, "crack_pattern")) and any(b.kind == 0 for b in model.bodies):
         write_crack_pattern(os.path.join(out_dir, "crack_pattern.png"), sim, sim.last_contact, model.contact,
                             title=case.name)
         out["crack_pattern"] = "crack_pattern.png"

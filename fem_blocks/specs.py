@@ -63,6 +63,12 @@ def schema_fields(cls) -> list:
     return [f for f in dataclasses.fields(cls) if "doc" in f.metadata]
 
 
+def default_of(cls, name: str):
+    """The default of field `name` of schema class `cls` (where a reader needs it outside the dataclass)."""
+    f = {f.name: f for f in dataclasses.fields(cls)}[name]
+    return f.default_factory() if f.default_factory is not dataclasses.MISSING else f.default
+
+
 def toml_key(f) -> str:
     return f.metadata["key"] or f.name
 
@@ -355,7 +361,7 @@ class StageSpec:
                                                 "below max_velocity after min_steps")
     equilibrium_velocity: float = spec(1e-6, doc="stop_at_equilibrium: velocity threshold", unit="length", lo=0.0,
                                        lo_open=True, key="stop_at_equilibrium.max_velocity")
-    min_steps: int = spec(1, doc="stop_at_equilibrium: steps before the test (10 when the table is given)", lo=1,
+    min_steps: int = spec(10, doc="stop_at_equilibrium: steps before the test", lo=1,
                           key="stop_at_equilibrium.min_steps")
     tol: float | None = spec(None, doc="contact solver tolerance for this stage (default: [contact])", lo=0.0,
                              lo_open=True)
