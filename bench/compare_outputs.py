@@ -87,8 +87,9 @@ def cases(tree: str, steps: int) -> list:
         p = os.path.join(demos, f)
         if f.endswith(".toml"):
             out.append((f[:-5], [PY, "-c", TOML_DRIVER, p, "{out}", str(steps)]))
-        elif f.endswith(".py"):
-            out.append((f[:-3], [PY, "-c", PY_DRIVER, p, "{out}"]))
+        elif f.endswith(".py"):  # named NAME.py where a case file NAME.toml exists too (dome)
+            name = f if os.path.exists(os.path.join(demos, f[:-3] + ".toml")) else f[:-3]
+            out.append((name, [PY, "-c", PY_DRIVER, p, "{out}"]))
     out.append(("benchmark1", [PY, os.path.join(tree, "bench", "bench_lmgc90_wall.py"), str(steps or 200),
                                "overlap", "{out}/history.csv"]))
     return out
