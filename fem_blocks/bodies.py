@@ -20,7 +20,7 @@ displacement history); the reaction on a driven dof is an output.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Sequence
 
 import numpy as np

@@ -10,7 +10,6 @@ force–displacement data are signed, in the unit of each dof.
 The expected counts and residuals come from history.csv (the solver's per-row `converged` / `residual`
 columns), not from the summary code under test."""
 import json
-import os
 from types import SimpleNamespace
 
 import numpy as np

@@ -9,7 +9,6 @@ assert the level the kernel reaches (about 2x the measured value), so that a reg
 import glob
 import json
 import os
-import sys
 
 import h5py
 import numpy as np

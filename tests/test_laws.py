@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from fem_blocks.bodies import BlockType, Clamp, DeformableBody, Driver, Material, RigidBody
+from fem_blocks.bodies import BlockType, DeformableBody, Driver, Material, RigidBody
 from fem_blocks.contact.step import ContactOptions, ContactStep, InterfaceSpec
 from fem_blocks.dynamics import Simulation
 from fem_blocks.errors import InputError

@@ -7,7 +7,7 @@ import re
 import numpy as np
 import pytest
 
-from fem_blocks.solver import newton, nlgs
+from fem_blocks.solver import newton
 from fem_blocks.linalg import to_block_csr
 
 from test_nlgs import random_problem  # noqa: E402

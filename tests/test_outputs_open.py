@@ -2,7 +2,6 @@
 t = 0 contact frame with no contact point included), each .pvd as XML naming files that exist, history.csv,
 summary.json. Issue: `contacts_000000.vtu` held no point and meshio raised IndexError on it."""
 import json
-import os
 import xml.etree.ElementTree as ET
 
 import meshio

@@ -1,6 +1,5 @@
 """Potential brick cracks: [wall] split_bricks replaces every full brick by two halves joined by the pair's
 interface of orientation "crack" (Lourenço's micro-model)."""
-import sys
 
 import numpy as np
 import pytest

@@ -3,7 +3,6 @@ coloured by damage, or by opening for dry joints, drawn thicker where they open 
 bodies (write_blocks_3d)."""
 from __future__ import annotations
 
-import os
 from types import SimpleNamespace
 
 import numpy as np
