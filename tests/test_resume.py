@@ -124,6 +124,23 @@ def _wait_for_checkpoint_step(proc, out, step, timeout=300):
     return None
 
 
+def _kill_between_checkpoint_writes(proc, ck, prev):
+    """SIGKILL the run at an instant where checkpoint.npz and checkpoint.prev.npz are two different files. Inside
+    a checkpoint write both names are, for two system calls, hard links to one file (the newest becomes .prev, then
+    the new one is renamed over checkpoint.npz: output/checkpoint.py); a kill there leaves two names of one
+    complete checkpoint, which is not the state this test needs (an in-place truncation of one would cut both). The
+    run is frozen (SIGSTOP), the two names are compared, and it runs on for a moment until they differ."""
+    for _ in range(2000):
+        proc.send_signal(signal.SIGSTOP)
+        if ck.exists() and prev.exists() and not os.path.samefile(ck, prev):
+            break
+        proc.send_signal(signal.SIGCONT)
+        time.sleep(0.01)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    assert not os.path.samefile(ck, prev)
+
+
 def _final(out):
     with open(out / "history.csv") as f:
         hist = f.read()
@@ -192,9 +209,8 @@ def test_truncated_checkpoint_falls_back_to_the_previous_one(reference, tmp_path
     proc = _run(case, out, wait=False)
     s = _wait_for_checkpoint_step(proc, out, 60)
     assert s is not None
-    proc.send_signal(signal.SIGKILL)
-    proc.wait()
-    ck = out / "checkpoint.npz"
+    ck, prev = out / "checkpoint.npz", out / "checkpoint.prev.npz"
+    _kill_between_checkpoint_writes(proc, ck, prev)
     newest = int(read_checkpoint(ck)["sim.step"])  # the run may have written another one before the kill
     data = ck.read_bytes()
     ck.write_bytes(data[: len(data) // 2])  # as if cut mid-write by a full disk
