@@ -373,7 +373,18 @@ class SlabSpec:
 
 
 @dataclass(kw_only=True)
-class WallSpec(GeneratorSpec):
+class SlabbedSpec(GeneratorSpec):
+    """A wall generator with an optional rigid foundation and top beam (2D [wall], 3D [wall3d])."""
+    foundation: SlabSpec | None = None
+    beam: SlabSpec | None = None
+
+    @property
+    def rigid(self) -> list:
+        return [r for s in (self.foundation, self.beam) if s is not None for r in s.bodies]
+
+
+@dataclass(kw_only=True)
+class WallSpec(SlabbedSpec):
     """[wall] (2D): running bond, explicit courses or a stacked prism (builders), optionally split bricks."""
     kind: str                          # running_bond | courses | prism
     brick_length: float
@@ -388,12 +399,6 @@ class WallSpec(GeneratorSpec):
     rows: list | None = None           # courses: items (brick lengths or {"gap": w [m]})
     bricks: int | None = None          # prism
     split_bricks: bool = False
-    foundation: SlabSpec | None = None
-    beam: SlabSpec | None = None
-
-    @property
-    def rigid(self) -> list:
-        return [r for s in (self.foundation, self.beam) if s is not None for r in s.bodies]
 
 
 @dataclass(kw_only=True)
@@ -413,7 +418,7 @@ class ArchSpec(GeneratorSpec):
 
 
 @dataclass(kw_only=True)
-class Wall3DSpec(GeneratorSpec):
+class Wall3DSpec(SlabbedSpec):
     """[wall3d]: running-bond wall of hexahedral bricks (builders3d), optional foundation and top beam."""
     brick_length: float
     brick_height: float
@@ -427,12 +432,6 @@ class Wall3DSpec(GeneratorSpec):
     bricks_per_course: int
     half_bricks: bool
     stagger_leaves: bool
-    foundation: SlabSpec | None = None
-    beam: SlabSpec | None = None
-
-    @property
-    def rigid(self) -> list:
-        return [r for s in (self.foundation, self.beam) if s is not None for r in s.bodies]
 
 
 @dataclass(kw_only=True)

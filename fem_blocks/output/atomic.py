@@ -21,34 +21,16 @@ def _umask() -> int:
 def atomic_write_bytes(path, data: bytes, before_replace=None) -> None:
     """Replace `path` by `data` atomically (same-directory temporary + fsync + os.replace + directory fsync).
     `before_replace()`, if given, runs once the temporary file is complete and synced, just before the rename."""
-    path = os.fspath(path)
-    d = os.path.dirname(os.path.abspath(path))
-    try:
-        mode = stat.S_IMODE(os.stat(path).st_mode)
-    except FileNotFoundError:
-        mode = 0o666 & ~_umask()
-    fd, tmp = tempfile.mkstemp(prefix=".tmp-" + os.path.basename(path) + "-", dir=d)
-    try:
-        with os.fdopen(fd, "wb") as f:
+    def write_to(tmp):
+        with os.fdopen(os.open(tmp, os.O_WRONLY | os.O_TRUNC), "wb") as f:
             f.write(data)
-            f.flush()
-            os.fsync(f.fileno())
-        os.chmod(tmp, mode)
-        if before_replace is not None:
-            before_replace()
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except FileNotFoundError:
-            pass
-        raise
-    fsync_dir(d)
+    atomic_write_with(path, write_to, before_replace)
 
 
-def atomic_write_with(path, write_to) -> None:
-    """Replace `path` atomically by the file that `write_to(tmp_path)` writes (for writers that want a file name,
-    e.g. meshio): the same temporary file, fsync, permissions, rename and clean-up as atomic_write_bytes."""
+def atomic_write_with(path, write_to, before_replace=None) -> None:
+    """Replace `path` atomically by the file that `write_to(tmp_path)` writes (also for writers that want a file
+    name, e.g. meshio): temporary file in the same directory, fsync, the old file's permissions (else the umask's),
+    `before_replace()` if given, os.replace, fsync of the directory; the temporary file is removed on any error."""
     path = os.fspath(path)
     d = os.path.dirname(os.path.abspath(path))
     try:
@@ -65,6 +47,8 @@ def atomic_write_with(path, write_to) -> None:
         finally:
             os.close(fd)
         os.chmod(tmp, mode)
+        if before_replace is not None:
+            before_replace()
         os.replace(tmp, path)
     except BaseException:
         try:
