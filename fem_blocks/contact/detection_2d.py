@@ -36,6 +36,7 @@ import numpy as np
 from numba import njit
 
 from ..errors import InputError
+from .tables import check_g0_alert, check_lengths, check_positions
 from .broadphase import grid_pairs
 
 
@@ -56,23 +57,11 @@ class InterfaceTable:
 
     def validate(self):
         ni = len(self.g0)
-        for name in ("alert", "placement", "cand_group", "thickness", "cos_max_angle", "split_head"):
-            if len(getattr(self, name)) != ni:
-                raise InputError(f"interface table: {name} has {len(getattr(self, name))} entries, expected {ni}")
-        if np.any(~np.isfinite(self.g0)) or np.any(self.g0 < 0):
-            raise InputError("interfaces.g0: expected joint thickness >= 0 [m]")
-        if np.any(~np.isfinite(self.alert)) or np.any(self.alert <= 0):
-            raise InputError("interfaces.alert: expected alert distance > 0 [m]")
+        check_lengths(self, ("alert", "placement", "cand_group", "thickness", "cos_max_angle", "split_head"), ni)
+        check_g0_alert(self.g0, self.alert)
         if np.any(self.thickness <= 0):
             raise InputError("interfaces.thickness: expected > 0 [m]")
-        p = self.positions
-        if p.ndim != 2 or p.shape[0] != ni:
-            raise InputError("interfaces.positions: expected one row per interface")
-        used = p >= 0
-        if np.any((p[used] <= 0) | (p[used] >= 1)):
-            raise InputError("interfaces.positions: expected relative positions strictly between 0 and 1")
-        if np.any((self.placement == 0) & ~used.any(axis=1)):
-            raise InputError("interfaces.positions: expected at least one position")
+        check_positions(self.positions, self.placement, ni)
 
 
 @dataclass

@@ -64,6 +64,7 @@ import numpy as np
 from numba import njit
 
 from ..errors import InputError
+from .tables import check_g0_alert, check_lengths, check_positions
 from .broadphase import grid_pairs
 
 PROBE = 1e-2  # node points: fraction of the way from the node toward its candidate face's centre (tie-break probe)
@@ -92,28 +93,16 @@ class InterfaceTable:
 
     def validate(self):
         ni = len(self.g0)
-        for name in ("alert", "placement", "tri_rule", "cand_group", "cos_max_angle", "split_head"):
-            if len(getattr(self, name)) != ni:
-                raise InputError(f"interface table: {name} has {len(getattr(self, name))} entries, expected {ni}")
+        check_lengths(self, ("alert", "placement", "tri_rule", "cand_group", "cos_max_angle", "split_head"), ni)
         pi = np.asarray(self.pair_iface)
         if pi.ndim != 2 or pi.shape[0] != pi.shape[1] or np.any(pi >= ni) or np.any(pi < -1):
             raise InputError(f"interface table: pair_iface expected a square (ng, ng) array of ids in [-1, {ni})")
-        if np.any(~np.isfinite(self.g0)) or np.any(self.g0 < 0):
-            raise InputError("interfaces.g0: expected joint thickness >= 0 [m]")
-        if np.any(~np.isfinite(self.alert)) or np.any(self.alert <= 0):
-            raise InputError("interfaces.alert: expected alert distance > 0 [m]")
+        check_g0_alert(self.g0, self.alert)
         if np.any((self.tri_rule != 1) & (self.tri_rule != 3)):
             raise InputError("interfaces.tri_rule: expected 1 (centroid) or 3 (three interior points)")
         if np.any((self.placement != 0) & (self.placement != 1)):
             raise InputError("interfaces.placement: expected 0 (positions) or 1 (nodes)")
-        p = np.asarray(self.positions)
-        if p.ndim != 2 or p.shape[0] != ni:
-            raise InputError("interfaces.positions: expected one row per interface")
-        used = p >= 0
-        if np.any((p[used] <= 0) | (p[used] >= 1)):
-            raise InputError("interfaces.positions: expected relative positions strictly between 0 and 1")
-        if np.any((self.placement == 0) & ~used.any(axis=1)):
-            raise InputError("interfaces.positions: expected at least one position")
+        check_positions(self.positions, self.placement, ni)
 
     @classmethod
     def from_2d(cls, table, tri_rule=3) -> "InterfaceTable":
