@@ -1061,7 +1061,9 @@ def _parse_reference(tables: list, curve: dict | None, U: dict, base: str) -> li
     ff = U["moment"] if curve["force"].startswith("r") else U["force"]
     out = []
     for t in tables:
-        label = t.string("label", required=True)
+        if not t.has("label"):
+            raise t.missing("label", "expected a text saying where the data come from and how accurate they are")
+        label = t.string("label")
         if not label.strip():
             raise t.error("label", "= '': expected a non-empty text saying where the data come from and how "
                                    "accurate they are")
