@@ -282,3 +282,14 @@ def test_run_writes_the_reference_block_and_the_png(tmp_path, capsys):
     assert band["inside_band"] == (0.01 <= Fm <= 0.02)
     assert curve["reference_peak_kN"] == 0.03 and curve["reference_displacement_at_peak_mm"] == pytest.approx(1e-3)
     assert curve["ratio"] == pytest.approx(Fm / 0.03, rel=1e-12) and curve["ratio_to"] == "peak"
+
+
+def test_variant_replaces_or_unsets_the_base_references(tmp_path):
+    from fem_blocks.case import load_case
+    (tmp_path / "base.toml").write_text(BASE.replace("UNITS", "").replace("FDOF", "x").replace("DDOF", "x")
+                                        + '[[reference]]\nlabel = "base"\npeak = 5.0\n')
+    (tmp_path / "v.toml").write_text('extends = "base.toml"\n[[reference]]\nlabel = "v"\npeak_band = [1.0, 2.0]\n')
+    (tmp_path / "u.toml").write_text('extends = "base.toml"\nunset = ["reference"]\n')
+    assert [r.label for r in load_case(str(tmp_path / "base.toml")).references] == ["base"]
+    assert [(r.label, r.peak_band) for r in load_case(str(tmp_path / "v.toml")).references] == [("v", (1.0, 2.0))]
+    assert load_case(str(tmp_path / "u.toml")).references == []
