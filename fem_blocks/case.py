@@ -1065,8 +1065,8 @@ def _parse_reference(tables: list, curve: dict | None, U: dict, base: str) -> li
             raise t.missing("label", "expected a text saying where the data come from and how accurate they are")
         label = t.string("label")
         if not label.strip():
-            raise t.error("label", "= '': expected a non-empty text saying where the data come from and how "
-                                   "accurate they are")
+            raise t.error("label", f"= {label!r}: expected a non-empty text saying where the data come from and "
+                                   "how accurate they are")
         is_curve = t.has("points") or t.has("file")
         is_peak = t.has("peak") or t.has("peak_band")
         if t.has("points") and t.has("file"):
@@ -1080,9 +1080,9 @@ def _parse_reference(tables: list, curve: dict | None, U: dict, base: str) -> li
         v = read_fields(t, ReferenceSpec, ("band", "peak", "displacement_at_peak"))
         r = ReferenceSpec(label=label, band=v["band"], key=t.path)
         if is_curve:
-            for k in ("displacement_at_peak",):
-                if t.has(k):
-                    raise t.error(k, "expected only in a peak-only reference (a curve's peak is read from the curve)")
+            if t.has("displacement_at_peak"):
+                raise t.error("displacement_at_peak", "expected only in a peak-only reference (a curve's peak is "
+                                                      "read from the curve)")
             if t.has("columns") and not t.has("file"):
                 raise t.error("columns", "expected only with file (the columns of a CSV file)")
             if t.has("file"):
