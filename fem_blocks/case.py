@@ -25,7 +25,7 @@ from . import casefile
 from .errors import InputError
 from .geometry import box_corners, check_hex_corners, rotation3d
 from .specs import (LAW_PARAMS, NONCONV, ChecksSpec, ContactOptions, InterfaceSpec, MaterialSpec,  # noqa: F401
-                    OutputSpec, StageSpec, controls_at, default_of, schema_fields, toml_key)
+                    OutputSpec, ReferenceSpec, StageSpec, controls_at, default_of, schema_fields, toml_key)
 
 NUMBER = (int, float)
 
@@ -483,6 +483,7 @@ class Case:
     #                                  stage's actual start)
     generators: list = field(default_factory=list)  # WallSpec, ArchSpec, Wall3DSpec, DomeSpec: expand.py
     expanded: bool = False  # True once expand() has added the generated block types, blocks and rigid bodies
+    references: list = field(default_factory=list)  # of specs.ReferenceSpec ([[reference]], SI)
 
     @property
     def dofs(self) -> tuple:
@@ -645,6 +646,7 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
     _check_interface_pairs(source, interfaces, blocks)
     checks = _parse_checks(root)
     output = _parse_output(root, D)
+    ref_tables = root.tables("reference")  # parsed below, once [output.curve] is known (3D: chosen below)
     root.done()
     _check_stages(source, stages, rigid_all)
     if "curve" in output:
@@ -659,6 +661,7 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
                 if drv:
                     output["curve"] = dict(body=drv[0][0], force=drv[0][1], displacement=drv[0][1])
                     break
+    references = _parse_reference(ref_tables, output.get("curve"), U, base)
     for itf in interfaces:
         if itf.reference == "as_built" and contact.geometry != "frozen":
             raise InputError(f"{source}: interfaces.{itf.name}.reference = 'as_built': expected contact.geometry = "
@@ -666,7 +669,8 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
     case = Case(source=source, name=name, units=units, gravity=gravity, materials=materials,
                 block_types=block_types, blocks=blocks, rigid_bodies=rigid, stages=stages, output=output,
                 contact=contact, interfaces=interfaces, checks=checks, dimension=D, warnings=warnings,
-                allow_no_interface=allow_pairs, history_times=history_times, generators=generators)
+                allow_no_interface=allow_pairs, history_times=history_times, generators=generators,
+                references=references)
     case.warnings += stage_history_warnings(case)
     return case
 
@@ -1040,6 +1044,156 @@ def _parse_output(root: Table, D: int) -> dict:
         output.update(read_fields(out, OutputSpec, ("crack_pattern",)))
         out.done()
     return output
+
+
+def _parse_reference(tables: list, curve: dict | None, U: dict, base: str) -> list:
+    """[[reference]] -> specs.ReferenceSpec (SI): each a curve (`points` inline or a CSV `file`; optional `band` or
+    `lower`/`upper`) or a peak (`peak` and/or `peak_band`, optional `band` with `peak`, `displacement_at_peak`), in
+    the quantities of [output.curve] (`curve`): displacement [length; rad for a rotation dof] and force [force;
+    moment for a rotation dof], converted with the file's units `U`. `base`: the folder of relative file paths."""
+    if not tables:
+        return []
+    if curve is None:
+        t = tables[0]
+        raise InputError(f"{casefile.origin(t.source, t.path)}: {t.path}: expected an [output.curve] (body, force, "
+                         "displacement): a reference is drawn on that curve and compared with its peak")
+    fd = 1.0 if curve["displacement"].startswith("r") else U["length"]
+    ff = U["moment"] if curve["force"].startswith("r") else U["force"]
+    out = []
+    for t in tables:
+        if not t.has("label"):
+            raise t.missing("label", "expected a text saying where the data come from and how accurate they are")
+        label = t.string("label")
+        if not label.strip():
+            raise t.error("label", f"= {label!r}: expected a non-empty text saying where the data come from and "
+                                   "how accurate they are")
+        is_curve = t.has("points") or t.has("file")
+        is_peak = t.has("peak") or t.has("peak_band")
+        if t.has("points") and t.has("file"):
+            raise t.error("file", "expected either points (inline) or file (CSV), not both")
+        if is_curve and is_peak:
+            k = "peak" if t.has("peak") else "peak_band"
+            raise t.error(k, "expected either a curve (points or file) or a peak (peak, peak_band), not both")
+        if not is_curve and not is_peak:
+            raise t.missing("points", "expected a curve (points = [[d, F], ...] or file = \"x.csv\") or a peak "
+                                      "(peak = F and/or peak_band = [Fmin, Fmax])")
+        v = read_fields(t, ReferenceSpec, ("band", "peak", "displacement_at_peak"))
+        r = ReferenceSpec(label=label, band=v["band"], key=t.path)
+        if is_curve:
+            if t.has("displacement_at_peak"):
+                raise t.error("displacement_at_peak", "expected only in a peak-only reference (a curve's peak is "
+                                                      "read from the curve)")
+            if t.has("columns") and not t.has("file"):
+                raise t.error("columns", "expected only with file (the columns of a CSV file)")
+            if t.has("file"):
+                r.file, r.points = _read_reference_csv(t, base, fd, ff)
+                r.columns = t.raw("columns")
+            else:
+                r.points = _reference_points(t, "points", fd, ff)
+            if t.has("lower") or t.has("upper"):
+                if not (t.has("lower") and t.has("upper")):
+                    k = "upper" if t.has("lower") else "lower"
+                    raise t.missing(k, "expected lower and upper together (the two curves of a band)")
+                if r.band is not None:
+                    raise t.error("band", "expected either band (relative) or lower/upper curves, not both")
+                r.lower = _reference_points(t, "lower", fd, ff)
+                r.upper = _reference_points(t, "upper", fd, ff)
+        else:
+            for k in ("columns", "lower", "upper"):
+                if t.has(k):
+                    raise t.error(k, "expected only with a curve (points or file)")
+            r.peak = None if v["peak"] is None else v["peak"] * ff
+            r.displacement_at_peak = None if v["displacement_at_peak"] is None else v["displacement_at_peak"] * fd
+            if t.has("peak_band"):
+                pb = t.raw("peak_band")
+                if (not isinstance(pb, list) or len(pb) != 2 or any(
+                        isinstance(x, bool) or not isinstance(x, NUMBER) or not math.isfinite(x) for x in pb)):
+                    raise t.error("peak_band", f"expected [Fmin, Fmax], two finite numbers, got {pb!r}")
+                if not 0 <= pb[0] < pb[1]:
+                    raise t.error("peak_band", f"= {pb!r}: expected [Fmin, Fmax] with 0 <= Fmin < Fmax")
+                if r.band is not None:
+                    raise t.error("band", "expected either band (relative) or peak_band, not both")
+                r.peak_band = (float(pb[0]) * ff, float(pb[1]) * ff)
+            if r.band is not None and r.peak is None:
+                raise t.missing("peak", "expected with band (a relative band around peak)")
+        t.done()
+        out.append(r)
+    return out
+
+
+def _monotone(t: Table, k: str, d: list, where: str = ""):
+    """InputError naming `k` unless the displacements d are strictly monotone (increasing or decreasing)."""
+    s = [(b > a) - (b < a) for a, b in zip(d, d[1:])]
+    bad = next((i for i, x in enumerate(s) if x == 0 or x != s[0]), None)
+    if bad is not None:
+        raise t.error(k, f"displacements not strictly monotone{where} ({d[bad]:g} then {d[bad + 1]:g}): expected a "
+                         "curve along strictly increasing (or decreasing) displacements")
+
+
+def _reference_points(t: Table, k: str, fd: float, ff: float) -> list:
+    """An inline curve [[d, F], ...] of `t` (>= 2 points, finite, d strictly monotone) -> [(d, F)] in SI."""
+    v = t.raw(k)
+    if not isinstance(v, list) or not all(isinstance(p, list) and len(p) == 2 and all(
+            not isinstance(x, bool) and isinstance(x, NUMBER) and math.isfinite(x) for x in p) for p in v):
+        raise t.error(k, "expected a list of [displacement, force] pairs of finite numbers")
+    if len(v) < 2:
+        raise t.error(k, f"expected at least 2 [displacement, force] points, got {len(v)}")
+    _monotone(t, k, [p[0] for p in v])
+    return [(float(d) * fd, float(F) * ff) for d, F in v]
+
+
+def _is_number(s: str) -> bool:
+    try:
+        float(s)
+    except ValueError:
+        return False
+    return True
+
+
+def _read_reference_csv(t: Table, base: str, fd: float, ff: float):
+    """The CSV file of a [[reference]] curve -> (its path, [(d, F)] in SI). Cells separated by commas (else
+    semicolons, else blanks); blank lines and lines starting with '#' skipped; a first row holding a non-number
+    is the header; `columns` = [displacement, force] header names (default: the first two columns)."""
+    f = t.string("file")
+    full = f if os.path.isabs(f) else os.path.join(base, f)
+    if not os.path.isfile(full):
+        raise t.error("file", f"= {f!r}: file not found (expected a CSV file, relative to the case file)")
+    try:
+        with open(full, encoding="utf-8") as fh:
+            text = fh.read()
+    except (OSError, UnicodeDecodeError) as e:
+        raise t.error("file", f"= {f!r}: unreadable ({type(e).__name__}): expected a text CSV file") from None
+    rows = []
+    for n, line in enumerate(text.splitlines(), 1):
+        s = line.strip()
+        if s and not s.startswith("#"):
+            sep = "," if "," in s else (";" if ";" in s else None)
+            rows.append((n, [c.strip().strip('"').strip() for c in s.split(sep)]))
+    header = rows.pop(0)[1] if rows and not all(_is_number(c) for c in rows[0][1]) else None
+    cols = t.raw("columns")
+    if cols is not None:
+        if not (isinstance(cols, list) and len(cols) == 2 and all(isinstance(c, str) and c for c in cols)):
+            raise t.error("columns", f"expected two column names [displacement, force], got {cols!r}")
+        if header is None:
+            raise t.error("columns", f"= {cols!r}: {f!r} has no header line naming its columns")
+        absent = [c for c in cols if c not in header]
+        if absent:
+            raise t.error("columns", f"= {cols!r}: no column {absent[0]!r} in {f!r} (its columns: {header})")
+        idx = [header.index(c) for c in cols]
+    else:
+        idx = [0, 1]
+    pts = []
+    for n, cells in rows:
+        if len(cells) <= max(idx):
+            raise t.error("file", f"= {f!r}, line {n}: expected at least {max(idx) + 1} columns, got {len(cells)}")
+        a, b = cells[idx[0]], cells[idx[1]]
+        if not (_is_number(a) and _is_number(b) and math.isfinite(float(a)) and math.isfinite(float(b))):
+            raise t.error("file", f"= {f!r}, line {n}: expected finite numbers (displacement, force), got {a!r}, {b!r}")
+        pts.append((float(a), float(b)))
+    if len(pts) < 2:
+        raise t.error("file", f"= {f!r}: expected at least 2 data rows (displacement, force), got {len(pts)}")
+    _monotone(t, "file", [p[0] for p in pts], f" in {f!r}")
+    return full, [(d * fd, F * ff) for d, F in pts]
 
 
 def _check_stages(source: str, stages: list, rigid: list):

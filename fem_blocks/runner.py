@@ -757,8 +757,16 @@ def _figures(case, sim, model, out_dir, hist: dict, conv=None) -> dict:
             note = (f"{conv['unconverged_steps']} unconverged steps (x){' (accepted)' if conv['accepted'] else ''}: "
                     f"worst residual {conv['worst_residual']:.3g} at step {conv['worst_step']} "
                     f"(t = {conv['worst_time']:.4g} s)")
-        write_curve(os.path.join(out_dir, "force_displacement.png"), hist, body, fk, dk, title=case.name, note=note)
+        refs = getattr(case, "references", None)  # [[reference]] entries (a Case has them; a stand-in may not)
+        write_curve(os.path.join(out_dir, "force_displacement.png"), hist, body, fk, dk, title=case.name, note=note,
+                    references=refs)
         c = curve_data(hist, body, fk, dk)
+        if refs:  # model peak vs each [[reference]] (output/summary.reference_comparison)
+            from .output.figures import reference_data
+            from .output.summary import reference_comparison
+            out["reference"] = [reference_comparison(c["x"], c["y"], r, _unit_key(c["yunit"]), _unit_key(c["xunit"]),
+                                                     "rotation" if cv["displacement"].startswith("r") else
+                                                     "displacement") for r in reference_data(refs, fk, dk)]
         F, D = np.abs(c["y"]), np.abs(c["x"])  # the peak: largest |force|; magnitudes, as before
         if F.size == 0 or not np.any(np.isfinite(F)):
             return out

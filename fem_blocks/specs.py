@@ -12,7 +12,8 @@ Each field below is defined once, with its default, unit kind, valid range or ch
 * `LAW_PARAMS`     — the interface-law parameter table (unit kind, range, default per law, which laws use it);
   `validate_law_params` is the one validation against it (with the laws' cross rules); `laws.pack` puts the
   values in the kernels' parameter vector (`laws.law_parameters` = both);
-* `MaterialSpec`, `ChecksSpec`, `OutputSpec` — `[materials.NAME]`, `[checks]`, `[output]`.
+* `MaterialSpec`, `ChecksSpec`, `OutputSpec` — `[materials.NAME]`, `[checks]`, `[output]`;
+* `ReferenceSpec`  — one `[[reference]]` entry (a measured curve, band or peak on force_displacement.png).
 
 Metadata keys (`spec`): `doc`, `unit` (unit kind of the mm-N-MPa conversion: "length", "stress", "stiffness",
 "energy", "time", ... — see case.UNIT_SYSTEMS/DERIVED; None: dimensionless), `choices`, `lo`/`hi` (with `lo_open`/
@@ -454,3 +455,32 @@ class OutputSpec:
     checkpoint_every: int = spec(0, doc="checkpoint every N steps (0: at the end of each stage only)", lo=0)
     crack_pattern: bool = spec(True, doc="write crack_pattern.png")
     curve: dict | None = spec(None, doc="[output.curve] body, force, displacement: force-displacement figure")
+
+
+# ----------------------------------------------------------------------------- [[reference]]
+@dataclass
+class ReferenceSpec:
+    """One `[[reference]]` entry: a measured or published force–displacement curve, band or peak, drawn on
+    force_displacement.png and compared with the model's peak in summary.json (output/figures.py, output/summary.py).
+
+    Its quantities are those of `[output.curve]`: the displacement of the curve's `displacement` dof (length, or
+    rotation [rad] for r*) and the reaction of its `force` dof (force, or moment for r*), in the file's `units`
+    (case.py converts them to SI). Three forms: a curve (`points` inline or a CSV `file`), optionally with a band
+    (`band`: relative half-width, F(1 ± band); or `lower`/`upper` curves); or a peak only (`peak` and/or
+    `peak_band`, optional `band` with `peak`, optional `displacement_at_peak`). Peaks are magnitudes (|F|), as the
+    model's peak in summary.json."""
+    label: str = spec(doc="where the data come from and how accurate they are (legend and summary.json)",
+                      required=True)
+    points: list | None = spec(None, doc="inline curve [[d, F], ...] (>= 2 points, displacements strictly "
+                                         "monotone); after parsing: the curve in SI, from points or file")
+    file: str | None = spec(None, doc="CSV file of the curve, relative to the case file (a header line allowed)")
+    columns: list | None = spec(None, doc="[displacement column, force column] names in the CSV header "
+                                          "(default: the first two columns)")
+    band: float | None = spec(None, doc="relative half-width of a band F(1 ± band) around the curve or the peak",
+                              lo=0.0)
+    lower: list | None = spec(None, doc="lower curve of a band [[d, F], ...] (with upper; with a curve)")
+    upper: list | None = spec(None, doc="upper curve of a band [[d, F], ...] (with lower; with a curve)")
+    peak: float | None = spec(None, doc="reference peak |F| (peak-only form)", lo=0.0, lo_open=True)
+    peak_band: tuple | None = spec(None, doc="[Fmin, Fmax] of the reference peak, 0 <= Fmin < Fmax (peak-only form)")
+    displacement_at_peak: float | None = spec(None, doc="|d| at the reference peak (peak-only form)", lo=0.0)
+    key: str = spec("reference", doc="the key path for messages", toml=False)

@@ -1,6 +1,7 @@
 """docs/case-files.md cannot drift from the schema (fem_blocks/specs.py).
 
-* `[contact]`, `[[interfaces]]`, `[[stages]]` (with "Load protocol"), `[checks]`, `[output]` and `[materials.NAME]`: the keys of the hand-written tables are
+* `[contact]`, `[[interfaces]]`, `[[stages]]` (with "Load protocol"), `[checks]`, `[output]`, `[materials.NAME]` and
+  `[[reference]]`: the keys of the hand-written tables are
   exactly the schema's TOML keys (a key added to a dataclass without a doc row, or a doc row left for a removed
   key, fails), and where the doc's default column holds a literal it is the field's default;
 * the interface-law parameter table is generated from `LAW_PARAMS` (scripts/schema_tables.py) and must be up to
@@ -14,8 +15,8 @@ import re
 
 import pytest
 
-from fem_blocks.specs import (ChecksSpec, ContactOptions, InterfaceSpec, MaterialSpec, OutputSpec, StageSpec,
-                              schema_fields, toml_key)
+from fem_blocks.specs import (ChecksSpec, ContactOptions, InterfaceSpec, MaterialSpec, OutputSpec, ReferenceSpec,
+                              StageSpec, schema_fields, toml_key)
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 DOC = os.path.join(ROOT, "docs", "case-files.md")
@@ -64,7 +65,8 @@ def schema_keys(cls) -> set:
                                         (InterfaceSpec, ["`[[interfaces]]`"]),
                                         (StageSpec, ["`[[stages]]`", "Load protocol"]),
                                         (ChecksSpec, ["`[checks]`"]), (OutputSpec, ["`[output]`"]),
-                                        (MaterialSpec, ["`[materials.NAME]`"])])
+                                        (MaterialSpec, ["`[materials.NAME]`"]),
+                                        (ReferenceSpec, ["`[[reference]]`"])])
 def test_doc_tables_name_exactly_the_schema_keys(cls, heads):
     doc = {}
     for h in heads:

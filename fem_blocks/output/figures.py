@@ -157,13 +157,34 @@ def curve_arrays(history: dict, body: str, force: str, displacement: str):
     return c["x"], c["y"]
 
 
-def write_curve(path, history: dict, body: str, force: str, displacement: str, title="", note=""):
+def reference_data(references, force: str, displacement: str) -> list:
+    """The [[reference]] entries (specs.ReferenceSpec, SI) in the units of the force–displacement figure
+    (dof_unit of the curve's `force` and `displacement` columns, e.g. "Rx", "ux": kN and mm): dicts for
+    plots.draw_references and summary.reference_comparison."""
+    sx, sy = dof_unit(displacement)[0], dof_unit(force)[0]
+
+    def curve(pts):
+        if pts is None:
+            return None
+        a = np.asarray(pts, dtype=float).reshape(-1, 2)
+        return a[:, 0] * sx, a[:, 1] * sy
+
+    return [dict(label=r.label, curve=curve(r.points), lower=curve(r.lower), upper=curve(r.upper), band=r.band,
+                 peak=None if r.peak is None else r.peak * sy,
+                 peak_band=None if r.peak_band is None else (r.peak_band[0] * sy, r.peak_band[1] * sy),
+                 displacement_at_peak=None if r.displacement_at_peak is None else r.displacement_at_peak * sx)
+            for r in references or []]
+
+
+def write_curve(path, history: dict, body: str, force: str, displacement: str, title="", note="", references=None):
     """force_displacement.png: signed curve (curve_data), unconverged steps marked; `note` (e.g. the count and
-    worst residual of the unconverged steps) is added under the title."""
+    worst residual of the unconverged steps) is added under the title; `references`: the case's [[reference]]
+    entries (specs.ReferenceSpec, SI), drawn in the figure's units (reference_data)."""
     c = curve_data(history, body, force, displacement)
     return plot_curve(path, c["x"], c["y"], c["xlabel"], c["ylabel"], title=title,
                       marks=c["unconverged"] if c["unconverged"].any() else None,
-                      marks_label=f"unconverged step ({int(c['unconverged'].sum())})", note=note)
+                      marks_label=f"unconverged step ({int(c['unconverged'].sum())})", note=note,
+                      references=reference_data(references, force, displacement) or None)
 
 
 def body_faces_3d(bodies, amplification: float = 1.0):

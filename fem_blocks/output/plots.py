@@ -32,10 +32,17 @@ def _no_data(ax):
     ax.text(0.5, 0.5, "no data", ha="center", va="center", fontsize=16, color="0.4", transform=ax.transAxes)
 
 
-def plot_curve(path, x, y, xlabel, ylabel, title="", peak=True, marks=None, marks_label="", note=""):
+def plot_curve(path, x, y, xlabel, ylabel, title="", peak=True, marks=None, marks_label="", note="",
+               references=None):
     """Curve y(x) (e.g. force–displacement); with peak=True the point of largest |y| is marked and annotated
     "peak y at x". `marks` (bool, one per point): points drawn as red crosses with a legend entry `marks_label`
-    (e.g. unconverged steps); `note`: a second title line (in red). Non-finite points are skipped. Returns `path`."""
+    (e.g. unconverged steps); `note`: a second title line (in red); `references`: reference curves, bands and
+    peaks in the units of x and y (draw_references). Non-finite points are skipped. Returns `path`."""
+    return _save(curve_figure(x, y, xlabel, ylabel, title, peak, marks, marks_label, note, references), path, 120)
+
+
+def curve_figure(x, y, xlabel, ylabel, title="", peak=True, marks=None, marks_label="", note="", references=None):
+    """The matplotlib Figure of plot_curve (not saved)."""
     x = np.asarray(x, dtype=float).ravel()
     y = np.asarray(y, dtype=float).ravel()
     if x.shape != y.shape:
@@ -45,16 +52,18 @@ def plot_curve(path, x, y, xlabel, ylabel, title="", peak=True, marks=None, mark
         if marks.shape != x.shape:
             raise InputError(f"plot_curve: marks must have one flag per point ({x.size}), got {marks.size}")
     ok = np.isfinite(x) & np.isfinite(y)
-    fig = _figure((6.4, 4.4 if note else 4.2))
+    fig = _figure((6.4, 4.4 if note else 4.2) if not references else (6.4, 4.8 + 0.25 * len(references)))
     ax = fig.add_subplot()
+    if references:  # drawn first, under the model's curve
+        k = int(np.flatnonzero(ok)[np.argmax(np.abs(y[ok]))]) if ok.any() else -1
+        draw_references(ax, references, (1.0 if k < 0 or x[k] >= 0 else -1.0, 1.0 if k < 0 or y[k] >= 0 else -1.0))
     if not ok.any():
         _no_data(ax)
     else:
-        ax.plot(x, y, "-", lw=1.5, color="C0")
+        ax.plot(x, y, "-", lw=1.5, color="C0", label="model" if references else None)
         if marks is not None and (marks & ok).any():
             m = marks & ok
             ax.plot(x[m], y[m], "x", color="red", ms=7, mew=1.8, zorder=4, label=marks_label or "marked")
-            ax.legend(loc="best", fontsize=9)
         if peak:
             k = int(np.flatnonzero(ok)[np.argmax(np.abs(y[ok]))])
             ax.plot([x[k]], [y[k]], "o", color="C3", ms=7, zorder=3)
@@ -64,6 +73,8 @@ def plot_curve(path, x, y, xlabel, ylabel, title="", peak=True, marks=None, mark
                         xytext=(-10 if right else 10, -16 if y[k] >= 0 else 12), ha="right" if right else "left",
                         color="C3", bbox=dict(facecolor="white", alpha=0.8, edgecolor="none", pad=1))
         ax.grid(alpha=0.3)
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend(loc="best", fontsize=7 if references else 9)
     ax.set(xlabel=xlabel, ylabel=ylabel)
     if note:
         ax.set_title(note, color="red", fontsize=9)
@@ -71,7 +82,45 @@ def plot_curve(path, x, y, xlabel, ylabel, title="", peak=True, marks=None, mark
     else:
         ax.set_title(title)
     fig.tight_layout()
-    return _save(fig, path, 120)
+    return fig
+
+
+_REF_COLOURS = ("C2", "C4", "C1", "C5", "C6", "C8", "C9")
+
+
+def draw_references(ax, references, sign=(1.0, 1.0)):
+    """Draw reference data on `ax` (units of the plot), one legend entry each (its label, wrapped): a dict with
+    `label` and `curve` (d, F) -> dashed line; `band` (relative r) -> shaded F(1 ± r) around the curve or the
+    peak; `lower`, `upper` (d, F) -> shaded area between them; the peak-only form `peak` -> dashed horizontal
+    line, `peak_band` (Fmin, Fmax) -> shaded horizontal band, `displacement_at_peak` -> a square marker. Peaks are
+    magnitudes: drawn at sign = (sign of d, sign of F) of the model's peak. Returns the artists drawn."""
+    import textwrap
+    arts = []
+    for i, r in enumerate(references):
+        c = _REF_COLOURS[i % len(_REF_COLOURS)]
+        lab = textwrap.fill(str(r["label"]), 70)
+        if r.get("curve") is not None:
+            d, F = (np.asarray(a, dtype=float) for a in r["curve"])
+            arts += ax.plot(d, F, "--", lw=1.5, color=c, label=lab)
+            if r.get("band") is not None:
+                arts.append(ax.fill_between(d, F * (1 - r["band"]), F * (1 + r["band"]), color=c, alpha=0.18, lw=0))
+            if r.get("lower") is not None:
+                (dl, Fl), (du, Fu) = ((np.asarray(a, dtype=float) for a in r[k]) for k in ("lower", "upper"))
+                arts += ax.fill(np.r_[dl, du[::-1]], np.r_[Fl, Fu[::-1]], color=c, alpha=0.18, lw=0)
+            continue
+        sx, sy = sign
+        P, band = r.get("peak"), r.get("peak_band")
+        if band is None and P is not None and r.get("band") is not None:
+            band = (P * (1 - r["band"]), P * (1 + r["band"]))
+        if band is not None:
+            lo, hi = sorted((sy * band[0], sy * band[1]))
+            arts.append(ax.axhspan(lo, hi, color=c, alpha=0.2, lw=0, label=None if P is not None else lab))
+        if P is not None:
+            arts.append(ax.axhline(sy * P, ls="--", lw=1.3, color=c, label=lab))
+        if r.get("displacement_at_peak") is not None:
+            yp = P if P is not None else 0.5 * (band[0] + band[1])
+            arts += ax.plot([sx * r["displacement_at_peak"]], [sy * yp], "s", color=c, ms=6, zorder=3)
+    return arts
 
 
 def plot_crack_pattern(path, polygons, segments, values, amplification, title="", value_label="damage",

@@ -97,3 +97,39 @@ def write_summary(path, data: dict) -> dict:
     d = _clean(d, "")
     atomic_write_text(path, json.dumps(d, indent=2, allow_nan=False) + "\n")
     return d
+
+
+def reference_comparison(x, y, ref: dict, force_unit: str = "kN", disp_unit: str = "mm",
+                         disp_name: str = "displacement") -> dict:
+    """summary.json "reference" entry: the model's peak against one reference (a dict of figures.reference_data),
+    both in the figure's units. Peaks are magnitudes: model peak F_m = max |y| at d_m = |x| there (finite points);
+    reference peak F_r = max |F| of its curve (d_r = |d| there) or its `peak`. Band [F_lo, F_hi]: `peak_band`,
+    F_r (1 ± band), or (max |lower|, max |upper|). ratio = F_m / F_r, or F_m / ((F_lo + F_hi) / 2) when the
+    reference has a band and no peak (`ratio_to` says which); `inside_band`: F_lo <= F_m <= F_hi (None without a
+    band). Keys carry the units, e.g. `model_peak_kN`, `reference_displacement_at_peak_mm`."""
+    x = np.asarray(x, dtype=float).ravel()
+    y = np.asarray(y, dtype=float).ravel()
+    ok = np.isfinite(x) & np.isfinite(y)
+    Fm = dm = None
+    if ok.any():
+        k = int(np.flatnonzero(ok)[np.argmax(np.abs(y[ok]))])
+        Fm, dm = float(abs(y[k])), float(abs(x[k]))
+    Fr, dr, band = ref.get("peak"), ref.get("displacement_at_peak"), ref.get("peak_band")
+    if ref.get("curve") is not None:
+        d, F = (np.asarray(a, dtype=float) for a in ref["curve"])
+        j = int(np.argmax(np.abs(F)))
+        Fr, dr = float(abs(F[j])), float(abs(d[j]))
+        if ref.get("lower") is not None:
+            band = tuple(sorted(float(np.max(np.abs(np.asarray(ref[k][1], dtype=float)))) for k in ("lower", "upper")))
+    if band is None and Fr is not None and ref.get("band") is not None:
+        band = (max(Fr * (1.0 - ref["band"]), 0.0), Fr * (1.0 + ref["band"]))
+    if Fr is not None:
+        target, to = Fr, "peak"
+    else:
+        target, to = 0.5 * (band[0] + band[1]), "band middle"
+    return {"label": ref["label"], f"reference_peak_{force_unit}": Fr,
+            f"reference_band_{force_unit}": None if band is None else [float(band[0]), float(band[1])],
+            f"reference_{disp_name}_at_peak_{disp_unit}": dr,
+            f"model_peak_{force_unit}": Fm, f"model_{disp_name}_at_peak_{disp_unit}": dm,
+            "ratio": None if Fm is None or not target > 0 else Fm / target, "ratio_to": to,
+            "inside_band": None if band is None or Fm is None else bool(band[0] <= Fm <= band[1])}
