@@ -66,7 +66,7 @@ def history_columns(model: Model) -> list[str]:
             cols += [f"{name}.R{d}" for d in model.dofs]  # 0 on free dofs; stages may drive or free dofs
             cols += [f"{name}.I{d}" for d in model.dofs]  # inertial part of R (dynamics.py docstring)
     if model.contact is not None:
-        cols += ["contacts", "closed", "slip", "sweeps", "change", "residual", "converged"]
+        cols += ["contacts", "closed", "slip", "sweeps", "change", "residual", "converged", "dissipated"]
     return cols
 
 
@@ -88,8 +88,18 @@ def history_row(model: Model, info, stage_index: int, sim=None, h=None) -> dict:
         c = info.contact or {}
         row.update(contacts=c.get("contacts", 0), closed=c.get("active", 0), slip=c.get("slip", 0),
                    sweeps=c.get("sweeps", 0), change=c.get("change", 0.0), residual=c.get("residual", 0.0),
-                   converged=int(c.get("converged", True)))
+                   converged=int(c.get("converged", True)), dissipated=_dissipated(sim))
     return row
+
+
+def _dissipated(sim) -> float:
+    """The contacts' dissipated energy so far [J]: the sum of the law state's S_DISS (decohesion and crushing;
+    friction is not in it), the history column `dissipated`."""
+    res = None if sim is None else sim.last_contact
+    if res is None or res.state is None or len(res.state) == 0:
+        return 0.0
+    from .laws import S_DISS
+    return float(res.state[:, S_DISS].sum())
 
 
 def _new_cstats() -> dict:
@@ -733,6 +743,22 @@ def _unit_key(unit: str) -> str:
     return {"kN·m": "kNm"}.get(unit, unit)
 
 
+def _cycles(hist: dict, body: str, fk: str, dk: str, out_dir: str, title: str) -> dict:
+    """summary.json `cycles` (output/summary.cycles_block) and hysteresis.png (cycles coloured) when the curve's
+    displacement goes both ways; {} for a monotone test."""
+    from .output.figures import dof_unit, write_hysteresis
+    from .output.summary import cycles_block
+    (us, uu, _), (fs, fu, _) = dof_unit(dk), dof_unit(fk)
+    stored = sum(np.asarray(hist[k], float) for k in ("elastic", "kinetic", "gravity_potential") if k in hist)
+    cyc = cycles_block(hist["time"], hist[f"{body}.{dk}"], hist[f"{body}.{fk}"], u_scale=us, u_unit=_unit_key(uu),
+                       f_scale=fs, f_unit=_unit_key(fu), dissipated=hist.get("dissipated"),
+                       stored=stored if np.ndim(stored) else None)
+    if cyc is None:
+        return {}
+    write_hysteresis(os.path.join(out_dir, "hysteresis.png"), hist, body, fk, dk, cyc, title=title)
+    return {"cycles": cyc, "hysteresis": "hysteresis.png"}
+
+
 def _figures(case, sim, model, out_dir, hist: dict, conv=None) -> dict:
     """force_displacement.png and crack_pattern.png, and the curve's peak figures for summary.json (keys named
     with their unit: translations mm / forces kN, rotations rad / moments kN·m; figures.dof_unit). `hist`: the
@@ -759,6 +785,7 @@ def _figures(case, sim, model, out_dir, hist: dict, conv=None) -> dict:
                     f"(t = {conv['worst_time']:.4g} s)")
         write_curve(os.path.join(out_dir, "force_displacement.png"), hist, body, fk, dk, title=case.name, note=note)
         c = curve_data(hist, body, fk, dk)
+        out.update(_cycles(hist, body, fk, dk, out_dir, case.name))
         F, D = np.abs(c["y"]), np.abs(c["x"])  # the peak: largest |force|; magnitudes, as before
         if F.size == 0 or not np.any(np.isfinite(F)):
             return out
