@@ -14,8 +14,8 @@ import re
 
 import pytest
 
-from fem_blocks.specs import (ChecksSpec, ContactOptions, InterfaceSpec, MaterialSpec, OutputSpec, StageSpec,
-                              schema_fields, toml_key)
+from fem_blocks.specs import (ChecksSpec, ContactOptions, CyclicProtocol, InterfaceSpec, MaterialSpec, OutputSpec,
+                              StageSpec, schema_fields, toml_key)
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 DOC = os.path.join(ROOT, "docs", "case-files.md")
@@ -64,7 +64,8 @@ def schema_keys(cls) -> set:
                                         (InterfaceSpec, ["`[[interfaces]]`"]),
                                         (StageSpec, ["`[[stages]]`", "Load protocol"]),
                                         (ChecksSpec, ["`[checks]`"]), (OutputSpec, ["`[output]`"]),
-                                        (MaterialSpec, ["`[materials.NAME]`"])])
+                                        (MaterialSpec, ["`[materials.NAME]`"]),
+                                        (CyclicProtocol, ["Cyclic displacement protocol"])])
 def test_doc_tables_name_exactly_the_schema_keys(cls, heads):
     doc = {}
     for h in heads:
