@@ -12,7 +12,9 @@ summary.json (output/summary.cycles_block).
   along x by the protocol: the block slides at the force μN as soon as it moves (rigid: no elastic branch), so
   every cycle of amplitude a dissipates 4 μ N a (closed form). Tolerance 1e-6 relative: the solver tolerance is
   1e-10 and the inertia the quasi-static step adds to the reaction is m v / h = 1 kg x 1e-4 m/s / 1 s = 1e-4 N
-  against μN = 5000 N (2e-8).
+  against μN = 5000 N (2e-8). The same block on an elastic–brittle joint checks the energy balance of the
+  `cycles` block: energy_J = stored_change_J + dissipated_J (the joint's break energy) + friction work + the step
+  rule's excess on the spring's branch, each in closed form.
 """
 import json
 
@@ -241,3 +243,27 @@ def test_block_sliding_on_coulomb_dissipates_4_mu_n_a_per_cycle(tmp_path):
         assert abs(r["stored_change_J"]) < 1e-6 * r["energy_J"]
     # the energy balance: the only moving driver is block.x, so ∮F du is the drivers' work in the stage
     assert cyc["energy_total_J"] == pytest.approx(s["final_energy"]["driver_work"], rel=1e-6)
+
+
+@pytest.mark.dolfinx
+def test_energy_balance_with_a_brittle_joint(tmp_path):
+    """The same block glued by an elastic–brittle joint (c_T, shear strength s_c, then Coulomb μ; docs/laws.md):
+    the shear spring c_T A u works in parallel with the friction μN while it lasts (u <= s_c / c_T = 0.55 mm, i.e.
+    m = 5 steps of Δu = 0.1 mm) and breaks in the step after, releasing its elastic energy ½ c_T A (m Δu)² into the
+    contacts' `dissipated`. Cycle 1: dissipated_J = ½ c_T A (m Δu)², and energy_J - dissipated_J - stored_change_J =
+    4 μ N a (friction) + ½ c_T A m Δu² (the step rule's excess Σ_k c_T A Δu² k - ½ c_T A (m Δu)² on the spring's
+    branch). Cycle 2: friction only, dissipated_J = 0."""
+    from fem_blocks.runner import run_case
+    N, MU, CT, SC, A, du, m = 10000.0, 0.5, 2e9, 1.1e6, 0.2, 1e-4, 5
+    f = tmp_path / "brittle.toml"
+    f.write_text(SLIDE.format(N=N, MU=MU).replace(f"mu = {MU}", f'law = "brittle"\nmu = {MU}\nc_N = {CT}\n'
+                                                                 f'c_T = {CT}\nr_c = 1e6\ns_c = {SC}'))
+    s = run_case(load_case(str(f)), str(tmp_path / "out"), progress=False)
+    assert s["convergence"]["unconverged_steps"] == 0
+    c1, c2 = s["cycles"]["cycles"]
+    k = CT * A
+    assert c1["dissipated_J"] == pytest.approx(0.5 * k * (m * du) ** 2, rel=1e-9)
+    assert c1["peak_force_pos_kN"] == pytest.approx((k * m * du + MU * N) / 1e3, rel=1e-9)
+    assert c1["energy_J"] - c1["dissipated_J"] - c1["stored_change_J"] == pytest.approx(
+        4 * MU * N * 1e-3 + 0.5 * k * m * du ** 2, rel=1e-6)
+    assert c2["dissipated_J"] == 0.0 and c2["energy_J"] == pytest.approx(4 * MU * N * 2e-3, rel=1e-6)
