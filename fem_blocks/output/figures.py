@@ -171,7 +171,7 @@ def write_hysteresis(path, history: dict, body: str, force: str, displacement: s
     colour and legend entry (number, amplitude, ∮ F du), the rows before the first cycle in grey, unconverged
     steps marked."""
     c = curve_data(history, body, force, displacement)
-    t = np.asarray(history["time"], dtype=float)
+    t = np.asarray(history.get("time", np.arange(len(c["x"]))), dtype=float)
     pieces, labels = [], []
     for cyc in cycles["cycles"]:
         i0 = int(np.searchsorted(t, cyc["t_start"], side="right")) - 1  # the row at or before the start
