@@ -743,6 +743,15 @@ def _unit_key(unit: str) -> str:
     return {"kN·m": "kNm"}.get(unit, unit)
 
 
+def _virgin(x) -> np.ndarray:
+    """Rows of the first loading branch of a displacement record: up to its first reversal (all rows when it
+    never reverses), so that a cyclic test's initial stiffness is not fitted through its unloading branches."""
+    dx = np.diff(np.asarray(x, float))
+    mv = np.flatnonzero(np.abs(dx) > 0)
+    rev = next((j for j in mv if np.sign(dx[j]) != np.sign(dx[mv[0]])), len(dx)) if mv.size else len(dx)
+    return np.arange(len(dx) + 1) <= rev
+
+
 def _cycles(hist: dict, body: str, fk: str, dk: str, out_dir: str, title: str) -> dict:
     """summary.json `cycles` (output/summary.cycles_block) and hysteresis.png (cycles coloured) when the curve's
     displacement goes both ways; {} for a monotone test."""
@@ -803,7 +812,7 @@ def _figures(case, sim, model, out_dir, hist: dict, conv=None) -> dict:
                    for col in others if col.split(".", 1)[1][1:].startswith("r")}
         if moments:
             out["other_moments_at_peak_kNm"] = moments
-        sel = (F > 0) & (F <= 0.4 * F[k]) & (D > 0)
+        sel = (F > 0) & (F <= 0.4 * F[k]) & (D > 0) & _virgin(c["x"])
         out[f"initial_stiffness_{fu}_per_{du}"] = float(np.polyfit(D[sel], F[sel], 1)[0]) \
             if sel.sum() >= 3 else None
         if cv["force"] == "x":

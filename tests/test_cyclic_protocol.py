@@ -170,6 +170,15 @@ def test_monotone_record_has_no_cycles_and_a_cut_cycle_is_flagged():
     assert c["energy_total_J"] == pytest.approx(4e-3, rel=1e-12)
 
 
+def test_initial_stiffness_rows_stop_at_the_first_reversal():
+    """summary.json initial_stiffness is fitted on the virgin loading branch only (runner._virgin): an unloading
+    branch of a cyclic test (stiffer or softer) must not enter the fit; a monotone record keeps every row."""
+    from fem_blocks.runner import _virgin
+    assert _virgin([0, 0, 1, 2, 3, 2, 1, 0, -1]).tolist() == [True] * 5 + [False] * 4
+    assert _virgin([0.0, -1.0, -2.0, -1.0]).tolist() == [True, True, True, False]
+    assert _virgin([0.0, 1.0, 2.0]).all() and _virgin([0.0, 0.0]).all()
+
+
 # ------------------------------------------------------------------------------------------ a real small run
 SLIDE = """
 name = "slide"
