@@ -760,8 +760,8 @@ def _cycles(hist: dict, body: str, fk: str, dk: str, out_dir: str, title: str) -
     (us, uu, _), (fs, fu, _) = dof_unit(dk), dof_unit(fk)
     stored = sum(np.asarray(hist[k], float) for k in ("elastic", "kinetic", "gravity_potential") if k in hist)
     u = np.asarray(hist[f"{body}.{dk}"], float)
-    cyc = cycles_block(hist.get("time", np.arange(len(u), dtype=float)), u, hist[f"{body}.{fk}"], u_scale=us, u_unit=_unit_key(uu),
-                       f_scale=fs, f_unit=_unit_key(fu), dissipated=hist.get("dissipated"),
+    cyc = cycles_block(hist.get("time", np.arange(len(u), dtype=float)), u, hist[f"{body}.{fk}"], u_scale=us,
+                       u_unit=_unit_key(uu), f_scale=fs, f_unit=_unit_key(fu), dissipated=hist.get("dissipated"),
                        stored=stored if np.ndim(stored) else None)
     if cyc is None:
         return {}

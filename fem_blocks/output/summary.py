@@ -1,4 +1,5 @@
-"""summary.json: run summary plus `versions` of the software stack and a UTC ISO `timestamp`, written atomically.
+"""summary.json: run summary plus `versions` of the software stack and a UTC ISO `timestamp`, written atomically;
+`cycles_block`, the `cycles` entry of a cyclic test (per cycle ∮ F du = Σ F_{k+1} Δu_k and the extremes).
 
 numpy scalars and arrays become JSON numbers and lists, non-finite floats (NaN, ±inf) become null, paths
 become strings; any other non-JSON object raises InputError naming its key."""
@@ -152,8 +153,8 @@ def cycles_block(t, u, F, *, u_scale: float = 1e3, u_unit: str = "mm", f_scale: 
 
     A cycle runs from an upward zero crossing of u - u_0 (u_0 = the first value) to its return to zero from below
     (crossings interpolated linearly between rows): with a cyclic protocol 0 -> +a -> -a -> +a ..., one cycle per
-    (+a, -a) pair; |u - u_0| <= 1e-4 max|u - u_0| counts as zero. Per cycle: its times, the extreme displacements and forces of its positive and negative halves
-    (signed, in u_unit/f_unit), and
+    (+a, -a) pair; |u - u_0| <= 1e-4 max|u - u_0| counts as zero. Per cycle: its times, the extreme displacements
+    and forces of its positive and negative halves (signed, in u_unit/f_unit), and
 
         energy_J = ∮ F du = Σ F_{k+1} (u_{k+1} - u_k)   over the steps of the cycle (the part of a step on
                              either side of a crossing with its increment cut there): the work the driver does on
