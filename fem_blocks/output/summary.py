@@ -165,7 +165,7 @@ def cycles_block(t, u, F, *, u_scale: float = 1e3, u_unit: str = "mm", f_scale: 
     `dissipated` (per row, cumulative [J], e.g. the contacts' damage and crushing energy) gives dissipated_J, its
     increment in the cycle; `stored` (per row [J], e.g. elastic + kinetic + gravity energy of the bodies) gives
     stored_change_J. Then energy_J = stored_change_J + the energy the interfaces took (dissipated_J + friction +
-    the joints' elastic energy change) + the work of the other drivers."""
+    the joints' elastic energy change) - the work of the other drivers and of the applied forces."""
     t, u, F = (np.asarray(x, dtype=float).ravel() for x in (t, u, F))
     ok = np.isfinite(t) & np.isfinite(u) & np.isfinite(F)
     extra = {k: np.asarray(v, dtype=float).ravel()[ok] for k, v in (("dissipated", dissipated), ("stored", stored))
