@@ -100,6 +100,15 @@ def test_reversal_between_steps_warns_with_the_value_reached():
     assert len(rev) == 1 and "reversal at t = 1 s (value 0.0005 m)" in rev[0] and "turns at 0.0004" in rev[0]
 
 
+def test_quick_rechecks_the_reversals_on_its_doubled_step():
+    """h = 1 s puts every knot (1, 3, 5, 7, 10, ... s) on a step; --quick (h = 2 s) moves the first off it."""
+    from fem_blocks.case import quick
+    c = _case()
+    assert c.warnings == []
+    q = quick(c)
+    assert len(q.warnings) == 1 and "reversal at t = 1 s" in q.warnings[0] and "h = 2 s" in q.warnings[0]
+
+
 def test_stage_times_shift_the_protocol_and_start_counts():
     c = _case(start=", start = 2.0", duration=26.0, history_times="stage")
     assert c.stages[0].drivers["block"]["x"][1]["times"][0] == 2.0
