@@ -165,8 +165,10 @@ class Table:
                 raise self.error(k, f"not used in dimension {D} (a key of dimension {d} case files); "
                                     f"see docs/case-files.md, 'dimension'")
 
-    def history(self, k: str, dim: str | None, default=None, required=False):
-        """A number or {times = [...], values = [...]} (times strictly increasing)."""
+    def history(self, k: str, dim: str | None, default=None, required=False, protocol: bool = False):
+        """A number or {times = [...], values = [...]} (times strictly increasing); with `protocol` (a displacement
+        driver) also a cyclic protocol {protocol = "cyclic", ...} (specs.CyclicProtocol), returned expanded
+        (cyclic_history): every caller gets a number or {times, values}."""
         self.used.add(k)
         if k not in self.data:
             if required:
@@ -176,6 +178,12 @@ class Table:
         f = self.units[dim] if dim else 1.0
         if isinstance(v, NUMBER) and not isinstance(v, bool) and math.isfinite(v):
             return float(v) * f
+        if isinstance(v, dict) and "protocol" in v:
+            if not protocol:
+                raise self.error(k + ".protocol", "a cyclic protocol is a displacement history: expected it in a "
+                                                  "driver with kind = \"displacement\" (here: a number or "
+                                                  "{times = [...], values = [...]})")
+            return self._protocol(k, dim)
         if isinstance(v, dict):
             t = Table(v, self.key(k), self.source, self.units)
             times = t.raw("times")
@@ -191,6 +199,27 @@ class Table:
             tf = self.units["time"]
             return {"times": [float(x) * tf for x in times], "values": [float(x) * f for x in values]}
         raise self.error(k, f"expected a number or {{times = [...], values = [...]}}, got {v!r}")
+
+    def _protocol(self, k: str, dim: str | None) -> dict:
+        """The cyclic protocol table at key `k` (fields of specs.CyclicProtocol; amplitudes and rate in the unit
+        `dim` of the driven dof) -> the expanded {times, values} (cyclic_history)."""
+        from .specs import CyclicProtocol
+        t = Table(self.data[k], self.key(k), self.source, self.units)
+        f = read_fields(t, CyclicProtocol, ("protocol", "cycles", "start"))
+        md = {x.name: x.metadata for x in schema_fields(CyclicProtocol)}
+        rate = t.number("rate", required=True, lo=md["rate"]["lo"], lo_open=True, dim=dim)
+        t.used.add("amplitudes")
+        if "amplitudes" not in t.data:
+            raise t.missing("amplitudes", "expected " + md["amplitudes"]["expected"])
+        a = t.data["amplitudes"]
+        if (not isinstance(a, list) or not a
+                or any(isinstance(x, bool) or not isinstance(x, NUMBER) or not math.isfinite(x) for x in a)):
+            raise t.error("amplitudes", f"= {a!r}: expected {md['amplitudes']['expected']}")
+        if any(x <= 0 for x in a) or any(y <= x for x, y in zip(a, a[1:])):
+            raise t.error("amplitudes", f"= {a!r}: expected {md['amplitudes']['expected']}")
+        t.done()
+        scale = self.units[dim] if dim else 1.0
+        return cyclic_history([float(x) * scale for x in a], f["cycles"], rate, f["start"])
 
     def table(self, k: str, required=False) -> "Table | None":
         self.used.add(k)
@@ -238,6 +267,22 @@ class Table:
 
 
 _REQUIRED = object()
+
+
+def cyclic_history(amplitudes, cycles: int, rate: float, start: float = 0.0) -> dict:
+    """The one expansion of a cyclic displacement protocol (specs.CyclicProtocol) into a piecewise-linear history
+    with a knot at every reversal: values 0, then (+a, -a) `cycles` times for each amplitude a in order, then 0;
+    times from t_0 = start at the constant rate |du/dt| = rate, t_{j+1} = t_j + |u_{j+1} - u_j| / rate (SI in,
+    {times, values} out; the duration is sum_i 4 cycles a_i / rate)."""
+    values = [0.0]
+    for a in amplitudes:
+        for _ in range(int(cycles)):
+            values += [float(a), -float(a)]
+    values.append(0.0)
+    times = [float(start)]
+    for u0, u1 in zip(values, values[1:]):
+        times.append(times[-1] + abs(u1 - u0) / rate)
+    return {"times": times, "values": values}
 
 
 def _tname(v) -> str:
@@ -671,7 +716,7 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
                 contact=contact, interfaces=interfaces, checks=checks, dimension=D, warnings=warnings,
                 allow_no_interface=allow_pairs, history_times=history_times, generators=generators,
                 references=references)
-    case.warnings += stage_history_warnings(case)
+    case.warnings += stage_history_warnings(case) + reversal_warnings(case)
     return case
 
 
@@ -852,8 +897,9 @@ def _stage_drivers(t: Table, D: int) -> dict:
                     drivers[body][dof] = None
                     continue
                 d = bt_.table(dof)
-                drivers[body][dof] = (d.string("kind", required=True, choices=("velocity", "displacement")),
-                                      d.history("history", None if dof[0] == "r" else "length", required=True))
+                kind = d.string("kind", required=True, choices=("velocity", "displacement"))
+                drivers[body][dof] = (kind, d.history("history", None if dof[0] == "r" else "length", required=True,
+                                                      protocol=kind == "displacement"))
                 d.done()
             bt_.done()
         dtab.done()
@@ -1288,6 +1334,42 @@ def stage_history_warnings(case: Case) -> list:
     return out
 
 
+def reversal_warnings(case: Case) -> list:
+    """Displacement histories set by a stage whose reversals (interior knots where the history changes direction:
+    every knot of a cyclic protocol but the first and last) fall between the steps of that stage (nominal times;
+    the driven value then turns before the knot's value, a silently smaller amplitude), and stop_after_peak on a
+    dof whose driver reverses (it would end the stage at the first unloading)."""
+    out = []
+    times = nominal_stage_times(case)
+    for si, st in enumerate(case.stages):
+        t0, t1 = times[si]
+        off = t0 if case.history_times == "stage" else 0.0
+        for body, dofs in st.drivers.items():
+            for dof, d in dofs.items():
+                if d is None or d[0] != "displacement" or not isinstance(d[1], dict):
+                    continue
+                T, V = np.asarray(d[1]["times"]) + off, np.asarray(d[1]["values"])
+                lab = f"stages[{si}].drivers.{body}.{dof}"
+                rev = [j for j in range(1, len(V) - 1) if (V[j] - V[j - 1]) * (V[j + 1] - V[j]) < 0]
+                if rev and st.stop_after_peak is not None and tuple(st.stop_after_peak[:2]) == (body, dof):
+                    out.append(f"{case.source}: stages[{si}].stop_after_peak: the driver of {body}.{dof} reverses "
+                               f"(at t = {T[rev[0]]:.6g} s): the stage stops at the first unloading once the force "
+                               f"falls below (1 - drop) x its peak; remove stop_after_peak for a cyclic test")
+                for j in rev:
+                    x = (T[j] - t0) / st.h
+                    if not (t0 - 1e-9 <= T[j] <= t1 + 1e-9) or abs(x - round(x)) <= 1e-6:
+                        continue
+                    ts = t0 + st.h * np.array([math.floor(x), math.ceil(x)])
+                    reached = np.interp(ts - off, d[1]["times"], V)
+                    got = reached.max() if V[j] > V[j - 1] else reached.min()
+                    out.append(f"{case.source}: {lab}: the reversal at t = {T[j]:.6g} s (value {V[j]:.4g} "
+                               f"{_unit_of('displacement', dof)}) falls between two steps of stage {st.name!r} "
+                               f"(h = {st.h:.4g} s): the driven value turns at {got:.4g}; choose the rate (or h) so "
+                               f"that every reversal is a whole number of steps from the stage's start")
+                    break  # one line per history
+    return out
+
+
 def _parse_rigid(t: Table, U: dict, rname: str, vertices, D: int = 2) -> RigidSpec:
     """Mass, thickness (2D), inertia, drivers and forces of a rigid body table (dofs of dimension D)."""
     rho = t.number("rho", lo=0, lo_open=True, dim="density")
@@ -1310,7 +1392,8 @@ def _parse_rigid(t: Table, U: dict, rname: str, vertices, D: int = 2) -> RigidSp
                 raise _dof_error(dt, dof, D)
             d = dt.table(dof)
             kind = d.string("kind", required=True, choices=("velocity", "displacement"))
-            hist = d.history("history", None if dof[0] == "r" else "length", required=True)
+            hist = d.history("history", None if dof[0] == "r" else "length", required=True,
+                             protocol=kind == "displacement")
             drivers[dof] = (kind, hist)
             d.done()
         dt.done()
@@ -1398,7 +1481,7 @@ def _parse_wall(w: Table, U: dict, materials, warnings: list, units: str = "SI")
         part, hist = None, None
         if sett is not None:
             part = sett.integer("part", required=True, lo=0, hi=len(cuts))
-            hist = sett.history("history", "length", required=True)
+            hist = sett.history("history", "length", required=True, protocol=True)
             sett.done()
         bodies = []
         for k in range(len(cuts) + 1):
@@ -1446,6 +1529,7 @@ def quick(case: Case, factor: float = 2.0) -> Case:
             body, dof, drop, n = st.stop_after_peak
             st.stop_after_peak = (body, dof, drop, max(1, int(round(n / factor))))
         st.min_steps = max(1, int(round(st.min_steps / factor)))
+    case.warnings += [w for w in reversal_warnings(case) if w not in case.warnings]  # the steps changed
     case.name += " (quick)"
     case.variant = f"quick x{factor:g}"
     return case

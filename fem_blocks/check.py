@@ -107,7 +107,9 @@ def _report(case: Case, model, per_interface: dict) -> list[str]:
             if isinstance(h, dict):
                 off = t0 if case.history_times == "stage" else 0.0
                 what = (f"times {_g(h['times'][0] + off)} to {_g(h['times'][-1] + off)} s, values "
-                        f"{_g(h['values'][0])} to {_g(h['values'][-1])}")
+                        f"{_g(h['values'][0])} to {_g(h['values'][-1])}"
+                        + (f" ({len(h['values'])} knots, between {_g(min(h['values']))} and {_g(max(h['values']))})"
+                           if len(h["values"]) > 2 else ""))
             else:
                 what = f"constant {_g(h)}"
             L.append(f"  {lab}: {kind}, {what}")

@@ -85,7 +85,7 @@ def _run(case_path: str, out: str, quiet: bool, quick: bool = False, resume: boo
         print(f"ParaView files: {os.path.join(os.path.abspath(out), pv)}")
     print(f"history: {os.path.join(os.path.abspath(out), 'history.csv')}; "
           f"summary: {os.path.join(os.path.abspath(out), 'summary.json')}")
-    figs = [summary[k] for k in ("force_displacement", "crack_pattern", "blocks_png") if summary.get(k)]
+    figs = [summary[k] for k in ("force_displacement", "hysteresis", "crack_pattern", "blocks_png") if summary.get(k)]
     if figs:
         print("figures: " + ", ".join(os.path.join(os.path.abspath(out), f) for f in figs))
     if "peak_horizontal_force_kN" in summary and "displacement_at_peak_mm" in summary:

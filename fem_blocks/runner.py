@@ -66,7 +66,7 @@ def history_columns(model: Model) -> list[str]:
             cols += [f"{name}.R{d}" for d in model.dofs]  # 0 on free dofs; stages may drive or free dofs
             cols += [f"{name}.I{d}" for d in model.dofs]  # inertial part of R (dynamics.py docstring)
     if model.contact is not None:
-        cols += ["contacts", "closed", "slip", "sweeps", "change", "residual", "converged"]
+        cols += ["contacts", "closed", "slip", "sweeps", "change", "residual", "converged", "dissipated"]
     return cols
 
 
@@ -88,8 +88,18 @@ def history_row(model: Model, info, stage_index: int, sim=None, h=None) -> dict:
         c = info.contact or {}
         row.update(contacts=c.get("contacts", 0), closed=c.get("active", 0), slip=c.get("slip", 0),
                    sweeps=c.get("sweeps", 0), change=c.get("change", 0.0), residual=c.get("residual", 0.0),
-                   converged=int(c.get("converged", True)))
+                   converged=int(c.get("converged", True)), dissipated=_dissipated(sim))
     return row
+
+
+def _dissipated(sim) -> float:
+    """The contacts' dissipated energy so far [J]: the sum of the law state's S_DISS (decohesion and crushing;
+    friction is not in it), the history column `dissipated`."""
+    res = None if sim is None else sim.last_contact
+    if res is None or res.state is None or len(res.state) == 0:
+        return 0.0
+    from .laws import S_DISS
+    return float(res.state[:, S_DISS].sum())
 
 
 def _new_cstats() -> dict:
@@ -733,6 +743,32 @@ def _unit_key(unit: str) -> str:
     return {"kN·m": "kNm"}.get(unit, unit)
 
 
+def _virgin(x) -> np.ndarray:
+    """Rows of the first loading branch of a displacement record: up to its first reversal (all rows when it
+    never reverses), so that a cyclic test's initial stiffness is not fitted through its unloading branches."""
+    dx = np.diff(np.asarray(x, float))
+    mv = np.flatnonzero(np.abs(dx) > 0)
+    rev = next((j for j in mv if np.sign(dx[j]) != np.sign(dx[mv[0]])), len(dx)) if mv.size else len(dx)
+    return np.arange(len(dx) + 1) <= rev
+
+
+def _cycles(hist: dict, body: str, fk: str, dk: str, out_dir: str, title: str) -> dict:
+    """summary.json `cycles` (output/summary.cycles_block) and hysteresis.png (cycles coloured) when the curve's
+    displacement goes both ways; {} for a monotone test."""
+    from .output.figures import dof_unit, write_hysteresis
+    from .output.summary import cycles_block
+    (us, uu, _), (fs, fu, _) = dof_unit(dk), dof_unit(fk)
+    stored = sum(np.asarray(hist[k], float) for k in ("elastic", "kinetic", "gravity_potential") if k in hist)
+    u = np.asarray(hist[f"{body}.{dk}"], float)
+    cyc = cycles_block(hist.get("time", np.arange(len(u), dtype=float)), u, hist[f"{body}.{fk}"], u_scale=us,
+                       u_unit=_unit_key(uu), f_scale=fs, f_unit=_unit_key(fu), dissipated=hist.get("dissipated"),
+                       stored=stored if np.ndim(stored) else None)
+    if cyc is None:
+        return {}
+    write_hysteresis(os.path.join(out_dir, "hysteresis.png"), hist, body, fk, dk, cyc, title=title)
+    return {"cycles": cyc, "hysteresis": "hysteresis.png"}
+
+
 def _figures(case, sim, model, out_dir, hist: dict, conv=None) -> dict:
     """force_displacement.png and crack_pattern.png, and the curve's peak figures for summary.json (keys named
     with their unit: translations mm / forces kN, rotations rad / moments kN·m; figures.dof_unit). `hist`: the
@@ -767,6 +803,7 @@ def _figures(case, sim, model, out_dir, hist: dict, conv=None) -> dict:
             out["reference"] = [reference_comparison(c["x"], c["y"], r, _unit_key(c["yunit"]), _unit_key(c["xunit"]),
                                                      "rotation" if cv["displacement"].startswith("r") else
                                                      "displacement") for r in reference_data(refs, fk, dk)]
+        out.update(_cycles(hist, body, fk, dk, out_dir, case.name))
         F, D = np.abs(c["y"]), np.abs(c["x"])  # the peak: largest |force|; magnitudes, as before
         if F.size == 0 or not np.any(np.isfinite(F)):
             return out
@@ -783,7 +820,7 @@ def _figures(case, sim, model, out_dir, hist: dict, conv=None) -> dict:
                    for col in others if col.split(".", 1)[1][1:].startswith("r")}
         if moments:
             out["other_moments_at_peak_kNm"] = moments
-        sel = (F > 0) & (F <= 0.4 * F[k]) & (D > 0)
+        sel = (F > 0) & (F <= 0.4 * F[k]) & (D > 0) & _virgin(c["x"])
         out[f"initial_stiffness_{fu}_per_{du}"] = float(np.polyfit(D[sel], F[sel], 1)[0]) \
             if sel.sum() >= 3 else None
         if cv["force"] == "x":

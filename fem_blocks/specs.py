@@ -6,6 +6,7 @@ Each field below is defined once, with its default, unit kind, valid range or ch
 * `InterfaceSpec`  — one `[[interfaces]]` entry: groups, law, friction, joint geometry, law parameters;
 * `SolverOptions`  — the solver's options (`solver.solve(problem, options)`), the `[contact]` table's solver keys;
 * `ContactOptions` — the `[contact]` table: SolverOptions plus contact geometry and non-convergence policy;
+* `CyclicProtocol` — a displacement history given as a cyclic protocol (expanded by `case.cyclic_history`);
 * `StageSpec`      — one `[[stages]]` entry; `StageSpec.changes()` lists what a stage sets, and
   `controls_at(rigid_bodies, stages, k)` folds them (stages accumulate in order) into the control of every
   rigid dof during stage k — the one implementation used by the case checks and by the runner;
@@ -384,6 +385,28 @@ class StageSpec:
         for body, dofs in self.forces.items():
             for dof, hist in dofs.items():
                 yield body, dof, "force", hist
+
+
+@dataclass
+class CyclicProtocol:
+    """A displacement history written as a cyclic protocol, `{protocol = "cyclic", amplitudes = [a1, a2, ...],
+    cycles = n, rate = v}`, accepted wherever a displacement driver history is (`[stages.drivers.BODY]`,
+    `[rigid_bodies.drivers]`, `[wall.beam.drivers]`, `[wall.foundation.settlement]`). `case.cyclic_history` expands
+    it once into the piecewise-linear {times, values} with a knot at every reversal,
+
+        0 -> +a1 -> -a1 -> ... (n cycles of a1) -> +a2 -> -a2 -> ... -> +ak -> -ak -> 0,
+
+    at the constant rate |du/dt| = v (knot times t_{j+1} = t_j + |u_{j+1} - u_j| / v from t_0 = start), so the
+    rest of the engine sees an ordinary history. Total duration sum_i 4 n a_i / v."""
+    protocol: str | None = spec(None, doc="the protocol's kind", choices=("cyclic",), required=True)
+    amplitudes: tuple | None = spec(None, doc="amplitudes a_1 < a_2 < ..., each > 0, in the dof's unit (length; rad "
+                                              "on a rotation dof)", unit="length", lo=0.0, lo_open=True,
+                                    required=True, expected="a list of amplitudes > 0, strictly increasing")
+    cycles: int = spec(1, doc="cycles per amplitude", lo=1)
+    rate: float | None = spec(None, doc="constant displacement rate |du/dt| (length per s; rad/s on a rotation "
+                                        "dof)", unit="length", lo=0.0, lo_open=True, required=True)
+    start: float = spec(0.0, doc="time of the first knot (u = 0) [s]: run time, or from the stage's start with "
+                                 "history_times = \"stage\"", unit="time", lo=0.0)
 
 
 @dataclass(frozen=True)

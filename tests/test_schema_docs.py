@@ -15,8 +15,8 @@ import re
 
 import pytest
 
-from fem_blocks.specs import (ChecksSpec, ContactOptions, InterfaceSpec, MaterialSpec, OutputSpec, ReferenceSpec,
-                              StageSpec, schema_fields, toml_key)
+from fem_blocks.specs import (ChecksSpec, ContactOptions, CyclicProtocol, InterfaceSpec, MaterialSpec, OutputSpec,
+                              ReferenceSpec, StageSpec, schema_fields, toml_key)
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 DOC = os.path.join(ROOT, "docs", "case-files.md")
@@ -66,7 +66,8 @@ def schema_keys(cls) -> set:
                                         (StageSpec, ["`[[stages]]`", "Load protocol"]),
                                         (ChecksSpec, ["`[checks]`"]), (OutputSpec, ["`[output]`"]),
                                         (MaterialSpec, ["`[materials.NAME]`"]),
-                                        (ReferenceSpec, ["`[[reference]]`"])])
+                                        (ReferenceSpec, ["`[[reference]]`"]),
+                                        (CyclicProtocol, ["Cyclic displacement protocol"])])
 def test_doc_tables_name_exactly_the_schema_keys(cls, heads):
     doc = {}
     for h in heads:

@@ -7,7 +7,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from .plots import plot_crack_pattern, plot_curve, plot_polygons_3d, plot_polygons_3d_pyvista
+from .plots import plot_crack_pattern, plot_curve, plot_hysteresis, plot_polygons_3d, plot_polygons_3d_pyvista
 
 
 def _loop(edges: np.ndarray) -> np.ndarray:
@@ -185,6 +185,27 @@ def write_curve(path, history: dict, body: str, force: str, displacement: str, t
                       marks=c["unconverged"] if c["unconverged"].any() else None,
                       marks_label=f"unconverged step ({int(c['unconverged'].sum())})", note=note,
                       references=reference_data(references, force, displacement) or None)
+
+
+def write_hysteresis(path, history: dict, body: str, force: str, displacement: str, cycles: dict, title=""):
+    """hysteresis.png: the signed curve (curve_data) with each cycle of `cycles` (summary.cycles_block) in its own
+    colour and legend entry (number, amplitude, ∮ F du), the rows before the first cycle in grey, unconverged
+    steps marked."""
+    c = curve_data(history, body, force, displacement)
+    t = np.asarray(history.get("time", np.arange(len(c["x"]))), dtype=float)
+    pieces, labels = [], []
+    for cyc in cycles["cycles"]:
+        i0 = int(np.searchsorted(t, cyc["t_start"], side="right")) - 1  # the row at or before the start
+        i1 = min(int(np.searchsorted(t, cyc["t_end"], side="left")), len(t) - 1)  # at or after the end
+        amp = max(abs(cyc[f"displacement_pos_{c['xunit']}"]), abs(cyc[f"displacement_neg_{c['xunit']}"])) \
+            if f"displacement_pos_{c['xunit']}" in cyc else float("nan")
+        pieces.append((max(i0, 0), i1))
+        labels.append(f"cycle {cyc['index']}: ±{amp:.3g} {c['xunit']}, {cyc['energy_J']:.3g} J"
+                      + ("" if cyc["complete"] else " (incomplete)"))
+    bad = c["unconverged"]
+    return plot_hysteresis(path, c["x"], c["y"], pieces, labels, c["xlabel"], c["ylabel"],
+                           title=f"{title}: {cycles['count']} cycles, ∮F du = {cycles['energy_total_J']:.3g} J",
+                           marks=bad if bad.any() else None, marks_label=f"unconverged step ({int(bad.sum())})")
 
 
 def body_faces_3d(bodies, amplification: float = 1.0):

@@ -123,6 +123,43 @@ def draw_references(ax, references, sign=(1.0, 1.0)):
     return arts
 
 
+def plot_hysteresis(path, x, y, pieces, labels, xlabel, ylabel, title="", marks=None, marks_label=""):
+    """Hysteresis loops: the curve y(x) drawn piece by piece, `pieces` a list of (i0, i1) point ranges (inclusive),
+    piece k coloured along a sequential colour map and named `labels[k]` in the legend (e.g. "cycle 3: ±2 mm,
+    41 J"); the points outside every piece in grey (e.g. the pre-compression). `marks` (bool per point): red
+    crosses (unconverged steps). Returns `path`."""
+    x = np.asarray(x, dtype=float).ravel()
+    y = np.asarray(y, dtype=float).ravel()
+    if x.shape != y.shape:
+        raise InputError(f"plot_hysteresis: x and y must have the same length, got {x.size} and {y.size}")
+    if len(labels) != len(pieces):
+        raise InputError(f"plot_hysteresis: expected one label per piece ({len(pieces)}), got {len(labels)}")
+    fig = _figure((7.2, 5.0))
+    ax = fig.add_subplot()
+    ok = np.isfinite(x) & np.isfinite(y)
+    if not ok.any():
+        _no_data(ax)
+    else:
+        from matplotlib import colormaps
+        cmap = colormaps["viridis"]
+        ax.plot(x[ok], y[ok], "-", lw=0.8, color="0.75", zorder=1)
+        n = max(len(pieces), 1)
+        for k, ((i0, i1), lab) in enumerate(zip(pieces, labels)):
+            sl = slice(int(i0), int(i1) + 1)
+            ax.plot(x[sl], y[sl], "-", lw=1.4, color=cmap(0.9 * k / max(n - 1, 1)), label=lab, zorder=2)
+        if marks is not None:
+            m = np.asarray(marks, dtype=bool).ravel() & ok
+            if m.any():
+                ax.plot(x[m], y[m], "x", color="red", ms=6, mew=1.5, zorder=4, label=marks_label or "marked")
+        ax.axhline(0.0, color="0.5", lw=0.6)
+        ax.axvline(0.0, color="0.5", lw=0.6)
+        ax.grid(alpha=0.3)
+        ax.legend(loc="upper left", fontsize=7, ncol=1 if n <= 8 else 2, framealpha=0.85)
+    ax.set(xlabel=xlabel, ylabel=ylabel, title=title)
+    fig.tight_layout()
+    return _save(fig, path, 120)
+
+
 def plot_crack_pattern(path, polygons, segments, values, amplification, title="", value_label="damage",
                        widths=None, width_note=""):
     """Deformed block outlines (displacements already amplified by `amplification`) and joint/contact
