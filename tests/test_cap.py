@@ -279,16 +279,17 @@ def test_hardening_softening_cap_under_imposed_closure(solver):
     #                                          on the softening branch Δκ = Δd / (1 + σ_c'/k), σ_c' < 0)
 
 
-def test_hardening_cap_dissipates_its_closed_form():
+@pytest.mark.parametrize("dim", [2, 3])
+def test_hardening_cap_dissipates_its_closed_form(dim):
     """Closure increments δ driven through commit_step (rigid joint: Δu_p = the closure): the dissipation is the left
     Riemann sum of σ_c, and to completion (n δ ≫ κ_p + G_fc/f_c) it tends to
     κ_p (f_ci + (π/4)(f_c - f_ci)) + G_fc per unit area (G_fc counts the softening branch only); here within the
-    left-sum bound δ × (total variation 2 f_c - f_ci)."""
+    left-sum bound δ × (total variation 2 f_c - f_ci). The same in 3D (state rows of NSTATE3 columns)."""
     from fem_blocks.laws import commit_step, initial_state, cap_stress
     kp, G, fci, area, h, theta = 1e-3, 5000.0, 0.4 * FC, 0.01, 1.0, 1.0
     code, p = law_parameters("coulomb", dict(mu=0.6, f_c=FC, G_fc=G, kappa_p=kp, f_ci=fci), "j")
     law, par = np.array([code]), p[None, :].copy()
-    st = initial_state(law)
+    st = initial_state(law, dim=dim)
     du, n = 5e-6, 12000                                # κ up to 0.06 m = κ_p + 11.8 G/f_c
     ref = 0.0
     for _ in range(n):
@@ -296,9 +297,11 @@ def test_hardening_cap_dissipates_its_closed_form():
         fc = cap_stress(par[0], st[0])
         assert fc == pytest.approx(cap_closed_form(kap, FC, fci, kp, G), rel=1e-12)
         ref += fc * area * du
-        P = np.array([h * fc * area, 0.0])             # at the cap
-        v = np.array([-du / (h * theta), 0.0])         # closes by du in the step
-        commit_step(law, par, st, np.zeros(1), np.zeros((1, 2)), P, v, np.array([area]), h, theta)
+        P = np.zeros(dim)
+        P[0] = h * fc * area                           # at the cap
+        v = np.zeros(dim)
+        v[0] = -du / (h * theta)                       # closes by du in the step
+        commit_step(law, par, st, np.zeros(1), np.zeros((1, dim)), P, v, np.array([area]), h, theta)
     assert st[0, S_DISS] == pytest.approx(ref, rel=1e-12)
     total = area * (kp * (fci + np.pi / 4 * (FC - fci)) + G)
     tail = area * G * np.exp(-FC * (n * du - kp) / G)  # energy left beyond the last closure
