@@ -32,6 +32,10 @@ the joint closes further; the closure u_p <= 0 (state S_UP) shifts the contact s
 so unloading does not spring back), the laws see the elastic jump u - u_p, and f_c A |Δu_p| is dissipated.
 With a compressive fracture energy `G_fc` [J/m²] the cap softens exponentially with the committed closure:
 f_c(u_p) = f_c exp(-f_c |u_p| / G_fc) (∫ f_c(u_p) d|u_p| = G_fc), floored at CAP_FLOOR f_c (`cap_stress`).
+With a plastic closure at the peak `kappa_p` κ_p [m] the cap first hardens from `f_ci` (default f_c/3) to f_c,
+f_c(κ) = f_ci + (f_c - f_ci) sqrt(2κ/κ_p - κ²/κ_p²) for κ = |u_p| < κ_p, then softens from the peak:
+f_c exp(-f_c (κ - κ_p)/G_fc) (G_fc counts the softening branch only: the whole crushing dissipates
+κ_p (f_ci + (π/4)(f_c - f_ci)) + G_fc per unit area).
 
 Compression: Signorini is always kept on r̃. For coulomb, brittle and fremond it is rigid (g - g0 >= 0); the
 elastic and mixed laws have a compliant joint in compression (stiffness c_N, k_n): g̃ + r̃_N/(k A) >= 0 ⊥
@@ -51,8 +55,8 @@ LAW_NAMES = {"coulomb": COULOMB, "elastic": ELASTIC, "brittle": BRITTLE, "dugdal
              "fremond": FREMOND, "mixed": MIXED}
 # parameter columns (per unit area)
 P_MU, P_CN, P_CT, P_RC, P_SC, P_LC, P_W, P_B, P_P, P_MUR, P_MUKIND, P_FT, P_C, P_GI, P_GII, P_SOFT, P_FC, P_ETA, \
-    P_GFC = range(19)
-NPAR = 19
+    P_GFC, P_KP, P_FCI = range(21)
+NPAR = 21
 # state columns; 3D (u = (u_N, u_T, u_S)) appends the second tangential jump S_US, the 2D columns stay in place
 S_BETA, S_UN, S_UT, S_DISS, S_HIST, S_BROKEN, S_UP = range(7)
 NSTATE = 7
@@ -64,7 +68,7 @@ LAW_KEYS = _specs.LAW_KEYS  # the parameters each law takes (specs.LAW_PARAMS, t
 # parameter name -> column of the parameter vector (mixed: k_n, k_s, tan_phi share the columns of c_N, c_T, mu)
 _COLUMNS = dict(mu=P_MU, c_N=P_CN, c_T=P_CT, r_c=P_RC, s_c=P_SC, l_c=P_LC, w=P_W, b=P_B, p=P_P, mu_r=P_MUR,
                 k_n=P_CN, k_s=P_CT, f_t=P_FT, c=P_C, G_I=P_GI, G_II=P_GII, tan_phi=P_MU, damage_viscosity=P_ETA,
-                f_c=P_FC, G_fc=P_GFC)
+                f_c=P_FC, G_fc=P_GFC, kappa_p=P_KP, f_ci=P_FCI)
 
 
 def pack(law: str, values: dict) -> tuple[int, np.ndarray]:
@@ -106,13 +110,28 @@ CAP_FLOOR = 1e-6  # a softened cap never drops below CAP_FLOOR f_c (a zero cap w
 
 @njit(cache=True)
 def cap_stress(par, st):
-    """Current compressive strength of the cap [Pa] (0: no cap): f_c, or with a compressive fracture energy
-    G_fc > 0 the exponential softening f_c max(exp(-f_c |u_p| / G_fc), CAP_FLOOR) of the committed plastic
-    closure u_p = st[S_UP] <= 0 (explicit in the step: the cap of a step is that of the committed state)."""
+    """Current compressive strength of the cap [Pa] (0: no cap) at the committed plastic closure κ = |u_p|,
+    u_p = st[S_UP] <= 0 (explicit in the step: the cap of a step is that of the committed state):
+
+    * hardening (κ_p = `kappa_p` > 0, κ < κ_p): f_ci + (f_c - f_ci) sqrt(2κ/κ_p - κ²/κ_p²), from f_ci at κ = 0
+      to the peak f_c at κ = κ_p (Lourenço's cap hardening, with κ the plastic closure);
+    * then, with a compressive fracture energy G_fc > 0, the exponential softening measured from the peak,
+      f_c max(exp(-f_c (κ - κ_p) / G_fc), CAP_FLOOR) (κ_p = 0: from κ = 0); without G_fc, f_c (perfectly plastic).
+
+    κ_p = 0 evaluates the expression of the cap without hardening (same arithmetic, bitwise)."""
     fc = par[P_FC]
-    if fc <= 0.0 or par[P_GFC] <= 0.0:
+    if fc <= 0.0:
         return fc
-    return fc * max(np.exp(-fc * abs(st[S_UP]) / par[P_GFC]), CAP_FLOOR)
+    k = abs(st[S_UP])
+    kp = par[P_KP]
+    if kp > 0.0:
+        if k < kp:
+            x = k / kp
+            return par[P_FCI] + (fc - par[P_FCI]) * np.sqrt(x * (2.0 - x))
+        k = k - kp
+    if par[P_GFC] <= 0.0:
+        return fc
+    return fc * max(np.exp(-fc * k / par[P_GFC]), CAP_FLOOR)
 
 
 @njit(cache=True)

@@ -162,6 +162,14 @@ LAW_PARAMS: dict[str, LawParam] = {
                      "compressive fracture energy (softening cap; needs f_c)", lo_open=True,
                      expected="compressive fracture energy G_fc > 0 [J/m^2] (omit: perfectly plastic cap)",
                      finite=True),
+    "kappa_p": LawParam("length", dict(coulomb=0.0, elastic=0.0, brittle=0.0, fremond=0.0, mixed=0.0),
+                        "plastic closure at the cap's peak: the cap hardens from f_ci to f_c over it (needs f_c; "
+                        "omit: no hardening)", lo_open=True,
+                        expected="plastic closure at the peak of the cap kappa_p > 0 [m] (omit: no hardening)",
+                        finite=True),
+    "f_ci": LawParam("stress", dict(coulomb=0.0, elastic=0.0, brittle=0.0, fremond=0.0, mixed=0.0),
+                     "initial cap of the hardening branch, f_ci <= f_c (needs kappa_p; omit: f_c/3)", lo_open=True,
+                     expected="initial cap f_ci > 0 [Pa] (omit: f_c/3)", finite=True),
 }
 LAWS = ("coulomb", "elastic", "brittle", "fremond", "mixed")
 # the parameters each law accepts, from the table
@@ -211,6 +219,21 @@ def validate_law_params(law: str, params: dict, name: str) -> dict:
         get("G_fc")
     else:
         out["G_fc"] = 0.0
+    if "kappa_p" in params:
+        if "f_c" not in params:
+            raise InputError(f"{name}.kappa_p: needs the compressive strength f_c [Pa] (kappa_p is the plastic "
+                             "closure at the cap's peak f_c)")
+        get("kappa_p")
+        if "f_ci" in params:
+            if get("f_ci") > out["f_c"]:
+                raise InputError(f"{name}.f_ci = {out['f_ci']:g}: expected f_ci <= f_c = {out['f_c']:g} Pa (the cap "
+                                 "hardens from f_ci to f_c)")
+        else:
+            out["f_ci"] = out["f_c"] / 3.0
+    elif "f_ci" in params:
+        raise InputError(f"{name}.f_ci: needs kappa_p [m] (f_ci is the start of the cap's hardening branch)")
+    else:
+        out["kappa_p"] = out["f_ci"] = 0.0
     if law == "mixed":
         for k in ("k_n", "k_s", "f_t", "c", "G_I", "G_II", "tan_phi", "softening", "damage_viscosity"):
             get(k)
