@@ -359,7 +359,7 @@ def test_micro_model_files_use_the_named_model():
     parameters that could drift), or the Frémond–Cangémi files not labelled as the thesis' model."""
     model = os.path.join(ROOT, "demos", "base", "lourenco_rots_1997.toml")
     for n in ("shear_wall_p030", "shear_wall_p121", "shear_wall_p212", "shear_wall_p030_unsplit",
-              "shear_wall_p121_unsplit", "shear_wall_p212_unsplit"):
+              "shear_wall_p121_unsplit", "shear_wall_p212_unsplit", "shear_wall_hollow_p030"):
         _, src = casefile.read(os.path.join(ROOT, "demos", f"{n}.toml"), LAW_KEYS)
         assert os.path.abspath(model) in [os.path.abspath(f) for f in src.files], n
         with open(os.path.join(ROOT, "demos", f"{n}.toml"), "rb") as f:
@@ -369,6 +369,33 @@ def test_micro_model_files_use_the_named_model():
         with open(path, encoding="utf-8") as f:
             assert "THESIS' MODEL" in f.readline(), n
         assert "thesis' model" in load_case(path).name, n
+
+
+def test_hollow_wall_opening_as_asked():
+    """Bug caught: the hollow wall's opening not built (openings ignored or rejected on a `courses` wall), built larger
+    or toothed, or leaving less pier or fewer courses than the case file states. Expected by hand from the file's
+    comment: clear opening [0.33, 0.31, 0.66, 0.682] m, courses 5 to 10 cut (5 whole courses above and below), piers
+    0.33 m wide on each side in every cut course, no brick inside the opening, no warning."""
+    from fem_blocks.expand import expand
+    case = expand(load_case(os.path.join(ROOT, "demos", "shear_wall_hollow_p030.toml")))
+    assert case.warnings == []
+    assert len(case.notes) == 1 and "built 0.33 x 0.372 m" in case.notes[0] and "courses 5 to 10 cut" in case.notes[0]
+    assert "toothed" not in case.notes[0]
+    lx = {n: t.lx for n, t in case.block_types.items()}
+    x0, y0, x1, y1 = 0.33, 0.31, 0.66, 0.682
+    per_course = {}
+    for b in case.blocks:
+        bx, by, L = b.position[0], b.position[1], lx[b.type]
+        assert bx + L <= x0 + 1e-9 or bx >= x1 - 1e-9 or by + 0.062 <= y0 + 1e-9 or by >= y1 - 1e-9, b.name
+        per_course.setdefault(round(by / 0.062), []).append((bx, L))
+    assert sorted(per_course) == list(range(16))
+    for c, blocks in per_course.items():
+        width = sum(L for _, L in blocks)
+        if 5 <= c <= 10:   # piers: 0 to 0.33 and 0.66 to 0.99 m, full
+            assert width == pytest.approx(0.66, abs=1e-9), c
+            assert sum(L for x, L in blocks if x < 0.5) == pytest.approx(0.33, abs=1e-9), c
+        else:
+            assert width == pytest.approx(0.99, abs=1e-9), c
 
 
 def test_demo_bases_are_not_listed_as_demos():
