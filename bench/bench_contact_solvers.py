@@ -1,4 +1,4 @@
-"""Contact solvers on the shear wall (demos/shear_wall.toml): NLGS vs global Newton on the same steps.
+"""Contact solvers on the shear wall (demos/shear_wall_fc_p030.toml): NLGS vs global Newton on the same steps.
 
 Runs the pre-compression stage and the first BENCH_STEPS (default 40) steps of the push with each solver,
 the residual criterion at tol 1e-6, and reports per solver: wall time per step, iterations (Newton) or sweeps
@@ -25,7 +25,7 @@ HEADING = "## Contact solvers on the shear wall (NLGS vs Newton)"
 
 
 def run(solver: str, placement: str, n_push: int, max_sweeps: int):
-    case = load_case(os.path.join(ROOT, "demos", "shear_wall.toml"))
+    case = load_case(os.path.join(ROOT, "demos", "shear_wall_fc_p030.toml"))
     case.contact = dataclasses.replace(case.contact, solver=solver, criterion="residual", tol=1e-6,
                                        max_sweeps=max_sweeps, check_every=10)
     for itf in case.interfaces:

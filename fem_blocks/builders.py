@@ -184,8 +184,9 @@ def cut_opening(blocks, opening, brick_length, joint, expanded, name):
     min_piece = 0.25 * brick_length
     tol = 1e-9 * brick_length  # a piece of exactly a quarter brick is kept on both sides (rounding of x0 - b.x)
     out = []
-    for b in blocks:
-        if b.y >= oy1 or b.y + b.height <= oy0 or b.x >= ox1 or b.x + b.length <= ox0:
+    eps = 1e-9 * max(1.0, wx1 - wx0, wy1 - wy0)  # as opening_extent: a block touching the opening is not in it
+    for b in blocks:                               # (11 x 0.062 m = 0.68199... must not cut the course at 0.682 m)
+        if b.y >= oy1 - eps or b.y + b.height <= oy0 + eps or b.x >= ox1 - eps or b.x + b.length <= ox0 + eps:
             out.append(b)
             continue
         left = ox0 - b.x - (gap if b.x < ox0 else 0.0)

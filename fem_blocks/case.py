@@ -1450,8 +1450,9 @@ def _parse_wall(w: Table, U: dict, materials, warnings: list, units: str = "SI")
                  position=w.vector("position", 2, (0.0, 0.0), dim="length"),
                  group=w.string("group", "bricks"))
     x0 = g.position[0]
-    if kind == "running_bond":
+    if kind in ("running_bond", "courses"):
         g.openings = _openings(w, U, "[x0, y0, x1, y1] rectangles [m]")
+    if kind == "running_bond":
         g.courses = w.integer("courses", required=True, lo=1, hi=2000)
         g.bricks_per_course = w.integer("bricks_per_course", required=True, lo=1, hi=2000)
         g.half_bricks = w.boolean("half_bricks", True)

@@ -80,6 +80,10 @@ def _wall(g: WallSpec, out: _Out):
             _opening_report(out, g, i, op, builders.opening_extent(lay, op, joint, expanded))
     elif g.kind == "courses":
         lay = builders.courses(g.rows, L, H, joint, expanded, name=f"{name}.rows")
+        for i, op in enumerate(g.openings):
+            lay = builders.cut_opening(lay, op, L, joint, expanded, f"{name}.openings[{i}]")
+        for i, op in enumerate(g.openings):
+            _opening_report(out, g, i, op, builders.opening_extent(lay, op, joint, expanded))
     else:
         lay = builders.stack_prism(g.bricks, L, H, joint, expanded, name=name)
     if g.split_bricks:

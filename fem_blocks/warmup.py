@@ -16,10 +16,10 @@ import sys
 import tempfile
 import time
 
-# Demos chosen for the kernels they reach: Frémond-Cangémi joints with the global Newton (shear_wall),
-# the mixed-mode law with its softening cap and viscous damage, brick cracks (shear_wall_p030_mixed_split),
+# Demos chosen for the kernels they reach: Frémond-Cangémi joints with the global Newton (shear_wall_fc_p030),
+# the mixed-mode law with its softening cap and viscous damage, brick cracks (shear_wall_p030, the micro-model),
 # dry 2D Coulomb joints with NLGS (arch), dry 3D joints (wall3d_push).
-DEMOS = ("shear_wall.toml", "shear_wall_p030_mixed_split.toml", "arch.toml", "wall3d_push.toml")
+DEMOS = ("shear_wall_fc_p030.toml", "shear_wall_p030.toml", "arch.toml", "wall3d_push.toml")
 STEPS_PER_STAGE = 2
 
 

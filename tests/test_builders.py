@@ -47,6 +47,23 @@ def test_opening_cuts_blocks_and_keeps_area():
         assert b.x + b.length <= 0.4 + 1e-12 or b.x >= 0.8 - 1e-12 or b.y + b.height <= 0.1 + 1e-12 or b.y >= 0.3 - 1e-12
 
 
+def test_opening_side_on_an_inexact_course_face_cuts_no_extra_course():
+    """Bug caught: cut_opening compared the course faces exactly while opening_extent (the report) used a tolerance:
+    with 62 mm courses the face of course 11 is 11 x 0.062 = 0.68199... m in floating point, so an opening asked up
+    to 0.682 m removed a brick of course 11 that the report said was untouched. Expected by hand: the opening
+    [0.33, 0.31, 0.66, 0.682] of a 4.5-brick wall (220 x 62 mm expanded bricks) meets courses 5 to 10 only and
+    removes one block per course (one brick inside, one cut to a half)."""
+    rows = [[1, 1, 1, 1, 0.5], [0.5, 1, 1, 1, 1]] * 8
+    lay = B.courses(rows, 0.21, 0.052, 0.01, expanded=True)
+    cut = B.cut_opening(lay, (0.33, 0.31, 0.66, 0.682), 0.21, 0.01, True, "wall.openings[0]")
+    per_course = lambda bl, c: sorted((round(b.x, 9), round(b.length, 9)) for b in bl if b.course == c)
+    for c in range(16):
+        if 5 <= c <= 10:
+            assert len(per_course(cut, c)) == len(per_course(lay, c)) - 1, c
+        else:
+            assert per_course(cut, c) == per_course(lay, c), c
+
+
 def test_lmgc90_window_wall_courses():
     """The benchmark wall of bench/ (LMGC90's deformable-brick example): explicit courses with gaps."""
     g = {"gap": 0.2}

@@ -13,7 +13,7 @@ from fem_blocks.expand import expand
 from fem_blocks.runner import _dof_control, _vertical_force
 
 from _paths import ROOT  # noqa: E402
-DEMO = casefile.read(os.path.join(ROOT, "demos", "shear_wall.toml"), LAW_KEYS)[0]  # with its base, laws resolved
+DEMO = casefile.read(os.path.join(ROOT, "demos", "shear_wall_fc_p030.toml"), LAW_KEYS)[0]  # with its base, laws resolved
 
 
 def fake_history(stage, time, ry):
@@ -21,7 +21,7 @@ def fake_history(stage, time, ry):
 
 
 def test_blocked_vertical_dof_reports_the_reaction():
-    case = expand(parse_case(copy.deepcopy(DEMO), "shear_wall.toml"))
+    case = expand(parse_case(copy.deepcopy(DEMO), "shear_wall_fc_p030.toml"))
     hist = fake_history([0, 0, 1, 1], [0.15, 0.4, 0.5, 0.9], [0.0, 0.0, -41234.5, -81234.5])
     # pre-compression: y free under the ramp 0 -> -29.7 kN over [0, 0.3] s (applied force, reaction column 0)
     assert _vertical_force(case, hist, "beam", 0) == pytest.approx(-14.85, rel=1e-12)
