@@ -1,10 +1,11 @@
 """fem_blocks: deformable-block masonry with Non-Smooth Contact Dynamics on FEniCSx.
 
 Importing the package first points numba's on-disk cache at a directory named by a hash of the package's
-numba modules (`_numba_cache_dir`; docs/stack-facts.md §4). numba keys a cached kernel on its own file only: a kernel that inlines a
-function of another module (nlgs.py calling laws.cap_stress, ...) would otherwise be loaded stale after that other
-module changed (e.g. after a `git pull`), and compute with the old law — silently. With the hash, any change to
-any numba module recompiles every kernel once (the warm-up, `python -m fem_blocks.warmup`, about 2 min).
+numba modules (`_numba_cache_dir`; docs/stack-facts.md §4). numba keys a cached kernel on its own file only: a
+kernel that inlines a function of another module (nlgs.py calling laws.cap_stress, ...) would otherwise be loaded
+stale after that other module changed (e.g. after a `git pull`), and compute with the old law — silently. With the
+hash, any change to any numba module recompiles every kernel once (the warm-up, `python -m fem_blocks.warmup`,
+about 2 min).
 """
 import hashlib as _hashlib
 import os as _os
