@@ -45,7 +45,11 @@ P̃ = P + h A r_adh(u), v' = v + cmp P̃_N e_N (u = u_eff + hθ v; cmp = 1/(h²�
 tension too so that F is continuous where u_N changes sign: at every solution P̃_N = 0 in tension, the same
 solutions as the branch-wise natural map), J = D' + E' W by the chain rule. The mixed-mode damage is evaluated
 inside the iteration, D(u) = max(D_committed, D(λ(u))), with its derivative in J (consistent tangent, no outer
-staggered loop); Frémond's β is staggered (docs/laws.md, "Integration in the global Newton").
+staggered loop); Frémond's β is staggered (docs/laws.md, "Integration in the global Newton"). In that coupled pass
+the contacts with a compliant normal law (cmp > 0) use `compliant_rows` instead of the Alart–Curnier rows (the
+compressive impulse as a function of the jump: F_N = P̃_N - min(k_c⟨-u_N⟩₊/(hθ), cap), no ρ_N), and its fallbacks
+and stall restarts take no Gauss–Seidel sweeps (measured on split-brick walls: docs/benchmarks.md, "Split-brick
+steps: where the iterations go").
 Gain-scaled line search (docs/laws.md, "Residual of the transformed problem"): σ_α,i = 1 + S_α,i W_αα,ii is the
 gain of row i of F on the contact's own impulse (S = h²θ A k of the adhesive part at the start of the solve). When
 the Armijo search on ½‖F‖² fails, a second one on ½‖Σ⁻¹F‖² (rows divided by σ: measured on P rather than on
@@ -73,9 +77,6 @@ from ..laws import MIXED, P_CN, P_CT, S_BETA, S_BROKEN, cap_stress, compression_
 from ..linalg import BlockCSR, lu_solve, matvec_bcsr
 from . import nlgs
 from .problem import SolverResult
-
-
-COUPLED_RESTARTS = 3  # the coupled damage-inside pass gives up after this many stall restarts (10 iterations each)
 
 
 def _rho(W: BlockCSR):
@@ -248,7 +249,7 @@ def _cohesive_terms(law, par, st, x, ueff, v, area, h, theta, S, c, mue, cmp, ca
 
 
 def _newton(W: BlockCSR, q, mu, r, tol, max_iter, gs, max_sweeps_total, coh=None, memory=1, stall_window=0,
-            fallback_sweeps=10, stall_sweeps=20, max_restarts=None, probe=None):
+            fallback_sweeps=10, stall_sweeps=20, probe=None):
     """Core iteration (2D or 3D by W.dim). coh = (law, par, st, x, ueff, area, h, theta, inside) for interface laws
     (2D only), else None: x fixed, except with inside = True, where the mixed-mode damage follows the jump
     (x_α = D(u), consistent tangent, see _cohesive_terms). `gs(r, k)` runs k Gauss–Seidel sweeps from r ->
@@ -359,7 +360,6 @@ def _newton(W: BlockCSR, q, mu, r, tol, max_iter, gs, max_sweeps_total, coh=None
     eps_min, eps_max = 1e-12 * wdiag, 1e-1 * wdiag
     eps = 1e-6 * wdiag
     merits = []  # merits of the last iterates (non-monotone line search)
-    n_restart = 0
     best, last = res, 0  # stagnation watch: residual and iteration of the last halving (or restart)
     while res > tol and n_it < max_iter and n_gs < max_sweeps_total:
         r0_it = r
@@ -411,16 +411,14 @@ def _newton(W: BlockCSR, q, mu, r, tol, max_iter, gs, max_sweeps_total, coh=None
         res = residual(r, u)
         if probe is not None:
             probe(dict(it=n_it, r=r0_it, F=F, J=J, t=t if accepted else 0.0, res=res, gs=n_gs, eps=eps_it / wdiag,
-                       rn=rn, rt=rt, x=None if coh is None else coh[3].copy(),
+                       D=D, E=E, rn=rn, rt=rt, x=None if coh is None else coh[3].copy(),
                        Ffun=lambda r_: fun(r_, Wsp @ r_ + q), restore=lambda: residual(r, u)))
         if stall_window:
             if res <= 0.5 * best:
                 best, last = res, n_it
             elif n_it - last >= stall_window and res > tol and n_gs < max_sweeps_total:
-                n_restart += 1
-                if max_restarts is not None and n_restart > max_restarts:
-                    break  # a failing pass, detected early: the caller falls back
-                r, k = gs(r, stall_sweeps) if stall_sweeps else (r, 0)  # stagnating (wandering between cases): Gauss–Seidel moves them, then restart
+                # stagnating (wandering between cases): Gauss–Seidel moves them, then restart
+                r, k = gs(r, stall_sweeps) if stall_sweeps else (r, 0)
                 n_gs += k
                 n_fb += 1
                 u = Wsp @ r + q
@@ -476,8 +474,10 @@ def solve_cohesive_newton(W: BlockCSR, q, mu, law, par, st, ueff, area, h: float
     function, with the consistent tangent dP̃/dv = diag(S) + T (T: the damage term, laws.mixed_damage_gradient).
     Newton then solves the coupled problem at once; the residual is the natural map at x = D(u). Other laws
     (Frémond β) and damage_inside = False: staggered — Newton at fixed x, then x updated from the converged jumps
-    (Aitken-relaxed), until x stops changing. The coupled pass restarts (20 Gauss–Seidel sweeps, regularisation
-    reset) when 10 iterations have not halved its residual; if it ends above the tolerance (`max_iter`), the
+    (Aitken-relaxed), until x stops changing. The coupled pass writes the rows of compliant contacts as functions
+    of the jump (`compliant_rows`), takes no Gauss–Seidel sweeps after a failed line search (the regularisation
+    grows) and restarts (regularisation and merit memory reset) when 10 iterations have not halved its residual;
+    if it ends above the tolerance (`max_iter`), the
     staggered iteration takes over from the committed damage and the Gauss–Seidel start (message says so): it
     selects the least damaged solution where a large step makes the coupled iteration jump between branches of
     the softening law. The whole step is bounded by `max_total_iter` Newton iterations (default 10 x max_iter) and
@@ -541,7 +541,7 @@ def solve_cohesive_newton(W: BlockCSR, q, mu, law, par, st, ueff, area, h: float
         r, u, i1, g1, f1, change, res = _newton(W, q, mu, r, tol, min(max_iter, budget - n_it), gs,
                                                 max_sweeps_total - n_gs, coh, stall_window=10 if inside else 0,
                                                 fallback_sweeps=0 if inside else 10, stall_sweeps=0 if inside else 20,
-                                                max_restarts=COUPLED_RESTARTS if inside else None, probe=probe)
+                                                probe=probe)
         n_it, n_gs, n_fb = n_it + i1, n_gs + g1, n_fb + f1
         if inside and res > tol:
             # the coupled iteration did not converge (e.g. a load step large enough to jump onto the softening
