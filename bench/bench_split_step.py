@@ -144,6 +144,8 @@ def main(argv=None):
     s = sub.add_parser("solve")
     s.add_argument("paths", nargs="+")
     s.add_argument("--staggered", action="store_true", help="damage_inside = False (staggered only)")
+    s.add_argument("--ac-rows", action="store_true", help="coupled pass with the Alart-Curnier rows for compliant "
+                   "contacts (newton.COMPLIANT_ROWS = False)")
     t = sub.add_parser("trace")
     t.add_argument("path")
     t.add_argument("--fd-every", type=int, default=0)
@@ -155,6 +157,7 @@ def main(argv=None):
     if a.cmd == "capture":
         save = "all" if a.save == "all" else {int(v) for v in a.save.split(",") if v}
         return capture(a.dir, save, cli_args)
+    newton.COMPLIANT_ROWS = not a.ac_rows
     solve(a.paths, a.staggered)
     return 0
 

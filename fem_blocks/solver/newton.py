@@ -79,6 +79,9 @@ from . import nlgs
 from .problem import SolverResult
 
 
+COMPLIANT_ROWS = True  # coupled pass: compliant_rows for the compliant contacts (False: Alart–Curnier rows; bench)
+
+
 def _rho(W: BlockCSR):
     """ρ_N = 1/W_αα,NN, ρ_T = 1/W_αα,TT (3D: 2/(W_T1T1 + W_T2T2)); 1/max|W| where a diagonal entry vanishes."""
     d = W.blocks[W.diag_pos]
@@ -323,7 +326,7 @@ def _newton(W: BlockCSR, q, mu, r, tol, max_iter, gs, max_sweeps_total, coh=None
             if inside:  # damage inside: dP̃/dv = diag(S) + T
                 E += np.einsum("kij,kjl->kil", D, T)
         cm = cmp > 0.0  # coupled pass: compliant normal laws' rows as functions of the jump (compliant_rows)
-        if inside and np.any(cm):
+        if inside and COMPLIANT_ROWS and np.any(cm):
             o2 = compliant_rows(Pt, u_, coh[4][:, 0], coh[6], coh[7], cmp, capv, mue, rt, S, T, jacobian)
             F2 = o2[0] if jacobian else o2
             F = F.copy()
@@ -346,7 +349,7 @@ def _newton(W: BlockCSR, q, mu, r, tol, max_iter, gs, max_sweeps_total, coh=None
         # (module docstring, "Interface laws")
         dg = W.blocks[W.diag_pos]
         sig = 1.0 + S * np.column_stack([dg[:, 0, 0], dg[:, 1, 1]])
-        if inside and np.any(cmp > 0.0):  # a compliant normal row (compliant_rows): gain of its compression branch
+        if inside and COMPLIANT_ROWS and np.any(cmp > 0.0):  # a compliant normal row (compliant_rows): gain of its compression branch
             kc = np.where(cmp > 0.0, 1.0 / np.where(cmp > 0.0, cmp, 1.0), 0.0)
             sig[:, 0] = 1.0 + np.maximum(S[:, 0], kc) * dg[:, 0, 0]
     res = residual(r, u)
