@@ -80,6 +80,7 @@ from .problem import SolverResult
 
 
 COMPLIANT_ROWS = True  # coupled pass: compliant_rows for the compliant contacts (False: Alart–Curnier rows; bench)
+RETRY_AC_ROWS = True  # a failed compliant coupled pass is retried with the Alart–Curnier rows before the staggered one
 
 
 def _rho(W: BlockCSR):
@@ -252,7 +253,7 @@ def _cohesive_terms(law, par, st, x, ueff, v, area, h, theta, S, c, mue, cmp, ca
 
 
 def _newton(W: BlockCSR, q, mu, r, tol, max_iter, gs, max_sweeps_total, coh=None, memory=1, stall_window=0,
-            fallback_sweeps=10, stall_sweeps=20, probe=None):
+            fallback_sweeps=10, stall_sweeps=20, compliant=False, probe=None):
     """Core iteration (2D or 3D by W.dim). coh = (law, par, st, x, ueff, area, h, theta, inside) for interface laws
     (2D only), else None: x fixed, except with inside = True, where the mixed-mode damage follows the jump
     (x_α = D(u), consistent tangent, see _cohesive_terms). `gs(r, k)` runs k Gauss–Seidel sweeps from r ->
@@ -326,7 +327,7 @@ def _newton(W: BlockCSR, q, mu, r, tol, max_iter, gs, max_sweeps_total, coh=None
             if inside:  # damage inside: dP̃/dv = diag(S) + T
                 E += np.einsum("kij,kjl->kil", D, T)
         cm = cmp > 0.0  # coupled pass: compliant normal laws' rows as functions of the jump (compliant_rows)
-        if inside and COMPLIANT_ROWS and np.any(cm):
+        if inside and compliant and np.any(cm):
             o2 = compliant_rows(Pt, u_, coh[4][:, 0], coh[6], coh[7], cmp, capv, mue, rt, S, T, jacobian)
             F2 = o2[0] if jacobian else o2
             F = F.copy()
@@ -349,7 +350,7 @@ def _newton(W: BlockCSR, q, mu, r, tol, max_iter, gs, max_sweeps_total, coh=None
         # (module docstring, "Interface laws")
         dg = W.blocks[W.diag_pos]
         sig = 1.0 + S * np.column_stack([dg[:, 0, 0], dg[:, 1, 1]])
-        if inside and COMPLIANT_ROWS and np.any(cmp > 0.0):  # a compliant normal row (compliant_rows): gain of its compression branch
+        if inside and compliant and np.any(cmp > 0.0):  # compliant_rows: a normal row has its compression gain
             kc = np.where(cmp > 0.0, 1.0 / np.where(cmp > 0.0, cmp, 1.0), 0.0)
             sig[:, 0] = 1.0 + np.maximum(S[:, 0], kc) * dg[:, 0, 0]
     res = residual(r, u)
@@ -532,6 +533,7 @@ def solve_cohesive_newton(W: BlockCSR, q, mu, law, par, st, ueff, area, h: float
     omega, res_prev = 1.0, None
     budget = max_total_iter if max_total_iter is not None else 10 * max_iter
     res = np.inf
+    rows = "compliant" if COMPLIANT_ROWS else "ac"
     for _ in range(max_outer):  # `budget` Newton iterations and max_sweeps_total sweeps bound the whole step
         if n_it >= budget or n_gs >= max_sweeps_total:
             break
@@ -544,8 +546,15 @@ def solve_cohesive_newton(W: BlockCSR, q, mu, law, par, st, ueff, area, h: float
         r, u, i1, g1, f1, change, res = _newton(W, q, mu, r, tol, min(max_iter, budget - n_it), gs,
                                                 max_sweeps_total - n_gs, coh, stall_window=10 if inside else 0,
                                                 fallback_sweeps=0 if inside else 10, stall_sweeps=0 if inside else 20,
-                                                probe=probe)
+                                                compliant=rows == "compliant", probe=probe)
         n_it, n_gs, n_fb = n_it + i1, n_gs + g1, n_fb + f1
+        if inside and res > tol and rows == "compliant" and RETRY_AC_ROWS:
+            # a second coupled pass with the Alart–Curnier rows, from the committed damage and the Gauss–Seidel start
+            # (measured: the late softening steps where the compliant rows fail, docs/benchmarks.md)
+            rows = "ac"
+            x[:] = st[:, S_BETA]
+            r = r_start.copy()
+            continue
         if inside and res > tol:
             # the coupled iteration did not converge (e.g. a load step large enough to jump onto the softening
             # branch): the staggered iteration from the committed state instead, which selects the least
