@@ -481,7 +481,8 @@ def solve_cohesive_newton(W: BlockCSR, q, mu, law, par, st, ueff, area, h: float
     (Aitken-relaxed), until x stops changing. The coupled pass writes the rows of compliant contacts as functions
     of the jump (`compliant_rows`), takes no Gauss–Seidel sweeps after a failed line search (the regularisation
     grows) and restarts (regularisation and merit memory reset) when 10 iterations have not halved its residual;
-    if it ends above the tolerance (`max_iter`), the
+    if it ends above the tolerance (`max_iter`), a second coupled pass with the Alart–Curnier rows
+    (RETRY_AC_ROWS), from the committed damage and the Gauss–Seidel start; if that one fails too, the
     staggered iteration takes over from the committed damage and the Gauss–Seidel start (message says so): it
     selects the least damaged solution where a large step makes the coupled iteration jump between branches of
     the softening law. The whole step is bounded by `max_total_iter` Newton iterations (default 10 x max_iter) and
