@@ -7,7 +7,12 @@
     python bench/bench_split_step.py capture DIR [--save 5,12,...|all] -- run CASE.toml --out OUT --quick [--resume]
 
     # re-solve saved problems with solve_cohesive_newton (this tree) and print one line per problem
-    python bench/bench_split_step.py solve DIR/call_0012.npz [...] [--staggered]
+    # (--staggered: damage_inside = False; --ac-rows: the coupled pass with the Alart–Curnier rows)
+    python bench/bench_split_step.py solve DIR/call_0012.npz [...] [--staggered] [--ac-rows]
+
+    # one problem, one line per Newton iteration: residual, step length, regularisation, share of ‖F‖² on the
+    # crack contacts (k_n >= 1e12), and every K iterations the Jacobian against central finite differences
+    python bench/bench_split_step.py trace DIR/call_0012.npz [--fd-every K]
 
 Used for docs/benchmarks.md, "Split-brick steps: where the iterations go". The iteration counts are the numbers to
 compare (robust under machine load); wall times depend on the load of the shared machine.
@@ -67,7 +72,7 @@ def capture(out_dir, save, cli_args):
         res, x = orig(W, q, mu, law, par, st, ueff, area, h, theta, r0=r0, **kw)
         rec = dict(call=k[0], h=float(h), n=int(W.n), seconds=round(time.perf_counter() - t0, 3),
                    residual=float(res.residual), converged=bool(res.converged),
-                   cracks_damaged=int(np.sum((law == 5) & (x > st[:, 0]))), **parse_message(res.message))
+                   damaging=int(np.sum((law == 5) & (x > st[:, 0]))), **parse_message(res.message))
         log.write(json.dumps(rec) + "\n")
         log.flush()
         return res, x
