@@ -45,7 +45,11 @@ P̃ = P + h A r_adh(u), v' = v + cmp P̃_N e_N (u = u_eff + hθ v; cmp = 1/(h²�
 tension too so that F is continuous where u_N changes sign: at every solution P̃_N = 0 in tension, the same
 solutions as the branch-wise natural map), J = D' + E' W by the chain rule. The mixed-mode damage is evaluated
 inside the iteration, D(u) = max(D_committed, D(λ(u))), with its derivative in J (consistent tangent, no outer
-staggered loop); Frémond's β is staggered (docs/laws.md, "Integration in the global Newton").
+staggered loop); Frémond's β is staggered (docs/laws.md, "Integration in the global Newton"). In that coupled pass
+the contacts with a compliant normal law (cmp > 0) use `compliant_rows` instead of the Alart–Curnier rows (the
+compressive impulse as a function of the jump: F_N = P̃_N - min(k_c⟨-u_N⟩₊/(hθ), cap), no ρ_N), and its fallbacks
+and stall restarts take no Gauss–Seidel sweeps (measured on split-brick walls: docs/benchmarks.md, "Split-brick
+steps: where the iterations go").
 Gain-scaled line search (docs/laws.md, "Residual of the transformed problem"): σ_α,i = 1 + S_α,i W_αα,ii is the
 gain of row i of F on the contact's own impulse (S = h²θ A k of the adhesive part at the start of the solve). When
 the Armijo search on ½‖F‖² fails, a second one on ½‖Σ⁻¹F‖² (rows divided by σ: measured on P rather than on
@@ -73,6 +77,10 @@ from ..laws import MIXED, P_CN, P_CT, S_BETA, S_BROKEN, cap_stress, compression_
 from ..linalg import BlockCSR, lu_solve, matvec_bcsr
 from . import nlgs
 from .problem import SolverResult
+
+
+COMPLIANT_ROWS = True  # coupled pass: compliant_rows for the compliant contacts (False: Alart–Curnier rows; bench)
+RETRY_AC_ROWS = True  # a failed compliant coupled pass is retried with the Alart–Curnier rows before the staggered one
 
 
 def _rho(W: BlockCSR):
@@ -157,6 +165,53 @@ def alart_curnier_3d(r, u, mu, rn, rt, jacobian=False):
     return F, D, E
 
 
+def compliant_rows(Pt, v, ueffN, h, theta, cmp, capv, mue, rt, S, T, jacobian=False):
+    """Rows of F for contacts with a compliant normal law (cmp > 0: elastic, mixed), where the compressive normal
+    impulse is a function of the jump, not a complementarity: with u_N = u_eff,N + hθ v_N and k_c = 1/cmp = h²θ k A,
+
+        P̃_c = min(k_c ⟨-u_N⟩₊/(hθ), h f_c A)                 (compliant Signorini g̃ + r̃_N/(kA) >= 0 ⊥ r̃_N >= 0,
+                                                              solved for r̃_N; the cap),
+        F_N = P̃_N - P̃_c,
+        F_T = P̃_T - P_[-μ P̃_c, μ P̃_c](P̃_T - ρ_T v_T),
+
+    P̃ = P + S v + c (S, c: the adhesive part of the branch of u_N, tension: u_N > 1e-15 as in _cohesive_terms).
+    Same zeros as the Alart–Curnier rows of (P̃, v') (the normal-compliance complementarity has the unique solution
+    P̃_N = P̃_c), without their case switch at x_N = P̃_N - ρ_N v'_N = 0, which does not coincide with the switch of
+    the adhesive branch at u_N = 0 (docs/laws.md, "Integration in the global Newton"). Returns F (2n,) and, if
+    asked, the 2×2 blocks D, E of J = D + E W directly in (P, v) (dP̃/dv = diag(S) + T).
+    Vectorised over all contacts; the caller uses the rows where cmp > 0."""
+    P2 = Pt.reshape(-1, 2)
+    V = v.reshape(-1, 2)
+    uN = ueffN + h * theta * V[:, 0]
+    comp = ~(uN > 1e-15)
+    kc = np.where(cmp > 0.0, 1.0 / np.where(cmp > 0.0, cmp, 1.0), 0.0)
+    Pc_raw = np.where(comp, np.maximum(-uN, 0.0) / (h * theta) * kc, 0.0)
+    capped = Pc_raw >= capv
+    Pc = np.minimum(Pc_raw, capv)
+    FN = P2[:, 0] - Pc
+    xT = P2[:, 1] - rt * V[:, 1]
+    lim = mue * Pc
+    stick = (np.abs(xT) <= lim) & (lim > 0.0)
+    sgn = np.sign(xT)
+    FT = np.where(stick, rt * V[:, 1], P2[:, 1] - lim * sgn)
+    F = np.column_stack([FN, FT]).ravel()
+    if not jacobian:
+        return F
+    n = len(cmp)
+    dPc = np.where(comp & ~capped & (uN < 0.0), -kc, 0.0)  # dP̃_c/dv_N
+    D = np.zeros((n, 2, 2))
+    E = np.zeros((n, 2, 2))
+    D[:, 0, 0] = 1.0
+    E[:, 0, 0] = S[:, 0] + T[:, 0, 0] - dPc
+    E[:, 0, 1] = T[:, 0, 1]
+    sl = ~stick
+    E[stick, 1, 1] = rt[stick]
+    D[sl, 1, 1] = 1.0
+    E[sl, 1, 0] = T[sl, 1, 0] - (mue * sgn * dPc)[sl]
+    E[sl, 1, 1] = S[sl, 1] + T[sl, 1, 1]
+    return F, D, E
+
+
 @njit(cache=True)
 def _cohesive_terms(law, par, st, x, ueff, v, area, h, theta, S, c, mue, cmp, capv, inside, T):
     """Per contact at fixed internal variables x: P̃ = P + S v + c (adhesive impulse h A r_adh(u), u = u_eff + hθ v),
@@ -197,7 +252,8 @@ def _cohesive_terms(law, par, st, x, ueff, v, area, h, theta, S, c, mue, cmp, ca
                 cmp[a] = 1.0 / (h * h * theta * kc)
 
 
-def _newton(W: BlockCSR, q, mu, r, tol, max_iter, gs, max_sweeps_total, coh=None, memory=1, stall_window=0):
+def _newton(W: BlockCSR, q, mu, r, tol, max_iter, gs, max_sweeps_total, coh=None, memory=1, stall_window=0,
+            fallback_sweeps=10, stall_sweeps=20, compliant=False, probe=None):
     """Core iteration (2D or 3D by W.dim). coh = (law, par, st, x, ueff, area, h, theta, inside) for interface laws
     (2D only), else None: x fixed, except with inside = True, where the mixed-mode damage follows the jump
     (x_α = D(u), consistent tangent, see _cohesive_terms). `gs(r, k)` runs k Gauss–Seidel sweeps from r ->
@@ -205,6 +261,8 @@ def _newton(W: BlockCSR, q, mu, r, tol, max_iter, gs, max_sweeps_total, coh=None
     - 2e-4 t ½‖F(r)‖² (1: monotone Armijo).
     `stall_window` > 0: when that many iterations have not halved the residual, 20 Gauss–Seidel sweeps and a
     restart (ε and the merit memory reset), counted as a fallback.
+    `probe` (diagnostics, bench/bench_split_step.py): called once per iteration as probe(event) with a dict (the
+    iterate, F, J, the step length, the residual after the step, and the function F(r) for finite differences).
     Returns (r, u, iterations, sweeps, fallbacks, change, residual)."""
     n = W.n
     dim = W.dim
@@ -253,9 +311,33 @@ def _newton(W: BlockCSR, q, mu, r, tol, max_iter, gs, max_sweeps_total, coh=None
         Fs = F / sig.ravel()
         return f, 0.5 * float(Fs @ Fs)
 
-    def merit(r_, u_):
+
+    def fun(r_, u_, jacobian=False):
+        """F (and the blocks D, E of J = D + E W in (P, v)) of the iterate (r_, u_)."""
         Pt, vp = transformed(r_, u_)
-        return merits_of(ac(Pt, vp))
+        out = ac(Pt, vp, jacobian=jacobian)
+        if coh is None:
+            return out
+        F = out[0] if jacobian else out
+        D = E = None
+        if jacobian:  # chain rule through P̃ = P + S v + c, v' = v + C P̃: J = D' + E' W
+            D, E = out[1].copy(), out[2]
+            D[:, :, 0] += E[:, :, 0] * cmp[:, None]
+            E = D * S[:, None, :] + E
+            if inside:  # damage inside: dP̃/dv = diag(S) + T
+                E += np.einsum("kij,kjl->kil", D, T)
+        cm = cmp > 0.0  # coupled pass: compliant normal laws' rows as functions of the jump (compliant_rows)
+        if inside and compliant and np.any(cm):
+            o2 = compliant_rows(Pt, u_, coh[4][:, 0], coh[6], coh[7], cmp, capv, mue, rt, S, T, jacobian)
+            F2 = o2[0] if jacobian else o2
+            F = F.copy()
+            F.reshape(-1, 2)[cm] = F2.reshape(-1, 2)[cm]
+            if jacobian:
+                D[cm], E[cm] = o2[1][cm], o2[2][cm]
+        return (F, D, E) if jacobian else F
+
+    def merit(r_, u_):
+        return merits_of(fun(r_, u_))
 
     u = Wsp @ r + q
     sig = None
@@ -268,6 +350,9 @@ def _newton(W: BlockCSR, q, mu, r, tol, max_iter, gs, max_sweeps_total, coh=None
         # (module docstring, "Interface laws")
         dg = W.blocks[W.diag_pos]
         sig = 1.0 + S * np.column_stack([dg[:, 0, 0], dg[:, 1, 1]])
+        if inside and compliant and np.any(cmp > 0.0):  # compliant_rows: a normal row has its compression gain
+            kc = np.where(cmp > 0.0, 1.0 / np.where(cmp > 0.0, cmp, 1.0), 0.0)
+            sig[:, 0] = 1.0 + np.maximum(S[:, 0], kc) * dg[:, 0, 0]
     res = residual(r, u)
     change = 0.0
     n_it = n_gs = n_fb = 0
@@ -281,14 +366,8 @@ def _newton(W: BlockCSR, q, mu, r, tol, max_iter, gs, max_sweeps_total, coh=None
     merits = []  # merits of the last iterates (non-monotone line search)
     best, last = res, 0  # stagnation watch: residual and iteration of the last halving (or restart)
     while res > tol and n_it < max_iter and n_gs < max_sweeps_total:
-        Pt, vp = transformed(r, u)
-        F, D, E = ac(Pt, vp, jacobian=True)
-        if coh is not None:  # chain rule through P̃ = P + S v + c, v' = v + C P̃: J = D' + E' W
-            D = D.copy()
-            D[:, :, 0] += E[:, :, 0] * cmp[:, None]
-            E = D * S[:, None, :] + E
-            if inside:  # damage inside: dP̃/dv = diag(S) + T
-                E += np.einsum("kij,kjl->kil", D, T)
+        r0_it = r
+        F, D, E = fun(r, u, jacobian=True)
         f0, f0s = merits_of(F)
         merits.append(f0)
         del merits[:-memory]
@@ -296,6 +375,7 @@ def _newton(W: BlockCSR, q, mu, r, tol, max_iter, gs, max_sweeps_total, coh=None
         Jb = np.einsum("kij,kjl->kil", E[rows], W.blocks)
         Jb[W.diag_pos] += D + eps * E
         J = sp.bsr_matrix((Jb, W.indices, W.indptr), shape=(dim * n, dim * n))
+        eps_it = eps
         n_it += 1
         dr = lu_solve(J, -F)  # SuperLU on small systems, MUMPS on large ones; None if J is singular
         ok = dr is not None
@@ -328,16 +408,21 @@ def _newton(W: BlockCSR, q, mu, r, tol, max_iter, gs, max_sweeps_total, coh=None
         else:  # not a descent direction here: Gauss–Seidel moves the cases, then Newton again
             eps = min(eps_max, eps * 100.0)
             merits.clear()
-            r, k = gs(r, 10)
+            r, k = gs(r, fallback_sweeps) if fallback_sweeps else (r, 0)
             n_gs += k
             n_fb += 1
             u = Wsp @ r + q
         res = residual(r, u)
+        if probe is not None:
+            probe(dict(it=n_it, r=r0_it, F=F, J=J, t=t if accepted else 0.0, res=res, gs=n_gs, eps=eps_it / wdiag,
+                       D=D, E=E, rn=rn, rt=rt, x=None if coh is None else coh[3].copy(),
+                       Ffun=lambda r_: fun(r_, Wsp @ r_ + q), restore=lambda: residual(r, u)))
         if stall_window:
             if res <= 0.5 * best:
                 best, last = res, n_it
             elif n_it - last >= stall_window and res > tol and n_gs < max_sweeps_total:
-                r, k = gs(r, 20)  # stagnating (wandering between cases): Gauss–Seidel moves them, then restart
+                # stagnating (wandering between cases): Gauss–Seidel moves them, then restart
+                r, k = gs(r, stall_sweeps) if stall_sweeps else (r, 0)
                 n_gs += k
                 n_fb += 1
                 u = Wsp @ r + q
@@ -382,7 +467,7 @@ def solve_newton(W: BlockCSR, q, mu, r0=None, tol: float = 1e-8, max_iter: int =
 def solve_cohesive_newton(W: BlockCSR, q, mu, law, par, st, ueff, area, h: float, theta: float, r0=None,
                           tol: float = 1e-8, max_iter: int = 200, gs_sweeps: int = 20,
                           max_sweeps_total: int = 100000, max_outer: int = 1000, max_total_iter: int | None = None,
-                          damage_inside: bool = True):
+                          damage_inside: bool = True, probe=None):
     """Newton for the contact problem with interface laws (laws.py), same contract as nlgs.solve_cohesive.
     At fixed internal variables x (β, damage) each law is piecewise linear in the jump u = u_eff + hθ v (tension /
     compression branches), so the transformed problem P̃ = P + S v + c, v' = v + cmp P̃_N e_N keeps the
@@ -393,12 +478,16 @@ def solve_cohesive_newton(W: BlockCSR, q, mu, law, par, st, ueff, area, h: float
     function, with the consistent tangent dP̃/dv = diag(S) + T (T: the damage term, laws.mixed_damage_gradient).
     Newton then solves the coupled problem at once; the residual is the natural map at x = D(u). Other laws
     (Frémond β) and damage_inside = False: staggered — Newton at fixed x, then x updated from the converged jumps
-    (Aitken-relaxed), until x stops changing. The coupled pass restarts (20 Gauss–Seidel sweeps, regularisation
-    reset) when 10 iterations have not halved its residual; if it ends above the tolerance (`max_iter`), the
+    (Aitken-relaxed), until x stops changing. The coupled pass writes the rows of compliant contacts as functions
+    of the jump (`compliant_rows`), takes no Gauss–Seidel sweeps after a failed line search (the regularisation
+    grows) and restarts (regularisation and merit memory reset) when 10 iterations have not halved its residual;
+    if it ends above the tolerance (`max_iter`), a second coupled pass with the Alart–Curnier rows
+    (RETRY_AC_ROWS), from the committed damage and the Gauss–Seidel start; if that one fails too, the
     staggered iteration takes over from the committed damage and the Gauss–Seidel start (message says so): it
     selects the least damaged solution where a large step makes the coupled iteration jump between branches of
     the softening law. The whole step is bounded by `max_total_iter` Newton iterations (default 10 x max_iter) and
     `max_sweeps_total` fallback sweeps over all passes; beyond, it reports non-convergence.
+    `probe`: diagnostics hook of every Newton iteration (see _newton).
     Returns (SolverResult, trial internal variables)."""
     q, mu, r = _prepare(W, q, mu, r0, tol)
     law = np.ascontiguousarray(law, dtype=np.int64)
@@ -445,15 +534,28 @@ def solve_cohesive_newton(W: BlockCSR, q, mu, law, par, st, ueff, area, h: float
     omega, res_prev = 1.0, None
     budget = max_total_iter if max_total_iter is not None else 10 * max_iter
     res = np.inf
+    rows = "compliant" if COMPLIANT_ROWS else "ac"
     for _ in range(max_outer):  # `budget` Newton iterations and max_sweeps_total sweeps bound the whole step
         if n_it >= budget or n_gs >= max_sweeps_total:
             break
         mode["inside"] = inside
         relax = (law == FREMOND) | ((law == MIXED) & (not inside))
         coh = (law, par, st, x, ueff, area, float(h), float(theta), inside)
+        # coupled pass: no Gauss–Seidel sweeps in its fallbacks and restarts (regularisation and merit memory reset
+        # only): at fixed trial damage they threw near-converged iterates of split-brick walls back by up to 4
+        # orders of magnitude (docs/benchmarks.md, "Split-brick steps")
         r, u, i1, g1, f1, change, res = _newton(W, q, mu, r, tol, min(max_iter, budget - n_it), gs,
-                                                max_sweeps_total - n_gs, coh, stall_window=10 if inside else 0)
+                                                max_sweeps_total - n_gs, coh, stall_window=10 if inside else 0,
+                                                fallback_sweeps=0 if inside else 10, stall_sweeps=0 if inside else 20,
+                                                compliant=rows == "compliant", probe=probe)
         n_it, n_gs, n_fb = n_it + i1, n_gs + g1, n_fb + f1
+        if inside and res > tol and rows == "compliant" and RETRY_AC_ROWS:
+            # a second coupled pass with the Alart–Curnier rows, from the committed damage and the Gauss–Seidel start
+            # (measured: the late softening steps where the compliant rows fail, docs/benchmarks.md)
+            rows = "ac"
+            x[:] = st[:, S_BETA]
+            r = r_start.copy()
+            continue
         if inside and res > tol:
             # the coupled iteration did not converge (e.g. a load step large enough to jump onto the softening
             # branch): the staggered iteration from the committed state instead, which selects the least
