@@ -15,7 +15,7 @@ message), the share of time in the contact solve (solver + law commit), detectio
 problem, the velocity corrections, the free-velocity solves, outputs (history, ParaView, checkpoints, snapshots)
 and, separately, the time and iterations of the attempts that "refine"/"adaptive" threw away (the calls of
 Simulation.step between a snapshot and the restore that undid them). --steps N cuts every stage to its first N
-steps; --resume-from copies DIR (a run's output directory with a checkpoint,
+steps (resumed: N more steps in the checkpoint's stage); --resume-from copies DIR (a run's output directory with a checkpoint,
 e.g. the end of the pre-compression) into the output and resumes from it (--force: the cut case differs from the
 one that wrote it); --set contact.KEY=VALUE (TOML value) changes a [contact] key, stages.NAME.KEY=VALUE a stage key.
 """
@@ -65,6 +65,23 @@ def _toml_value(text):
     return tomllib.loads(f"v = {text}")["v"]
 
 
+def _reopen_stage(out, case):
+    """A window run ends its (cut) stage: when the checkpoint in `out` closed a stage before the case's own end of
+    it, reopen it (stage_done false, its summary entry dropped) so that the resumed run goes on in that stage."""
+    import numpy as np
+    from fem_blocks.output.checkpoint import latest_checkpoint, write_checkpoint
+    _, ck = latest_checkpoint(out)
+    si, k = int(ck["run.stage"]), int(ck["run.k"])
+    st = case.stages[si]
+    if not bool(ck["run.stage_done"]) or k >= int(round(st.duration / st.h)):
+        return
+    d = {key: ck[key] for key in ck if key != "_digest"}
+    extra = json.loads(str(d["run.json"]))
+    extra["stages_done"] = extra["stages_done"][:-1]
+    d["run.json"], d["run.stage_done"] = np.array(json.dumps(extra)), np.bool_(False)
+    write_checkpoint(out, d)
+
+
 def breakdown(path, out, quick, steps=None, resume_from=None, sets=()):
     """Cost breakdown of one case run in this process (module docstring). Returns one dict per stage."""
     import dataclasses
@@ -88,13 +105,20 @@ def breakdown(path, out, quick, steps=None, resume_from=None, sets=()):
             for st in case.stages:
                 if st.name == name:
                     setattr(st, k, v)
-    if steps:
-        for st in case.stages:
-            st.duration = min(st.duration, steps * st.h)
+    if steps:  # the window: N steps per stage; resumed: N more steps in the checkpoint's stage
+        si, k = -1, 0
+        if resume_from:
+            from fem_blocks.output.checkpoint import latest_checkpoint
+            _, ck = latest_checkpoint(resume_from)
+            si, k = int(ck["run.stage"]), int(ck["run.k"])
+        for i, st in enumerate(case.stages):
+            if i >= si:
+                st.duration = min(st.duration, ((k if i == si else 0) + steps) * st.h)
     if os.path.exists(out):
         shutil.rmtree(out)
     if resume_from:
         shutil.copytree(resume_from, out)
+        _reopen_stage(out, case)
     T = dict(free=0.0, output=0.0, snapshot=0.0)
     calls = []      # per Simulation.step: [stage, seconds, newton its, gs sweeps, sweeps, failed]
     mark = [0]      # index of the first step call since the last snapshot/restore
@@ -117,14 +141,21 @@ def breakdown(path, out, quick, steps=None, resume_from=None, sets=()):
         saved.append((getattr(mod, cls), "write", timed(getattr(mod, cls), "write", "output")))
     saved.append((runner, "write_checkpoint", timed(runner, "write_checkpoint", "output")))
     step0, snap0, rest0, enter0 = Simulation.step, runner._snapshot, runner._restore, runner._enter_stage
+    nominal0 = runner._step
+    nominal = {}  # stage -> nominal steps run in this window
+
+    def nominal_step(*a, **k):
+        nominal[stage[0]] = nominal.get(stage[0], 0) + 1
+        return nominal0(*a, **k)
 
     def step(sim):
-        t = time.perf_counter()
+        t, c0 = time.perf_counter(), time.process_time()
         info = step0(sim)
         c = info.contact or {}
         m = _ITS.search(str(c.get("message", "")))
         calls.append([stage[0], time.perf_counter() - t, int(m.group(1)) if m else 0,
-                      int(m.group(2)) if m else int(c.get("sweeps", 0)), int(c.get("sweeps", 0)), False])
+                      int(m.group(2)) if m else int(c.get("sweeps", 0)), int(c.get("sweeps", 0)), False,
+                      time.process_time() - c0])
         return info
 
     def snapshot(*a):
@@ -145,7 +176,8 @@ def breakdown(path, out, quick, steps=None, resume_from=None, sets=()):
         return enter0(model, sim, case_, si, *a)
 
     Simulation.step, runner._snapshot, runner._restore, runner._enter_stage = step, snapshot, restore, enter
-    t_run = time.perf_counter()
+    runner._step = nominal_step
+    t_run, c_run = time.perf_counter(), time.process_time()
     cs_timers = {}
     init0 = ContactStep.__init__
 
@@ -157,10 +189,11 @@ def breakdown(path, out, quick, steps=None, resume_from=None, sets=()):
         summary = runner.run_case(case, out, progress=False, resume=bool(resume_from), force=True)
     finally:
         Simulation.step, runner._snapshot, runner._restore, runner._enter_stage = step0, snap0, rest0, enter0
+        runner._step = nominal0
         ContactStep.__init__ = init0
         for obj, name, f in saved:
             setattr(obj, name, f)
-    wall = time.perf_counter() - t_run
+    wall, cpu = time.perf_counter() - t_run, time.process_time() - c_run
     tm = cs_timers.get("t", {})
     rows = []
     for st in summary["stages"]:
@@ -169,23 +202,23 @@ def breakdown(path, out, quick, steps=None, resume_from=None, sets=()):
         cl = [c for c in calls if c[0] == st["name"]]
         kept = [c for c in cl if not c[5]]
         lost = [c for c in cl if c[5]]
-        rows.append(dict(stage=st["name"], steps=st["steps"], rows=len(kept), wall=st["wall_time"],
-                         step_time=sum(c[1] for c in cl), failed_time=sum(c[1] for c in lost),
+        rows.append(dict(stage=st["name"], steps=nominal.get(st["name"], 0), rows=len(kept), wall=st["wall_time"],
+                         cpu=sum(c[6] for c in cl), step_time=sum(c[1] for c in cl), failed_time=sum(c[1] for c in lost),
                          failed_calls=len(lost), newton=sum(c[2] for c in kept), gs=sum(c[3] for c in kept),
                          failed_its=sum(c[4] for c in lost), max_its=max((c[4] for c in kept), default=0)))
-    total = dict(wall=wall, solver=tm.get("nlgs", 0.0), detection=tm.get("detection", 0.0),
+    total = dict(wall=wall, cpu=cpu, solver=tm.get("nlgs", 0.0), detection=tm.get("detection", 0.0),
                  local=tm.get("local", 0.0), correction=tm.get("correction", 0.0), **T,
                  convergence=summary.get("convergence"), setup=summary.get("setup_time"))
     return rows, total
 
 
 def print_breakdown(rows, total):
-    print("| stage | nominal steps | rows | wall [s] | s per nominal step | Newton its / row | GS sweeps / row | "
+    print("| stage | nominal steps | rows | wall [s] | s per nominal step (CPU s) | Newton its / row | GS sweeps / row | "
           "max its (row) | thrown-away attempts: calls, time [s], iterations |")
     print("|---|---|---|---|---|---|---|---|---|")
     for r in rows:
-        n = max(r["rows"], 1)
-        print(f"| {r['stage']} | {r['steps']} | {r['rows']} | {r['wall']:.1f} | {r['wall'] / max(r['steps'], 1):.2f} | "
+        n, ns = max(r["rows"], 1), max(r["steps"], 1)
+        print(f"| {r['stage']} | {r['steps']} | {r['rows']} | {r['wall']:.1f} | {r['wall'] / ns:.2f} ({r['cpu'] / ns:.2f}) | "
               f"{r['newton'] / n:.0f} | {r['gs'] / n:.0f} | {r['max_its']} | {r['failed_calls']}, "
               f"{r['failed_time']:.1f}, {r['failed_its']} |")
     w = total["wall"]
@@ -194,7 +227,7 @@ def print_breakdown(rows, total):
              ("velocity corrections", total["correction"]), ("free-velocity solves", total["free"]),
              ("outputs (history, ParaView, checkpoints)", total["output"]), ("snapshots", total["snapshot"])]
     rest = w - sum(t for _, t in parts)
-    print(f"\nrun (after set-up {total['setup']:.1f} s): {w:.1f} s; " + "; ".join(
+    print(f"\nrun (after set-up {total['setup']:.1f} s): {w:.1f} s wall, {total['cpu']:.1f} s CPU of this process; " + "; ".join(
         f"{k} {t:.1f} s ({t / w:.0%})" for k, t in parts) + f"; other {rest:.1f} s ({rest / w:.0%})")
     conv = total["convergence"] or {}
     print(f"convergence: {conv.get('unconverged_steps')} unconverged of {conv.get('solved_steps')} rows; "
