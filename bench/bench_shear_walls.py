@@ -15,9 +15,10 @@ message), the share of time in the contact solve (solver + law commit), detectio
 problem, the velocity corrections, the free-velocity solves, outputs (history, ParaView, checkpoints, snapshots)
 and, separately, the time and iterations of the attempts that "refine"/"adaptive" threw away (the calls of
 Simulation.step between a snapshot and the restore that undid them). --steps N cuts every stage to its first N
-steps (resumed: N more steps in the checkpoint's stage); --resume-from copies DIR (a run's output directory with a checkpoint,
-e.g. the end of the pre-compression) into the output and resumes from it (--force: the cut case differs from the
-one that wrote it); --set contact.KEY=VALUE (TOML value) changes a [contact] key, stages.NAME.KEY=VALUE a stage key.
+steps (resumed: N more steps in the checkpoint's stage); --resume-from copies DIR (a run's output directory with a
+checkpoint, e.g. the end of the pre-compression) into the output and resumes from it (--force: the cut case differs
+from the one that wrote it); --set contact.KEY=VALUE (TOML value) changes a [contact] key, stages.NAME.KEY=VALUE a
+stage key. A window ended by SIGTERM (the runner checkpoints and stops) is still reported.
 """
 import argparse
 import csv
@@ -186,7 +187,12 @@ def breakdown(path, out, quick, steps=None, resume_from=None, sets=()):
         cs_timers["t"] = self.timers
     ContactStep.__init__ = init
     try:
-        summary = runner.run_case(case, out, progress=False, resume=bool(resume_from), force=True)
+        try:
+            summary = runner.run_case(case, out, progress=False, resume=bool(resume_from), force=True)
+        except runner.RunStopped as e:  # (e.g. SIGTERM to end a window early: the summary was written)
+            print(f"stopped: {e}", file=sys.stderr)
+            with open(os.path.join(out, "summary.json")) as f:
+                summary = json.load(f)
     finally:
         Simulation.step, runner._snapshot, runner._restore, runner._enter_stage = step0, snap0, rest0, enter0
         runner._step = nominal0
@@ -196,14 +202,15 @@ def breakdown(path, out, quick, steps=None, resume_from=None, sets=()):
     wall, cpu = time.perf_counter() - t_run, time.process_time() - c_run
     tm = cs_timers.get("t", {})
     rows = []
-    for st in summary["stages"]:
-        if st["name"] not in {c[0] for c in calls}:
-            continue  # (stages done before --resume-from)
+    walls = {st["name"]: st["wall_time"] for st in summary["stages"]}
+    for name in dict.fromkeys(c[0] for c in calls):  # the stages run in this window, in order
+        st = dict(name=name, wall_time=walls.get(name, sum(c[1] for c in calls if c[0] == name)))
         cl = [c for c in calls if c[0] == st["name"]]
         kept = [c for c in cl if not c[5]]
         lost = [c for c in cl if c[5]]
         rows.append(dict(stage=st["name"], steps=nominal.get(st["name"], 0), rows=len(kept), wall=st["wall_time"],
-                         cpu=sum(c[6] for c in cl), step_time=sum(c[1] for c in cl), failed_time=sum(c[1] for c in lost),
+                         cpu=sum(c[6] for c in cl), step_time=sum(c[1] for c in cl),
+                         failed_time=sum(c[1] for c in lost),
                          failed_calls=len(lost), newton=sum(c[2] for c in kept), gs=sum(c[3] for c in kept),
                          failed_its=sum(c[4] for c in lost), max_its=max((c[4] for c in kept), default=0)))
     total = dict(wall=wall, cpu=cpu, solver=tm.get("nlgs", 0.0), detection=tm.get("detection", 0.0),
@@ -213,12 +220,13 @@ def breakdown(path, out, quick, steps=None, resume_from=None, sets=()):
 
 
 def print_breakdown(rows, total):
-    print("| stage | nominal steps | rows | wall [s] | s per nominal step (CPU s) | Newton its / row | GS sweeps / row | "
-          "max its (row) | thrown-away attempts: calls, time [s], iterations |")
+    print("| stage | nominal steps | rows | wall [s] | s per nominal step (CPU s) | Newton its / row | "
+          "GS sweeps / row | max its (row) | thrown-away attempts: calls, time [s], iterations |")
     print("|---|---|---|---|---|---|---|---|---|")
     for r in rows:
         n, ns = max(r["rows"], 1), max(r["steps"], 1)
-        print(f"| {r['stage']} | {r['steps']} | {r['rows']} | {r['wall']:.1f} | {r['wall'] / ns:.2f} ({r['cpu'] / ns:.2f}) | "
+        print(f"| {r['stage']} | {r['steps']} | {r['rows']} | {r['wall']:.1f} | "
+              f"{r['wall'] / ns:.2f} ({r['cpu'] / ns:.2f}) | "
               f"{r['newton'] / n:.0f} | {r['gs'] / n:.0f} | {r['max_its']} | {r['failed_calls']}, "
               f"{r['failed_time']:.1f}, {r['failed_its']} |")
     w = total["wall"]
@@ -227,7 +235,8 @@ def print_breakdown(rows, total):
              ("velocity corrections", total["correction"]), ("free-velocity solves", total["free"]),
              ("outputs (history, ParaView, checkpoints)", total["output"]), ("snapshots", total["snapshot"])]
     rest = w - sum(t for _, t in parts)
-    print(f"\nrun (after set-up {total['setup']:.1f} s): {w:.1f} s wall, {total['cpu']:.1f} s CPU of this process; " + "; ".join(
+    print(f"\nrun (after set-up {total['setup']:.1f} s): {w:.1f} s wall, {total['cpu']:.1f} s CPU of this process; "
+          + "; ".join(
         f"{k} {t:.1f} s ({t / w:.0%})" for k, t in parts) + f"; other {rest:.1f} s ({rest / w:.0%})")
     conv = total["convergence"] or {}
     print(f"convergence: {conv.get('unconverged_steps')} unconverged of {conv.get('solved_steps')} rows; "
