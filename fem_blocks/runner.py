@@ -106,9 +106,11 @@ def _new_cstats() -> dict:
     """Contact-solver statistics of a run (summary.json "contact"; kept in checkpoints). steps, sweeps,
     max_sweeps, unconverged, max_residual, max_change, refined_steps: per nominal step; rows, unconverged_rows,
     worst_unconverged, unconverged_solvers: per history row (a sub-step of "refine" is a row), the steps whose
-    state the run kept."""
+    state the run kept; failed_attempts, failed_sweeps: the attempts "refine"/"adaptive" threw away and their
+    solver iterations (not in `sweeps`)."""
     return dict(steps=0, sweeps=0, max_sweeps=0, unconverged=0, max_residual=0.0, max_change=0.0, refined_steps=0,
-                rows=0, unconverged_rows=0, worst_unconverged=None, unconverged_solvers=[])
+                rows=0, unconverged_rows=0, worst_unconverged=None, unconverged_solvers=[], failed_attempts=0,
+                failed_sweeps=0)
 
 
 def _count_row(cstats: dict, stage_bad: dict, row: dict, c: dict, stage: str, tol: float, criterion: str) -> None:
@@ -151,12 +153,17 @@ EXIT_UNCONVERGED = 3  # exit status of a run that completed with unconverged ste
 
 def convergence_report(case: Case, cstats: dict, has_contact: bool = True) -> dict:
     """summary.json "convergence": the steps (history rows) whose contact solve ended above the tolerance, the
-    worst residual with its step, time, stage, solver and message, and the exit status the CLI gives a completed
+    worst residual with its step, time, stage, solver and message, the nominal steps, those done as sub-steps
+    ("refine"/"adaptive") and their share, the attempts thrown away, and the exit status the CLI gives a completed
     run: EXIT_UNCONVERGED (3) when there are such steps and `[checks] accept_unconverged` is false, else 0."""
     n = int(cstats.get("unconverged_rows", 0)) if has_contact else 0
     w = cstats.get("worst_unconverged") if has_contact else None
     accept = bool(case.checks.get("accept_unconverged", default_of(ChecksSpec, "accept_unconverged")))
+    nominal, sub = int(cstats.get("steps", 0)), int(cstats.get("refined_steps", 0))
     out = dict(unconverged_steps=n, solved_steps=int(cstats.get("rows", 0)) if has_contact else 0,
+               nominal_steps=nominal if has_contact else 0, substepped_steps=sub if has_contact else 0,
+               substepped_share=sub / nominal if has_contact and nominal else 0.0,
+               failed_attempts=int(cstats.get("failed_attempts", 0)) if has_contact else 0,
                accepted=accept, exit_status=EXIT_UNCONVERGED if n and not accept else 0,
                max_residual=float(cstats.get("max_residual", 0.0)) if has_contact else None,
                worst_residual=None, worst_step=None, worst_time=None, worst_stage=None, worst_solver=None,
@@ -364,7 +371,8 @@ def _run_arrays(run: dict) -> dict:
             "run.stage_done": np.bool_(run["stage_done"]), "run.peak_force": np.float64(run["peak_force"]),
             "run.e0": np.array(run["e0"], dtype=float), "run.frames": np.int64(run["frames"]),
             "run.json": np.array(json.dumps(dict(cstats=run["cstats"], stages_done=run["stages_done"],
-                                                 stage_t0=run.get("stage_t0", [])))),
+                                                 stage_t0=run.get("stage_t0", []),
+                                                 adapt=run.get("adapt", dict(level=0, easy=0))))),
             "case_hash": np.array(run["case_hash"]), "fem_blocks": np.array(__version__)}
 
 
@@ -372,25 +380,59 @@ def _restore(sim: Simulation, model: Model, d: dict) -> None:
     sim.restore_state(d)  # with the contact step's arrays: restores it too (Simulation.restore_state)
 
 
-def _step(sim: Simulation, model: Model, run: dict, policy: str, max_level: int, make_row, write_row) -> tuple:
+def _attempt(sim: Simulation, model: Model, budget: int):
+    """One sim.step(); `budget` > 0: with the contact solver's sweeps (and Newton iterations) capped at `budget` (an
+    attempt that may still be halved: [contact] attempt_budget)."""
+    if budget <= 0 or model.contact is None:
+        return sim.step()
+    import dataclasses
+    full = model.contact.opts
+    its = budget if full.max_iterations is None else min(budget, full.max_iterations)
+    model.contact.set_options(dataclasses.replace(full, max_sweeps=min(full.max_sweeps, budget), max_iterations=its))
+    try:
+        return sim.step()
+    finally:
+        model.contact.set_options(full)
+
+
+def _sweeps(info) -> int:
+    return int((info.contact or {}).get("sweeps", 0))
+
+
+def _failed(run: dict, sweeps: int) -> None:
+    """Count an attempt (a step, or the sub-steps of one level of "refine") whose state is thrown away, and its
+    solver iterations (summary.json "contact": failed_attempts, failed_sweeps)."""
+    c = run["cstats"]
+    c["failed_attempts"] = c.get("failed_attempts", 0) + 1
+    c["failed_sweeps"] = c.get("failed_sweeps", 0) + int(sweeps)
+
+
+def _step(sim: Simulation, model: Model, run: dict, policy: str, max_level: int, make_row, write_row,
+          budget: int = 0, grow_after: int = 4) -> tuple:
     """One nominal step h; with policy "refine", a step whose contact solve did not converge is redone as 2, 4, ...
     2^max_level sub-steps (sub-step rows go to the history with their h and the state at the end of each sub-step;
-    `make_row(info, h)` builds a row from the current state, `write_row(row)` writes it). Returns (info, level)."""
+    `make_row(info, h)` builds a row from the current state, `write_row(row)` writes it); "adaptive": `_step_adaptive`.
+    `budget` > 0: every attempt that may still be halved stops after `budget` sweeps / Newton iterations (the last
+    level has the full max_sweeps). Returns (info, level): level = the deepest halving used in this step."""
+    if policy == "adaptive" and model.contact is not None:
+        return _step_adaptive(sim, model, run, max_level, make_row, write_row, budget, grow_after)
     if policy != "refine" or model.contact is None:
         info = sim.step()
         write_row(make_row(info, sim.h))
         return info, 0
     snap = _snapshot(sim, model, run)
     h, th, t0 = sim.h, sim.theta, sim.time
-    info = sim.step()
-    level = 0
+    info = _attempt(sim, model, budget)
+    level, spent = 0, _sweeps(info)
     while info.contact and not info.contact.get("converged", True) and level < max_level:
+        _failed(run, spent)
         level += 1
         _restore(sim, model, snap)
         sim.set_step(h / 2 ** level, th)
-        rows = []
+        rows, spent = [], 0
         for _ in range(2 ** level):
-            info = sim.step()
+            info = _attempt(sim, model, budget if level < max_level else 0)
+            spent += _sweeps(info)
             rows.append(make_row(info, sim.h))  # now: the bodies' state at the end of this sub-step
             if not info.contact.get("converged", True) and level < max_level:
                 break
@@ -404,6 +446,48 @@ def _step(sim: Simulation, model: Model, run: dict, policy: str, max_level: int,
     else:
         write_row(make_row(info, h))
     return info, level
+
+
+def _step_adaptive(sim: Simulation, model: Model, run: dict, max_level: int, make_row, write_row, budget: int,
+                   grow_after: int) -> tuple:
+    """One nominal step h as sub-steps h / 2^l on the grid of h / 2^max_level: a sub-step that does not converge
+    (within `budget` while l < max_level) is thrown away and redone at l + 1; after `grow_after` converged sub-steps
+    in a row at level l the next sub-step doubles (l - 1) when it starts on the coarser grid; the level carries over
+    to the next nominal step (run["adapt"], reset at each stage start), so a hard stretch is not re-attempted at h
+    each step. Each kept sub-step is a history row with its h; at max_level an unconverged sub-step is kept
+    (flagged, as with "refine"). The step ends on the nominal time t0 + h. Returns (info, deepest level)."""
+    ad = run.setdefault("adapt", dict(level=0, easy=0))
+    h, th, t0 = sim.h, sim.theta, sim.time
+    units, p, deepest, info = 2 ** max_level, 0, 0, None
+    lev = min(int(ad["level"]), max_level)
+    while p < units:
+        while (units - p) < 2 ** (max_level - lev):  # (cannot happen on the grid; kept as a guard)
+            lev += 1
+        size = 2 ** (max_level - lev)
+        hs = h * size / units
+        if sim.h != hs:
+            sim.set_step(hs, th)
+        snap = _snapshot(sim, model, run) if lev < max_level else None
+        info = _attempt(sim, model, budget if lev < max_level else 0)
+        ok = not info.contact or info.contact.get("converged", True)
+        if not ok and lev < max_level:
+            _failed(run, _sweeps(info))
+            _restore(sim, model, snap)
+            lev += 1
+            ad["easy"] = 0
+            continue
+        write_row(make_row(info, sim.h))
+        deepest = max(deepest, lev)
+        p += size
+        ad["easy"] = ad["easy"] + 1 if ok else 0
+        if lev > 0 and ad["easy"] >= grow_after and p % (2 * size) == 0:
+            lev -= 1
+            ad["easy"] = 0
+    ad["level"] = lev
+    if sim.h != h:
+        sim.set_step(h, th)
+    sim.time = t0 + h  # the nominal time grid (sub-steps may differ from it by rounding)
+    return info, deepest
 
 
 def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = False, force: bool = False) -> dict:
@@ -526,7 +610,7 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
                 if not resumed_mid_stage:  # (a resumed run entered stages 0..run["stage"] before restoring)
                     run["stage_t0"] = run["stage_t0"][:si] + [sim.time]
                     _enter_stage(model, sim, case, si, sim.time)
-                    run.update(stage=si, k=0, stage_done=False, peak_force=0.0)
+                    run.update(stage=si, k=0, stage_done=False, peak_force=0.0, adapt=dict(level=0, easy=0))
                 resumed_mid_stage = False
                 policy = _policy(case, st)
                 max_level = case.contact.max_refinements
@@ -542,7 +626,8 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
                 while k < n_steps:
                     k += 1
                     good = _snapshot(sim, model, run)  # last good state, checkpointed if this step fails
-                    info, level = _step(sim, model, run, policy, max_level, make_row, write_row)
+                    info, level = _step(sim, model, run, policy, max_level, make_row, write_row,
+                                        case.contact.attempt_budget, case.contact.grow_after)
                     run["k"] = k
                     c = info.contact
                     if c:
@@ -554,7 +639,7 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
                         cstats["max_residual"] = max(cstats["max_residual"], c["residual"])
                         cstats["max_change"] = max(cstats["max_change"], c["change"])
                     failure = guards.check(sim, info, run["e0"])
-                    if failure is None and c and not c["converged"] and policy in ("fail", "refine") \
+                    if failure is None and c and not c["converged"] and policy in ("fail", "refine", "adaptive") \
                             and (policy == "fail" or level >= max_level):
                         if policy == "fail":
                             failure = (f"the contact solver ({c.get('solver', 'NLGS')}) did not converge: "

@@ -314,7 +314,8 @@ class InterfaceSpec:
 
 
 # ----------------------------------------------------------------------------- [contact]
-NONCONV = ("warn", "fail", "refine")
+NONCONV = ("warn", "fail", "refine", "adaptive")
+PREDICTORS = ("previous", "scaled", "extrapolated")
 
 
 @dataclass
@@ -339,6 +340,8 @@ class SolverOptions:
     coarse: str = spec("none", doc="'interfaces': two-level NLGS, coarse correction per interface (solver/coarse.py)",
                        choices=("none", "interfaces"))
     coarse_every: int = spec(10, doc="sweeps between two coarse corrections", lo=1)
+    max_iterations: int | None = spec(None, doc="Newton with interface laws: most Newton iterations per step over "
+                                      "all passes (default 10 x 200)", lo=1)
 
     def __post_init__(self):
         check_fields(self, "contact")
@@ -358,8 +361,16 @@ class ContactOptions(SolverOptions):
                          choices=("frozen", "updated"))
     redetect_every: int = spec(1, doc="steps between re-detections (updated geometry)", lo=1)
     on_nonconvergence: str = spec("warn", doc="what a step reaching max_sweeps does", choices=NONCONV,
-                                  expected="'warn', 'fail' or 'refine' (refine: handled by the runner, warn here)")
-    max_refinements: int = spec(4, doc="'refine': at most 2^max_refinements sub-steps per step", lo=1, hi=12)
+                                  expected="'warn', 'fail', 'refine' or 'adaptive' (refine, adaptive: handled by the "
+                                           "runner, warn here)")
+    max_refinements: int = spec(4, doc="'refine', 'adaptive': at most 2^max_refinements sub-steps per step", lo=1,
+                                hi=12)
+    attempt_budget: int = spec(0, doc="'refine', 'adaptive': an attempt that can still be halved stops after this "
+                               "many Newton iterations / fallback sweeps (0: the full max_sweeps)", lo=0)
+    grow_after: int = spec(4, doc="'adaptive': converged sub-steps in a row before the sub-step is doubled", lo=1)
+    predictor: str = spec("previous", doc="warm start of the impulses: the last step's ('previous'), rescaled to "
+                          "the new h ('scaled'), or extrapolated linearly in time from the last two steps "
+                          "('extrapolated')", choices=PREDICTORS)
 
     def for_stage(self, stage: "StageSpec") -> "ContactOptions":
         """The options of a stage: its tol/max_sweeps override these; the non-convergence policy is applied by the
@@ -396,7 +407,8 @@ class StageSpec:
     drivers: dict = spec(doc="body -> dof -> (kind, history) | None (free)", default_factory=dict)
     forces: dict = spec(doc="body -> dof -> history", default_factory=dict)
     stop_after_peak: tuple | None = spec(None, doc="(body, reaction dof, relative drop, min_steps)")
-    on_nonconvergence: str | None = spec(None, doc="'warn', 'fail' or 'refine' for this stage (default: [contact])",
+    on_nonconvergence: str | None = spec(None, doc="'warn', 'fail', 'refine' or 'adaptive' for this stage (default: "
+                                         "[contact])",
                                          choices=NONCONV)
 
     def changes(self):

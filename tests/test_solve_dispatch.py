@@ -91,13 +91,13 @@ def test_dispatch_errors():
 
 
 def test_options_fields_defined_once():
-    """ContactOptions adds the time stepper's four fields to SolverOptions and redefines none of the solver's;
+    """ContactOptions adds the time stepper's fields to SolverOptions and redefines none of the solver's;
     every field states its meaning."""
     solver_fields = [f.name for f in dataclasses.fields(SolverOptions)]
     contact_fields = [f.name for f in dataclasses.fields(ContactOptions)]
     assert contact_fields[:len(solver_fields)] == solver_fields
     assert contact_fields[len(solver_fields):] == ["geometry", "redetect_every", "on_nonconvergence",
-                                                   "max_refinements"]
+                                                   "max_refinements", "attempt_budget", "grow_after", "predictor"]
     for cls in (SolverOptions, ContactOptions):
         assert {f.name: f.default for f in dataclasses.fields(cls)}["tol"] == 1e-6
         assert all(f.metadata.get("doc") for f in dataclasses.fields(cls))

@@ -17,6 +17,13 @@ from the current configuration every `redetect_every` steps, reactions carried o
 the steps in between keep the pairs and recompute points, frames, gaps and G from the current positions by
 detection_2d.update_geometry (2D) / detection_3d.update_geometry (3D)).
 
+Warm start of the solver (`[contact] predictor`; the impulses P_i = h_i r_i of the last steps, same contacts):
+
+    "previous"      P0 = P_i                                         (the last step's impulses as they are)
+    "scaled"        P0 = h r_i                                       (the same forces over the new step h)
+    "extrapolated"  P0 = h [r_i + (h / h_i) (r_i - r_{i-1})]         (forces linear in time over the last two steps;
+                                                                      "scaled" where r_{i-1} is not known)
+
 Dimension d = sim.dim: the same step in 2D (detection, kinematics, delassus: local (n, t)) and 3D
 (detection_3d, kinematics_3d: local (n, t, s), 3x3 Delassus blocks); impulses P (nc, d), law state
 (nc, NSTATE) in 2D, (nc, NSTATE + 1) in 3D (the extra column is the second tangential jump u_S).
@@ -70,6 +77,8 @@ class ContactStep:
         self.scene = None
         self.cs = None
         self.P = None  # impulses of the last step (nc, 2)
+        self.h_last = None  # its step h; the step before: impulses P_prev (same contacts) and h_prev (predictor)
+        self.P_prev, self.h_prev = None, None
         self.W_dirty = True
         self._rigid_W_restored = None  # 3D resume: rigid W of the checkpoint, used at the next Delassus build
         self.n_unconverged = 0
@@ -168,6 +177,7 @@ class ContactStep:
             ref = first and not updated
             bx = s.positions(reference=ref)
             old, oldP = self.cs, self.P
+            self.P_prev = None  # (a new contact set: no extrapolation across a re-detection)
             self.cs = self._detect(bx)
             self._check_initial_penetration(first, bx)
             self._assign_laws()
@@ -284,6 +294,10 @@ class ContactStep:
         for k in ("side_body", "side_dofs", "side_G"):
             d[f"contact.G.{k}"] = getattr(self.G, k)
         d["contact.P"], d["contact.state"], d["contact.law"] = self.P, self.state, self.law
+        if self.h_last is not None:  # the predictor's history
+            d["contact.h_last"] = np.float64(self.h_last)
+            if self.P_prev is not None:
+                d["contact.P_prev"], d["contact.h_prev"] = self.P_prev, np.float64(self.h_prev)
         if getattr(self, "gap_ref", None) is not None:
             d["contact.gap_ref"] = self.gap_ref
         if self.dim == 3 and self.scene is not None and len(self.scene.rigid) and self.scene.rigid_W:
@@ -308,6 +322,9 @@ class ContactStep:
         self._assign_laws()
         self.G = self._g_cls(*(np.array(d[f"contact.G.{k}"]) for k in ("side_body", "side_dofs", "side_G")))
         self.P, self.state = np.array(d["contact.P"]), np.array(d["contact.state"])
+        self.h_last = float(d["contact.h_last"]) if "contact.h_last" in d else None
+        self.P_prev = np.array(d["contact.P_prev"]) if "contact.P_prev" in d else None
+        self.h_prev = float(d["contact.h_prev"]) if "contact.h_prev" in d else None
         self.gap_ref = np.array(d["contact.gap_ref"]) if "contact.gap_ref" in d else None
         self.W_dirty = True  # rebuilt at the next step (new scene); 3D: with the rigid W in use at the export
         self._rigid_W_restored = (np.array(d["contact.rigid_W"]) if "contact.rigid_W" in d
@@ -317,6 +334,17 @@ class ContactStep:
                              state=self.state.copy(), **out)
 
     # ------------------------------------------------------------------ the step
+    def warm_start(self, h: float) -> np.ndarray:
+        """The solver's starting impulses (nc, d) for a step h: `opts.predictor` (module docstring)."""
+        mode = getattr(self.opts, "predictor", "previous")
+        if mode == "previous" or self.h_last is None or self.P is None:
+            return self.P
+        r = self.P / self.h_last
+        if mode == "extrapolated" and self.P_prev is not None and self.P_prev.shape == self.P.shape \
+                and self.h_prev is not None:
+            r = r + (h / self.h_last) * (r - self.P_prev / self.h_prev)
+        return h * r
+
     def solve(self, sim, t0, t1) -> ContactResult:
         """One contact step over [t0, t1] from the free velocities of `sim` (read only): detection/geometry,
         local problem, solver, law commit. Returns the step's ContactResult (statistics, impulses, gaps, status,
@@ -369,7 +397,8 @@ class ContactStep:
                 self._coarse = InterfaceCoarse.from_contacts(cs, self.opts.coarse_every)
             coarse = self._coarse
         res = solve(ContactProblem(self.Wdel, q.ravel(), self.mu, laws=laws),
-                    dataclasses.replace(self.opts, seed=self.opts.seed + self.steps), r0=self.P.ravel(), coarse=coarse)
+                    dataclasses.replace(self.opts, seed=self.opts.seed + self.steps), r0=self.warm_start(h).ravel(),
+                    coarse=coarse)
         if self.cohesive:
             from ..laws import commit_step  # crushing at the cap, then the laws' commit (any dimension)
             commit_step(self.law, self.par, self.state, res.trial, ueff, res.r, res.u, cs.area, h, th)
@@ -382,6 +411,7 @@ class ContactStep:
         c3 = perf_counter()
         tm["nlgs"] += c3 - c2
         P = res.r.reshape(-1, d)
+        self.P_prev, self.h_prev, self.h_last = self.P, self.h_last, h
         self.P = P
         v = res.u.reshape(-1, d).copy()
         imp = K.accumulate_impulse(self.G, P, s.n_udof, s.U_offset)

@@ -10,9 +10,10 @@ method of `options` (specs.py: SolverOptions), and returns a SolverResult. Dispa
     laws      "nlgs"          (not used)        2, 3  nlgs.solve_cohesive (staggered internal variables)
     laws      "newton"        -                 2     newton.solve_cohesive_newton (3D: InputError)
 
-`r0` warm-starts the reactions (zeros by default). Newton reads tol and max_sweeps (its budget of fallback
-sweeps) only; order, omega, seed, criterion and check_every are NLGS's. The result carries which solver produced r
-(`solver`) and, with interface laws, the trial internal variables (`trial`) that laws.commit_step commits.
+`r0` warm-starts the reactions (zeros by default). Newton reads tol, max_sweeps (its budget of fallback
+sweeps) and, with interface laws, max_iterations (its budget of Newton iterations) only; order, omega, seed,
+criterion and check_every are NLGS's. The result carries which solver produced r (`solver`) and, with interface
+laws, the trial internal variables (`trial`) that laws.commit_step commits.
 """
 from __future__ import annotations
 
@@ -40,7 +41,8 @@ def solve(problem: ContactProblem, options: SolverOptions | None = None, r0=None
     if L is not None:
         if o.solver == "newton":
             res, trial = newton.solve_cohesive_newton(W, q, mu, L.law, L.par, L.state, L.ueff, L.area, L.h, L.theta,
-                                                      r0=r0, tol=o.tol, max_sweeps_total=o.max_sweeps)
+                                                      r0=r0, tol=o.tol, max_sweeps_total=o.max_sweeps,
+                                                      max_total_iter=o.max_iterations)
         else:
             res, trial = nlgs.solve_cohesive(W, q, mu, L.law, L.par, L.state, L.ueff, L.area, L.h, L.theta, r0=r0,
                                              tol=o.tol, max_sweeps=o.max_sweeps, omega=o.omega, order=o.order,
