@@ -29,6 +29,11 @@ from .specs import (LAW_PARAMS, NONCONV, ChecksSpec, ContactOptions, InterfaceSp
 
 NUMBER = (int, float)
 
+
+def _finite(x) -> bool:
+    """A finite TOML number (int or float, not a bool)."""
+    return isinstance(x, NUMBER) and not isinstance(x, bool) and math.isfinite(x)
+
 # unit systems: factor to SI per physical dimension
 UNIT_SYSTEMS = {
     "SI": dict(length=1.0, force=1.0, stress=1.0, density=1.0, time=1.0, mass=1.0, moment=1.0),
@@ -130,8 +135,7 @@ class Table:
                 raise self.missing(k, f"expected a list of {n} numbers")
             return default
         v = self.data[k]
-        if (not isinstance(v, list) or len(v) != n
-                or any(isinstance(x, bool) or not isinstance(x, NUMBER) or not math.isfinite(x) for x in v)):
+        if not isinstance(v, list) or len(v) != n or not all(_finite(x) for x in v):
             raise self.error(k, f"expected a list of {n} finite numbers, got {v!r}")
         if lo is not None and any(x < lo for x in v):
             raise self.error(k, f"= {v!r}: expected values >= {lo}")
@@ -150,8 +154,7 @@ class Table:
             return None
         v = self.data[k]
         ok = isinstance(v, list) and (len(v) == min_count if exact else len(v) >= min_count) and all(
-            isinstance(p, list) and len(p) == n and all(
-                not isinstance(x, bool) and isinstance(x, NUMBER) and math.isfinite(x) for x in p) for p in v)
+            isinstance(p, list) and len(p) == n and all(_finite(x) for x in p) for p in v)
         if not ok:
             raise self.error(k, f"expected a list of {count} {xyz} points of finite numbers")
         f = self.units[dim]
@@ -176,7 +179,7 @@ class Table:
             return default
         v = self.data[k]
         f = self.units[dim] if dim else 1.0
-        if isinstance(v, NUMBER) and not isinstance(v, bool) and math.isfinite(v):
+        if _finite(v):
             return float(v) * f
         if isinstance(v, dict) and "protocol" in v:
             if not protocol:
@@ -190,8 +193,7 @@ class Table:
             values = t.raw("values")
             t.done()
             good = (isinstance(times, list) and isinstance(values, list) and len(times) == len(values) >= 1
-                    and all(isinstance(x, NUMBER) and not isinstance(x, bool) and math.isfinite(x)
-                            for x in times + values))
+                    and all(_finite(x) for x in times + values))
             if not good:
                 raise self.error(k, "expected {times = [...], values = [...]} of equal non-zero length")
             if any(b <= a for a, b in zip(times, times[1:])):
@@ -212,10 +214,8 @@ class Table:
         if "amplitudes" not in t.data:
             raise t.missing("amplitudes", "expected " + md["amplitudes"]["expected"])
         a = t.data["amplitudes"]
-        if (not isinstance(a, list) or not a
-                or any(isinstance(x, bool) or not isinstance(x, NUMBER) or not math.isfinite(x) for x in a)):
-            raise t.error("amplitudes", f"= {a!r}: expected {md['amplitudes']['expected']}")
-        if any(x <= 0 for x in a) or any(y <= x for x, y in zip(a, a[1:])):
+        if (not isinstance(a, list) or not a or not all(_finite(x) for x in a)
+                or any(x <= 0 for x in a) or any(y <= x for x, y in zip(a, a[1:]))):
             raise t.error("amplitudes", f"= {a!r}: expected {md['amplitudes']['expected']}")
         t.done()
         scale = self.units[dim] if dim else 1.0
@@ -1152,8 +1152,7 @@ def _parse_reference(tables: list, curve: dict | None, U: dict, base: str) -> li
             r.displacement_at_peak = None if v["displacement_at_peak"] is None else v["displacement_at_peak"] * fd
             if t.has("peak_band"):
                 pb = t.raw("peak_band")
-                if (not isinstance(pb, list) or len(pb) != 2 or any(
-                        isinstance(x, bool) or not isinstance(x, NUMBER) or not math.isfinite(x) for x in pb)):
+                if not isinstance(pb, list) or len(pb) != 2 or not all(_finite(x) for x in pb):
                     raise t.error("peak_band", f"expected [Fmin, Fmax], two finite numbers, got {pb!r}")
                 if not 0 <= pb[0] < pb[1]:
                     raise t.error("peak_band", f"= {pb!r}: expected [Fmin, Fmax] with 0 <= Fmin < Fmax")
@@ -1179,8 +1178,8 @@ def _monotone(t: Table, k: str, d: list, where: str = ""):
 def _reference_points(t: Table, k: str, fd: float, ff: float) -> list:
     """An inline curve [[d, F], ...] of `t` (>= 2 points, finite, d strictly monotone) -> [(d, F)] in SI."""
     v = t.raw(k)
-    if not isinstance(v, list) or not all(isinstance(p, list) and len(p) == 2 and all(
-            not isinstance(x, bool) and isinstance(x, NUMBER) and math.isfinite(x) for x in p) for p in v):
+    if not isinstance(v, list) or not all(isinstance(p, list) and len(p) == 2 and all(_finite(x) for x in p)
+                                          for p in v):
         raise t.error(k, "expected a list of [displacement, force] pairs of finite numbers")
     if len(v) < 2:
         raise t.error(k, f"expected at least 2 [displacement, force] points, got {len(v)}")
@@ -1427,8 +1426,8 @@ def _openings(w: Table, U: dict, what: str) -> list:
     """`openings`: a list of [x0, y0, x1, y1] rectangles (2D; [x0, z0, x1, z1] in the wall frame in 3D), in SI;
     `what` is the expected form for the error."""
     ops = w.raw("openings", [])
-    if not isinstance(ops, list) or not all(isinstance(o, list) and len(o) == 4 and all(
-            isinstance(v, NUMBER) and not isinstance(v, bool) and math.isfinite(v) for v in o) for o in ops):
+    if not isinstance(ops, list) or not all(isinstance(o, list) and len(o) == 4 and all(_finite(v) for v in o)
+                                            for o in ops):
         raise w.error("openings", f"expected a list of {what}")
     return [[float(v) * U["length"] for v in o] for o in ops]
 

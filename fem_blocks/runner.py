@@ -17,6 +17,7 @@ from .errors import InputError
 from .bodies import Driver
 from .dynamics import Simulation
 from .expand import expand
+from .laws import S_DISS
 from .model import Model, build_model
 from .output.history import HistoryWriter
 from .output.checkpoint import write_checkpoint
@@ -98,7 +99,6 @@ def _dissipated(sim) -> float:
     res = None if sim is None else sim.last_contact
     if res is None or res.state is None or len(res.state) == 0:
         return 0.0
-    from .laws import S_DISS
     return float(res.state[:, S_DISS].sum())
 
 
@@ -460,9 +460,7 @@ def _step_adaptive(sim: Simulation, model: Model, run: dict, max_level: int, mak
     h, th, t0 = sim.h, sim.theta, sim.time
     units, p, deepest, info = 2 ** max_level, 0, 0, None
     lev = min(int(ad["level"]), max_level)
-    while p < units:
-        while (units - p) < 2 ** (max_level - lev):  # (cannot happen on the grid; kept as a guard)
-            lev += 1
+    while p < units:  # p is a multiple of size (a level drops only at a point of the coarser grid): it fits
         size = 2 ** (max_level - lev)
         hs = h * size / units
         if sim.h != hs:
@@ -864,7 +862,8 @@ def _figures(case, sim, model, out_dir, hist: dict, conv=None) -> dict:
         from .output.figures import write_blocks_3d
         write_blocks_3d(os.path.join(out_dir, "blocks.png"), sim, title=case.name, backend="auto")
         out["blocks_png"] = "blocks.png"
-    elif case.output.get("crack_pattern", default_of(OutputSpec, "crack_pattern")) and any(b.kind == 0 for b in model.bodies):
+    elif case.output.get("crack_pattern", default_of(OutputSpec, "crack_pattern")) \
+            and any(b.kind == 0 for b in model.bodies):
         write_crack_pattern(os.path.join(out_dir, "crack_pattern.png"), sim, sim.last_contact, model.contact,
                             title=case.name)
         out["crack_pattern"] = "crack_pattern.png"

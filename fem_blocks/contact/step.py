@@ -336,7 +336,7 @@ class ContactStep:
     # ------------------------------------------------------------------ the step
     def warm_start(self, h: float) -> np.ndarray:
         """The solver's starting impulses (nc, d) for a step h: `opts.predictor` (module docstring)."""
-        mode = getattr(self.opts, "predictor", "previous")
+        mode = self.opts.predictor
         if mode == "previous" or self.h_last is None or self.P is None:
             return self.P
         r = self.P / self.h_last

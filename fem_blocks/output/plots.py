@@ -54,8 +54,8 @@ def curve_figure(x, y, xlabel, ylabel, title="", peak=True, marks=None, marks_la
     ok = np.isfinite(x) & np.isfinite(y)
     fig = _figure((6.4, 4.4 if note else 4.2) if not references else (6.4, 4.8 + 0.25 * len(references)))
     ax = fig.add_subplot()
+    k = int(np.flatnonzero(ok)[np.argmax(np.abs(y[ok]))]) if ok.any() else -1  # the peak: largest |y|
     if references:  # drawn first, under the model's curve
-        k = int(np.flatnonzero(ok)[np.argmax(np.abs(y[ok]))]) if ok.any() else -1
         draw_references(ax, references, (1.0 if k < 0 or x[k] >= 0 else -1.0, 1.0 if k < 0 or y[k] >= 0 else -1.0))
     if not ok.any():
         _no_data(ax)
@@ -65,7 +65,6 @@ def curve_figure(x, y, xlabel, ylabel, title="", peak=True, marks=None, marks_la
             m = marks & ok
             ax.plot(x[m], y[m], "x", color="red", ms=7, mew=1.8, zorder=4, label=marks_label or "marked")
         if peak:
-            k = int(np.flatnonzero(ok)[np.argmax(np.abs(y[ok]))])
             ax.plot([x[k]], [y[k]], "o", color="C3", ms=7, zorder=3)
             xs = x[ok]
             right = x[k] > 0.5 * (xs.min() + xs.max())  # put the label on the side with room
