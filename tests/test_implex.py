@@ -5,6 +5,10 @@ implicit value of the converged jump. Checked through the real path of a contact
 transformed problem, then laws.commit_step) on single joints and a coupled row of joints, against the closed forms
 of the rate-independent mixed-mode law (linear softening, pure mode I: t(u) = k u up to δ_I, then
 f_t (λ_f - λ)/(λ_f - 1), λ = u/δ_I, λ_f = 2 G_I k/f_t²)."""
+import os
+
+import os
+
 import numpy as np
 import pytest
 
@@ -245,3 +249,45 @@ def test_fixed_damage_step_converges_in_three_newton_iterations():
         assert np.all(j.st[:, S_BETA] > 0.9)  # every joint has softened
     assert its["implex"].max() <= 3
     assert its["implicit"].max() > 2
+
+
+# ----------------------------------------------------------------------------- checkpoint / resume
+@pytest.mark.dolfinx
+def test_resume_from_a_checkpoint_is_bitwise_with_implex(tmp_path):
+    """The damage rate of the extrapolation lives in the law state (column S_HIST), so a checkpoint carries it:
+    the small wall of tests/test_resume.py with IMPL-EX Frémond joints (weaker), run through; then its output directory
+    with the previous checkpoint (checkpoint_every = 7) put back as the newest, resumed: the same history, bitwise.
+    The final checkpoint holds non-zero rates (the column is part of the checkpointed state); the rates of the
+    previous checkpoint happen to be 0 in this run, so a rate kept outside the state would not be caught here."""
+    import shutil
+    import subprocess
+    import sys
+
+    from _paths import ROOT
+    from test_resume import CASE
+    from fem_blocks.output.checkpoint import read_checkpoint
+
+    case = tmp_path / "case.toml"
+    assert 'law = "fremond"' in CASE
+    assert "w = 18.0" in CASE
+    # weaker adhesion (w = 0.001 J/m²) so that the joints decohere during the push and β still changes at the end
+    case.write_text(CASE.replace('law = "fremond"', 'law = "fremond"\ndamage_integration = "implex"')
+                    .replace("w = 18.0", "w = 0.001"))
+
+    def run(out, *extra):
+        return subprocess.run([sys.executable, "-m", "fem_blocks.cli", "run", str(case), "--out", str(out),
+                               "--quiet", *extra], capture_output=True, text=True, cwd=ROOT, timeout=600)
+
+    ref = tmp_path / "ref"
+    p = run(ref)
+    assert p.returncode in (0, 3), p.stderr
+    st = read_checkpoint(ref / "checkpoint.npz")["contact.state"]
+    assert np.any(st[:, S_HIST] < 0.0)  # IMPL-EX rates of β in the checkpoint (Frémond: β decreasing)
+    again = tmp_path / "again"
+    shutil.copytree(ref, again)
+    os.replace(again / "checkpoint.prev.npz", again / "checkpoint.npz")
+    p2 = run(again, "--resume")
+    assert p2.returncode == p.returncode, p2.stderr
+    assert (again / "history.csv").read_text() == (ref / "history.csv").read_text()
+    a, b = read_checkpoint(again / "checkpoint.npz"), read_checkpoint(ref / "checkpoint.npz")
+    assert np.array_equal(a["contact.state"], b["contact.state"])
