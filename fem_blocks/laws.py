@@ -26,6 +26,9 @@ contact's tributary area A), with u = (u_N, u_T) the displacement jump since the
   m = (u_T/δ_II)²/λ² so that pure modes dissipate G_I and G_II. Dissipation Y ΔD with Y = ½(k_n⟨u_N⟩₊² + k_s u_T²).
   Optional viscous regularisation (`damage_viscosity` η > 0): Ḋ = (D_s(u) - D)/η with D_s the rate-independent value,
   backward Euler D = (D_n + (h/η) D_s)/(1 + h/η) (`viscous_damage`); η = 0 is the rate-independent law.
+  IMPL-EX (`damage_integration = "implex"`, mixed and fremond; Oliver, Huespe & Cante 2008): the step runs at the
+  internal variable extrapolated from the two last committed values, x̃ = x_n + h_{n+1}(x_n - x_{n-1})/h_n (rate in
+  S_HIST, `implex_extrapolate`), held fixed; commit_step commits the implicit value of the converged jump.
 
 Compressive cap (any law, optional `f_c` [Pa]): r̃_N <= f_c A (elastic–perfectly plastic crushing). At the cap
 the joint closes further; the closure u_p <= 0 (state S_UP) shifts the contact surface (Signorini on g - g0 - u_p,
