@@ -7,8 +7,6 @@ of the rate-independent mixed-mode law (linear softening, pure mode I: t(u) = k 
 f_t (λ_f - λ)/(λ_f - 1), λ = u/δ_I, λ_f = 2 G_I k/f_t²)."""
 import os
 
-import os
-
 import numpy as np
 import pytest
 

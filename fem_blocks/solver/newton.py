@@ -501,7 +501,9 @@ def solve_cohesive_newton(W: BlockCSR, q, mu, law, par, st, ueff, area, h: float
     if W.n == 0:
         return SolverResult(r, q.copy(), 0, True, 0.0, 0.0, 0.0, "no contact", solver="Newton"), x
     from ..laws import FREMOND
-    inside = bool(damage_inside) and bool(np.any((law == MIXED) & (par[:, P_IMPLEX] != 1.0)))
+    # the coupled pass (compliant rows, stall restarts, Alart–Curnier retry) also serves IMPL-EX mixed contacts, whose
+    # x stays the extrapolated one in it (_cohesive_terms)
+    inside = bool(damage_inside) and bool(np.any(law == MIXED))
     n = W.n
     scratch = (np.zeros((n, 2)), np.zeros((n, 2)), np.zeros(n), np.zeros(n), np.zeros(n), np.zeros((n, 2, 2)))
     mode = {"inside": False}  # damage inside for the Gauss-Seidel fallbacks of the current pass
@@ -555,7 +557,7 @@ def solve_cohesive_newton(W: BlockCSR, q, mu, law, par, st, ueff, area, h: float
             # a second coupled pass with the Alart–Curnier rows, from the committed damage and the Gauss–Seidel start
             # (measured: the late softening steps where the compliant rows fail, docs/benchmarks.md)
             rows = "ac"
-            x[:] = st[:, S_BETA]
+            x[:] = x0
             r = r_start.copy()
             continue
         if inside and res > tol:
