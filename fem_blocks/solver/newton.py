@@ -477,7 +477,8 @@ def solve_cohesive_newton(W: BlockCSR, q, mu, law, par, st, ueff, area, h: float
     D(u) = max(D_committed, D(λ(u))) (monotone: never below the committed damage), inside the Alart–Curnier
     function, with the consistent tangent dP̃/dv = diag(S) + T (T: the damage term, laws.mixed_damage_gradient).
     Newton then solves the coupled problem at once; the residual is the natural map at x = D(u). IMPL-EX contacts
-    (`damage_integration = "implex"`) start from and keep the extrapolated x (laws.step_start). Other laws
+    (`damage_integration = "implex"`) start from and keep the extrapolated x (laws.step_start) in every pass, the
+    coupled one included (there without a damage term T: a compliant-joint problem at fixed x). Other laws
     (Frémond β) and damage_inside = False: staggered — Newton at fixed x, then x updated from the converged jumps
     (Aitken-relaxed), until x stops changing. The coupled pass writes the rows of compliant contacts as functions
     of the jump (`compliant_rows`), takes no Gauss–Seidel sweeps after a failed line search (the regularisation
