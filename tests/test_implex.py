@@ -249,6 +249,32 @@ def test_fixed_damage_step_converges_in_three_newton_iterations():
     assert its["implicit"].max() > 2
 
 
+def test_every_newton_pass_runs_at_the_extrapolated_damage():
+    """A row of joints, half IMPL-EX and half implicit (damage inside), softening; then one step solved with a budget
+    of one Newton iteration per pass, so that the coupled pass fails and the Alart–Curnier retry and the staggered
+    passes run too. In every iteration of every pass the IMPL-EX contacts hold x̃ = laws.step_start (bitwise): a
+    retry or fallback that restarted them from the committed D_n (x[:] = st[:, S_BETA]) would be caught here."""
+    C, xs = _row()
+    j = Joints(C, "implex")
+    j.par[1::2] = _par("implicit")  # every other joint implicit: the coupled pass has damage inside
+    for k in range(1, 9):
+        j.step(1.5 * LF * DI * k / 25 * (1.0 + 0.8 * xs), np.full(len(xs), 10 * DII * k / 25))
+    s = 9 / 25
+    ueff = j.st[:, [S_UN, S_UT]].copy()
+    ueff[:, 0] = 0.0
+    q = np.column_stack([1.5 * LF * DI * s * (1.0 + 0.8 * xs) / H, (10 * DII * s - ueff[:, 1]) / H]).ravel()
+    xt = laws.step_start(j.law, j.par, j.st, H)
+    imp = np.arange(j.n) % 2 == 0
+    assert np.any(xt[imp] > j.st[imp, S_BETA])  # the extrapolation moves some IMPL-EX contacts
+    seen = []
+    newton.solve_cohesive_newton(j.W, q, np.full(j.n, PAR["tan_phi"]), j.law, j.par, j.st, ueff, j.area, H, 1.0,
+                                 r0=j.r, tol=1e-14, max_iter=1, max_total_iter=6, gs_sweeps=0,
+                                 probe=lambda ev: seen.append(ev["x"][imp].copy()))
+    assert len(seen) >= 3  # coupled, retry and staggered passes
+    for x in seen:
+        assert np.array_equal(x, xt[imp])
+
+
 # ----------------------------------------------------------------------------- checkpoint / resume
 @pytest.mark.dolfinx
 def test_resume_from_a_checkpoint_is_bitwise_with_implex(tmp_path):
