@@ -67,7 +67,8 @@ def history_columns(model: Model) -> list[str]:
             cols += [f"{name}.R{d}" for d in model.dofs]  # 0 on free dofs; stages may drive or free dofs
             cols += [f"{name}.I{d}" for d in model.dofs]  # inertial part of R (dynamics.py docstring)
     if model.contact is not None:
-        cols += ["contacts", "closed", "slip", "sweeps", "change", "residual", "converged", "dissipated"]
+        cols += ["contacts", "closed", "slip", "sweeps", "change", "residual", "converged", "dissipated",
+                 "friction_dissipated"]
     return cols
 
 
@@ -89,7 +90,9 @@ def history_row(model: Model, info, stage_index: int, sim=None, h=None) -> dict:
         c = info.contact or {}
         row.update(contacts=c.get("contacts", 0), closed=c.get("active", 0), slip=c.get("slip", 0),
                    sweeps=c.get("sweeps", 0), change=c.get("change", 0.0), residual=c.get("residual", 0.0),
-                   converged=int(c.get("converged", True)), dissipated=_dissipated(sim))
+                   converged=int(c.get("converged", True)), dissipated=_dissipated(sim),
+                   friction_dissipated=0.0 if sim is None or sim.last_contact is None
+                   else sim.last_contact.friction_total)
     return row
 
 
@@ -797,6 +800,8 @@ def _summary(case, model, sim, info, run, t_start, t_setup, pv, pc, status) -> d
     if model.contact is not None and res is not None and res.state is not None:
         from .laws import S_DISS
         summary["dissipated_energy_J"] = float(res.state[:, S_DISS].sum())
+    if model.contact is not None and res is not None:
+        summary["friction_dissipated_J"] = float(res.friction_total)  # contact/friction.py
     return summary
 
 
@@ -845,7 +850,7 @@ def _cycles(hist: dict, body: str, fk: str, dk: str, out_dir: str, title: str) -
     u = np.asarray(hist[f"{body}.{dk}"], float)
     cyc = cycles_block(hist.get("time", np.arange(len(u), dtype=float)), u, hist[f"{body}.{fk}"], u_scale=us,
                        u_unit=_unit_key(uu), f_scale=fs, f_unit=_unit_key(fu), dissipated=hist.get("dissipated"),
-                       stored=stored if np.ndim(stored) else None)
+                       stored=stored if np.ndim(stored) else None, friction=hist.get("friction_dissipated"))
     if cyc is None:
         return {}
     write_hysteresis(os.path.join(out_dir, "hysteresis.png"), hist, body, fk, dk, cyc, title=title)
