@@ -857,6 +857,14 @@ def _cycles(hist: dict, body: str, fk: str, dk: str, out_dir: str, title: str) -
     return {"cycles": cyc, "hysteresis": "hysteresis.png"}
 
 
+def _cracked_bricks(b) -> dict:
+    """summary.json `cracked_bricks` of a split-brick wall (output/figures.brick_cracks; {} without brick cracks)."""
+    if b is None:
+        return {}
+    return {"cracked_bricks": dict(count=b["n_cracked"], of=b["n_bricks"], threshold_mm=1e3 * b["threshold_m"],
+                                   max_width_mm=1e3 * b["max_width_m"], bricks=b["cracked_names"])}
+
+
 def _figures(case, sim, model, out_dir, hist: dict, conv=None) -> dict:
     """force_displacement.png and crack_pattern.png, and the curve's peak figures for summary.json (keys named
     with their unit: translations mm / forces kN, rotations rad / moments kN·m; figures.dof_unit). `hist`: the
@@ -869,9 +877,13 @@ def _figures(case, sim, model, out_dir, hist: dict, conv=None) -> dict:
         out["blocks_png"] = "blocks.png"
     elif case.output.get("crack_pattern", default_of(OutputSpec, "crack_pattern")) \
             and any(b.kind == 0 for b in model.bodies):
-        write_crack_pattern(os.path.join(out_dir, "crack_pattern.png"), sim, sim.last_contact, model.contact,
-                            title=case.name)
+        d = write_crack_pattern(os.path.join(out_dir, "crack_pattern.png"), sim, sim.last_contact, model.contact,
+                                title=case.name)
         out["crack_pattern"] = "crack_pattern.png"
+        out.update(_cracked_bricks(d["bricks"]))
+    elif model.contact is not None:  # no figure: the count all the same (output/figures.brick_cracks)
+        from .output.figures import brick_cracks
+        out.update(_cracked_bricks(brick_cracks(sim.last_contact, model.contact)))
     cv = case.output.get("curve")
     if cv:
         body, fk, dk = cv["body"], f"R{cv['force']}", f"u{cv['displacement']}"

@@ -159,12 +159,19 @@ def plot_hysteresis(path, x, y, pieces, labels, xlabel, ylabel, title="", marks=
     return _save(fig, path, 120)
 
 
+BRICK_FACE, BRICK_EDGE, CRACK_COLOUR = "#f3a48c", "#a8321e", "#1565c0"  # cracked bricks, brick cracks
+
+
 def plot_crack_pattern(path, polygons, segments, values, amplification, title="", value_label="damage",
-                       widths=None, width_note=""):
+                       widths=None, width_note="", shaded=None, crack_segments=None, crack_widths=None,
+                       crack_label=None):
     """Deformed block outlines (displacements already amplified by `amplification`) and joint/contact
     segments (m, 2, 2) coloured by `values` (m,) clipped to [0, 1] (NaN drawn grey), `widths` (m,) their line
     widths [pt] (default 2.2; `width_note` says what they mean), with a colourbar and the text
-    "displacements x{amplification:g}". Returns `path`."""
+    "displacements x{amplification:g}". Split-brick walls: `shaded` (indices into `polygons`) are filled in a
+    distinct colour (cracked bricks), `crack_segments` (k, 2, 2) with `crack_widths` (k,) [pt] are drawn in one
+    colour of their own, on top (brick cracks), and `crack_label` (e.g. "brick cracks: 3 of 64 bricks cracked")
+    heads a legend of the two. Returns `path`."""
     try:
         amp = float(amplification)
     except (TypeError, ValueError):
@@ -189,6 +196,17 @@ def plot_crack_pattern(path, polygons, segments, values, amplification, title=""
         raise InputError(f"widths: expected {len(seg)} line widths (one per segment), got {len(lw)}")
     if np.any(~np.isfinite(lw)) or np.any(lw <= 0):
         raise InputError("widths: expected finite line widths > 0 [pt]")
+    cseg = np.asarray(crack_segments if crack_segments is not None else np.zeros((0, 2, 2)), dtype=float)
+    cseg = cseg.reshape(-1, 2, 2) if cseg.size else np.zeros((0, 2, 2))
+    clw = np.full(len(cseg), 2.2) if crack_widths is None else np.asarray(crack_widths, dtype=float).ravel()
+    if len(clw) != len(cseg):
+        raise InputError(f"crack_widths: expected {len(cseg)} line widths (one per crack segment), got {len(clw)}")
+    shade = np.zeros(len(polys), bool)
+    if shaded is not None:
+        idx = np.asarray(shaded, dtype=np.int64).ravel()
+        if idx.size and (idx.min() < 0 or idx.max() >= len(polys)):
+            raise InputError(f"shaded: expected polygon indices in [0, {len(polys)}), got {idx.tolist()}")
+        shade[idx] = True
 
     from matplotlib import colormaps
     from matplotlib.cm import ScalarMappable
@@ -202,11 +220,24 @@ def plot_crack_pattern(path, polygons, segments, values, amplification, title=""
         _no_data(ax)
     else:
         if polys:
-            ax.add_collection(PolyCollection(polys, facecolors="#e8d5c0", edgecolors="#7a5c3e", linewidths=0.4))
+            ax.add_collection(PolyCollection(polys, facecolors=np.where(shade[:, None], _rgba(BRICK_FACE),
+                                                                        _rgba("#e8d5c0")),
+                                             edgecolors=np.where(shade[:, None], _rgba(BRICK_EDGE), _rgba("#7a5c3e")),
+                                             linewidths=np.where(shade, 1.0, 0.4)))
         if len(seg):
             order = np.argsort(lw, kind="stable")  # widest (open cracks) drawn last, on top
             ax.add_collection(LineCollection(seg[order], array=np.clip(val[order], 0.0, 1.0), cmap=cmap,
                                              norm=norm, linewidths=lw[order]))
+        if len(cseg):
+            ax.add_collection(LineCollection(cseg, colors=CRACK_COLOUR, linewidths=clw, zorder=3))
+        if crack_label is not None:
+            from matplotlib.lines import Line2D
+            from matplotlib.patches import Patch
+            ax.legend(handles=[Patch(facecolor=BRICK_FACE, edgecolor=BRICK_EDGE, label="cracked brick"),
+                               Line2D([], [], color=CRACK_COLOUR, lw=2.5, label="brick crack")],
+                      title=crack_label, title_fontsize=8, fontsize=8, loc="upper center",
+                      bbox_to_anchor=(0.5, -0.06), ncol=2, framealpha=0.9)
+        seg = np.concatenate([seg, cseg])
         pts = np.concatenate(polys + [seg.reshape(-1, 2)])
         pts = pts[np.all(np.isfinite(pts), axis=1)]
         if len(pts):
@@ -220,6 +251,11 @@ def plot_crack_pattern(path, polygons, segments, values, amplification, title=""
     fig.text(0.01, 0.01, f"displacements x{amp:g}" + (f"; {width_note}" if width_note else ""), fontsize=10)
     fig.tight_layout(rect=(0, 0.03, 1, 1))
     return _save(fig, path, 130)
+
+
+def _rgba(colour):
+    from matplotlib.colors import to_rgba
+    return np.array(to_rgba(colour))
 
 
 def _subdivide(polys, rgba):
