@@ -869,7 +869,7 @@ def _figures(case, sim, model, out_dir, hist: dict, conv=None) -> dict:
     """force_displacement.png and crack_pattern.png, and the curve's peak figures for summary.json (keys named
     with their unit: translations mm / forces kN, rotations rad / moments kN·m; figures.dof_unit). `hist`: the
     run's history columns (HistoryWriter.columns_dict: the rows of history.csv, kept in memory)."""
-    from .output.figures import curve_data, dof_unit, write_crack_pattern, write_curve
+    from .output.figures import curve_data, dof_unit, post_peak, post_peak_summary, write_crack_pattern, write_curve
     out = {}
     if case.dimension == 3:  # deformed blocks, off-screen (pyvista when installed, else matplotlib)
         from .output.figures import write_blocks_3d
@@ -881,7 +881,7 @@ def _figures(case, sim, model, out_dir, hist: dict, conv=None) -> dict:
                                 title=case.name)
         out["crack_pattern"] = "crack_pattern.png"
         out.update(_cracked_bricks(d["bricks"]))
-    elif model.contact is not None:  # no figure: the count all the same (output/figures.brick_cracks)
+    elif getattr(model, "contact", None) is not None and sim is not None:  # no figure: the count all the same
         from .output.figures import brick_cracks
         out.update(_cracked_bricks(brick_cracks(sim.last_contact, model.contact)))
     cv = case.output.get("curve")
@@ -895,16 +895,21 @@ def _figures(case, sim, model, out_dir, hist: dict, conv=None) -> dict:
                     f"worst residual {conv['worst_residual']:.3g} at step {conv['worst_step']} "
                     f"(t = {conv['worst_time']:.4g} s)")
         refs = getattr(case, "references", None)  # [[reference]] entries (a Case has them; a stand-in may not)
-        write_curve(os.path.join(out_dir, "force_displacement.png"), hist, body, fk, dk, title=case.name, note=note,
-                    references=refs)
         c = curve_data(hist, body, fk, dk)
+        cyc = _cycles(hist, body, fk, dk, out_dir, case.name)
+        pp = None if cyc else post_peak(c["x"], c["y"])  # monotone curves: the softening branch, read once
+        write_curve(os.path.join(out_dir, "force_displacement.png"), hist, body, fk, dk, title=case.name, note=note,
+                    references=refs, softening=pp)
+        if pp is not None:
+            out["post_peak"] = post_peak_summary(pp, _unit_key(c["xunit"]), _unit_key(c["yunit"]),
+                                                 "rotation" if cv["displacement"].startswith("r") else "displacement")
         if refs:  # model peak vs each [[reference]] (output/summary.reference_comparison)
             from .output.figures import reference_data
             from .output.summary import reference_comparison
             out["reference"] = [reference_comparison(c["x"], c["y"], r, _unit_key(c["yunit"]), _unit_key(c["xunit"]),
                                                      "rotation" if cv["displacement"].startswith("r") else
                                                      "displacement") for r in reference_data(refs, fk, dk)]
-        out.update(_cycles(hist, body, fk, dk, out_dir, case.name))
+        out.update(cyc)
         F, D = np.abs(c["y"]), np.abs(c["x"])  # the peak: largest |force|; magnitudes, as before
         if F.size == 0 or not np.any(np.isfinite(F)):
             return out

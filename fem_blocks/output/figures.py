@@ -219,6 +219,46 @@ def curve_data(history: dict, body: str, force: str, displacement: str) -> dict:
                 xunit=ux, yunit=uy, unconverged=bad)
 
 
+POST_PEAK_FRACTION = 0.85  # the post-peak read-out: where the force has fallen to 85 % of the peak (a common
+                           # definition of the ultimate displacement of a masonry wall, e.g. in pushover analyses)
+
+
+def post_peak(x, y, fraction: float = POST_PEAK_FRACTION) -> dict | None:
+    """The softening branch of a monotone force–displacement curve (signed x, y in the figure's units; rows in time
+    order), read once for the figure and summary.json: the peak (largest |y|, row k), the end of the run (the last
+    finite row: |y_end|, |x_end|, |y_end| / |y_k|) and the post-peak point where |y| first falls to `fraction` of the
+    peak after it — linear between the last row above and the first row at or below, |x| there (None when the force
+    never falls that far within the run). Magnitudes, as the peak of summary.json. None without a finite point.
+    Returns dict(k, peak, d_peak, end, d_end, end_ratio, fraction, d_drop, f_drop, x_drop (signed), y_drop)."""
+    x = np.asarray(x, dtype=float).ravel()
+    y = np.asarray(y, dtype=float).ravel()
+    ok = np.flatnonzero(np.isfinite(x) & np.isfinite(y))
+    if ok.size == 0:
+        return None
+    F = np.abs(y[ok])
+    j = int(np.argmax(F))
+    k, peak, e = int(ok[j]), float(F[j]), int(ok[-1])
+    out = dict(k=k, peak=peak, d_peak=float(abs(x[k])), end=float(abs(y[e])), d_end=float(abs(x[e])),
+               end_ratio=float(abs(y[e]) / peak) if peak > 0 else None, fraction=float(fraction), d_drop=None,
+               f_drop=None, x_drop=None, y_drop=None)
+    target = fraction * peak
+    below = np.flatnonzero(F[j:] <= target)
+    if peak > 0 and below.size:
+        i = j + int(below[0])  # first row at or below the target after the peak; F[i - 1] > target
+        a, b = ok[i - 1], ok[i]
+        s = (F[i - 1] - target) / (F[i - 1] - F[i])
+        xd = float(x[a] + s * (x[b] - x[a]))
+        out.update(d_drop=abs(xd), f_drop=float(target), x_drop=xd, y_drop=float(np.sign(y[k]) * target))
+    return out
+
+
+def post_peak_summary(pp: dict, xunit: str, yunit: str, dname: str = "displacement") -> dict:
+    """summary.json `post_peak` from post_peak's dict (keys with the figure's units, e.g. `end_force_kN`)."""
+    pct = int(round(100 * pp["fraction"]))
+    return {f"end_force_{yunit}": pp["end"], f"end_{dname}_{xunit}": pp["d_end"], "end_to_peak": pp["end_ratio"],
+            "drop_fraction": pp["fraction"], f"{dname}_at_{pct}_percent_post_peak_{xunit}": pp["d_drop"]}
+
+
 def curve_arrays(history: dict, body: str, force: str, displacement: str):
     """(displacement, force) of `body`, signed, in the units of dof_unit."""
     c = curve_data(history, body, force, displacement)
@@ -244,15 +284,18 @@ def reference_data(references, force: str, displacement: str) -> list:
             for r in references or []]
 
 
-def write_curve(path, history: dict, body: str, force: str, displacement: str, title="", note="", references=None):
+def write_curve(path, history: dict, body: str, force: str, displacement: str, title="", note="", references=None,
+                softening=None):
     """force_displacement.png: signed curve (curve_data), unconverged steps marked; `note` (e.g. the count and
     worst residual of the unconverged steps) is added under the title; `references`: the case's [[reference]]
-    entries (specs.ReferenceSpec, SI), drawn in the figure's units (reference_data)."""
+    entries (specs.ReferenceSpec, SI), drawn in the figure's units (reference_data); `softening`: the post-peak
+    read-out (post_peak of the same curve) marked on the softening branch."""
     c = curve_data(history, body, force, displacement)
     return plot_curve(path, c["x"], c["y"], c["xlabel"], c["ylabel"], title=title,
                       marks=c["unconverged"] if c["unconverged"].any() else None,
                       marks_label=f"unconverged step ({int(c['unconverged'].sum())})", note=note,
-                      references=reference_data(references, force, displacement) or None)
+                      references=reference_data(references, force, displacement) or None,
+                      softening=softening, units=(c["xunit"], c["yunit"]))
 
 
 def write_hysteresis(path, history: dict, body: str, force: str, displacement: str, cycles: dict, title=""):

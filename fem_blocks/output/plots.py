@@ -33,15 +33,20 @@ def _no_data(ax):
 
 
 def plot_curve(path, x, y, xlabel, ylabel, title="", peak=True, marks=None, marks_label="", note="",
-               references=None):
+               references=None, softening=None, units=("", "")):
     """Curve y(x) (e.g. force–displacement); with peak=True the point of largest |y| is marked and annotated
     "peak y at x". `marks` (bool, one per point): points drawn as red crosses with a legend entry `marks_label`
     (e.g. unconverged steps); `note`: a second title line (in red); `references`: reference curves, bands and
-    peaks in the units of x and y (draw_references). Non-finite points are skipped. Returns `path`."""
-    return _save(curve_figure(x, y, xlabel, ylabel, title, peak, marks, marks_label, note, references), path, 120)
+    peaks in the units of x and y (draw_references); `softening`: the post-peak read-out (figures.post_peak of the
+    same curve): the level fraction × peak dashed from the peak to where the force falls to it (a triangle there,
+    its displacement in the legend) and the end of the run ("end: F (r % of the peak) at d"); `units` = (x unit,
+    y unit) for its labels. Non-finite points are skipped. Returns `path`."""
+    return _save(curve_figure(x, y, xlabel, ylabel, title, peak, marks, marks_label, note, references, softening,
+                              units), path, 120)
 
 
-def curve_figure(x, y, xlabel, ylabel, title="", peak=True, marks=None, marks_label="", note="", references=None):
+def curve_figure(x, y, xlabel, ylabel, title="", peak=True, marks=None, marks_label="", note="", references=None,
+                 softening=None, units=("", "")):
     """The matplotlib Figure of plot_curve (not saved)."""
     x = np.asarray(x, dtype=float).ravel()
     y = np.asarray(y, dtype=float).ravel()
@@ -71,6 +76,8 @@ def curve_figure(x, y, xlabel, ylabel, title="", peak=True, marks=None, marks_la
             ax.annotate(f"peak {y[k]:.4g} at {x[k]:.4g}", (x[k], y[k]), textcoords="offset points",
                         xytext=(-10 if right else 10, -16 if y[k] >= 0 else 12), ha="right" if right else "left",
                         color="C3", bbox=dict(facecolor="white", alpha=0.8, edgecolor="none", pad=1))
+        if softening is not None:
+            _draw_softening(ax, x, y, softening, units)
         ax.grid(alpha=0.3)
     if ax.get_legend_handles_labels()[0]:
         ax.legend(loc="best", fontsize=7 if references else 9)
@@ -82,6 +89,24 @@ def curve_figure(x, y, xlabel, ylabel, title="", peak=True, marks=None, marks_la
         ax.set_title(title)
     fig.tight_layout()
     return fig
+
+
+def _draw_softening(ax, x, y, pp, units):
+    """The post-peak read-out of plot_curve on `ax` (pp: figures.post_peak)."""
+    xu, yu = units
+    k = pp["k"]
+    pct = int(round(100 * pp["fraction"]))
+    if pp["x_drop"] is not None:
+        ax.plot([x[k], pp["x_drop"]], [pp["y_drop"]] * 2, ":", color="C1", lw=1.2)
+        ax.plot([pp["x_drop"]], [pp["y_drop"]], "v", color="C1", ms=8, zorder=4,
+                label=f"post-peak: {pct} % of the peak at {pp['d_drop']:.3g} {xu}")
+    else:
+        ax.plot([], [], "v", color="C1", ms=8, label=f"the force stays above {pct} % of the peak after it")
+    e = int(np.flatnonzero(np.isfinite(x) & np.isfinite(y))[-1])
+    if e != k:
+        ratio = "" if pp["end_ratio"] is None else f" ({100 * pp['end_ratio']:.0f} % of the peak)"
+        ax.plot([x[e]], [y[e]], "s", color="C1", ms=6, mfc="white", mew=1.5, zorder=4,
+                label=f"end: {pp['end']:.4g} {yu}{ratio} at {pp['d_end']:.3g} {xu}")
 
 
 _REF_COLOURS = ("C2", "C4", "C1", "C5", "C6", "C8", "C9")
