@@ -300,8 +300,8 @@ def write_curve(path, history: dict, body: str, force: str, displacement: str, t
 
 def write_hysteresis(path, history: dict, body: str, force: str, displacement: str, cycles: dict, title=""):
     """hysteresis.png: the signed curve (curve_data) with each cycle of `cycles` (summary.cycles_block) in its own
-    colour and legend entry (number, amplitude, ∮ F du), the rows before the first cycle in grey, unconverged
-    steps marked."""
+    colour and legend entry (number, amplitude, ∮ F du and, with the history column friction_dissipated, the cycle's
+    friction work), the rows before the first cycle in grey, unconverged steps marked."""
     c = curve_data(history, body, force, displacement)
     t = np.asarray(history.get("time", np.arange(len(c["x"]))), dtype=float)
     pieces, labels = [], []
@@ -312,6 +312,7 @@ def write_hysteresis(path, history: dict, body: str, force: str, displacement: s
             if f"displacement_pos_{c['xunit']}" in cyc else float("nan")
         pieces.append((max(i0, 0), i1))
         labels.append(f"cycle {cyc['index']}: ±{amp:.3g} {c['xunit']}, {cyc['energy_J']:.3g} J"
+                      + (f" (friction {cyc['friction_J']:.3g} J)" if "friction_J" in cyc else "")
                       + ("" if cyc["complete"] else " (incomplete)"))
     bad = c["unconverged"]
     return plot_hysteresis(path, c["x"], c["y"], pieces, labels, c["xlabel"], c["ylabel"],
