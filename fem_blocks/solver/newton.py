@@ -72,7 +72,7 @@ import scipy.sparse as sp
 from numba import njit
 
 from ..errors import InputError
-from ..laws import MIXED, P_CN, P_CT, S_BETA, S_BROKEN, cap_stress, compression_stiffness, linear_part, \
+from ..laws import MIXED, P_CN, P_CSS, P_CT, S_BETA, S_BROKEN, cap_stress, compression_stiffness, linear_part, \
     mixed_damage_gradient, viscous_damage
 from ..linalg import BlockCSR, lu_solve, matvec_bcsr
 from . import nlgs
@@ -94,9 +94,24 @@ def _rho(W: BlockCSR):
     return rn, rt
 
 
-def alart_curnier(r, u, mu, rn, rt, jacobian=False, cap=None):
+@njit(cache=True)
+def _ellcone_rows(sel, xN, xT, rN, rT, cap, css, mu):
+    """Π and ∂Π/∂x (nlgs.ellcone_proj2) of the contacts `sel` with an elliptic cap: (len(sel), 2), (len(sel), 2, 2)."""
+    Y = np.empty((sel.shape[0], 2))
+    JP = np.empty((sel.shape[0], 2, 2))
+    for k in range(sel.shape[0]):
+        a = sel[k]
+        y0, y1, j00, j01, j10, j11, reg = nlgs.ellcone_proj2(xN[a], xT[a], rN[a], rT[a], cap[a], css[a], mu[a])
+        Y[k, 0], Y[k, 1] = y0, y1
+        JP[k, 0, 0], JP[k, 0, 1], JP[k, 1, 0], JP[k, 1, 1] = j00, j01, j10, j11
+    return Y, JP
+
+
+def alart_curnier(r, u, mu, rn, rt, jacobian=False, cap=None, css=None):
     """F (2n,) and, if asked, the 2×2 blocks D, E (n, 2, 2) of J = D + E W (vectorised over contacts).
-    `cap` (n,): compressive cap on r_N (inf: none): F_N = r_N - P_[0, cap](x), friction bound μ P_[0, cap](x)."""
+    `cap` (n,): compressive cap on r_N (inf: none): F_N = r_N - P_[0, cap](x), friction bound μ P_[0, cap](x).
+    `css` (n,): the cap's shear term C_ss; where > 0 (elliptic cap) F = r - Π(r - R u), R = diag(ρ_N, ρ_T), Π the map
+    of nlgs.ellcone_proj2, D = I - ∂Π/∂x, E = (∂Π/∂x) R."""
     R = r.reshape(-1, 2)
     U = u.reshape(-1, 2)
     xN = R[:, 0] - rn * U[:, 0]
@@ -111,6 +126,10 @@ def alart_curnier(r, u, mu, rn, rt, jacobian=False, cap=None):
     s = np.sign(xT)
     FT = np.where(stick, rt * U[:, 1], np.where(slip, R[:, 1] - lim * s, R[:, 1]))
     F = np.column_stack([FN, FT]).ravel()
+    el = np.zeros(0, dtype=np.int64) if css is None or cap is None else np.nonzero((css > 0.0) & (cap < np.inf))[0]
+    if el.size:  # elliptic cap
+        Y, JP = _ellcone_rows(el, xN, xT, rn, rt, cap, css, mu)
+        F.reshape(-1, 2)[el] = R[el] - Y
     if not jacobian:
         return F
     n = len(mu)
@@ -124,6 +143,9 @@ def alart_curnier(r, u, mu, rn, rt, jacobian=False, cap=None):
     sl = slip & closed  # the friction bound depends on x_N below the cap only
     D[sl, 1, 0] = -(mu * s)[sl]
     E[sl, 1, 0] = (mu * s * rn)[sl]
+    if el.size:
+        D[el] = np.eye(2)[None] - JP
+        E[el] = JP * np.column_stack([rn[el], rt[el]])[:, None, :]
     return F, D, E
 
 
@@ -165,7 +187,7 @@ def alart_curnier_3d(r, u, mu, rn, rt, jacobian=False):
     return F, D, E
 
 
-def compliant_rows(Pt, v, ueffN, h, theta, cmp, capv, mue, rt, S, T, jacobian=False):
+def compliant_rows(Pt, v, ueffN, h, theta, cmp, capv, mue, rt, S, T, jacobian=False, css=None):
     """Rows of F for contacts with a compliant normal law (cmp > 0: elastic, mixed), where the compressive normal
     impulse is a function of the jump, not a complementarity: with u_N = u_eff,N + hθ v_N and k_c = 1/cmp = h²θ k A,
 
@@ -179,6 +201,8 @@ def compliant_rows(Pt, v, ueffN, h, theta, cmp, capv, mue, rt, S, T, jacobian=Fa
     P̃_N = P̃_c), without their case switch at x_N = P̃_N - ρ_N v'_N = 0, which does not coincide with the switch of
     the adhesive branch at u_N = 0 (docs/laws.md, "Integration in the global Newton"). Returns F (2n,) and, if
     asked, the 2×2 blocks D, E of J = D + E W directly in (P, v) (dP̃/dv = diag(S) + T).
+    Elliptic cap (`css` > 0): F = P̃ - Π(x), x = (k_c ⟨-u_N⟩₊/(hθ), P̃_T - ρ_T v_T), Π of nlgs.ellcone_proj2 with
+    R = diag(k_c, ρ_T) (x_N is P̃_N - k_c v'_N: on the ellipse v' = -λ (P̃_N, C_ss P̃_T)).
     Vectorised over all contacts; the caller uses the rows where cmp > 0."""
     P2 = Pt.reshape(-1, 2)
     V = v.reshape(-1, 2)
@@ -195,6 +219,10 @@ def compliant_rows(Pt, v, ueffN, h, theta, cmp, capv, mue, rt, S, T, jacobian=Fa
     sgn = np.sign(xT)
     FT = np.where(stick, rt * V[:, 1], P2[:, 1] - lim * sgn)
     F = np.column_stack([FN, FT]).ravel()
+    el = np.zeros(0, dtype=np.int64) if css is None else np.nonzero((css > 0.0) & (capv < np.inf) & (kc > 0.0))[0]
+    if el.size:  # elliptic cap
+        Y, JP = _ellcone_rows(el, Pc_raw, xT, kc, rt, capv, css, mue)
+        F.reshape(-1, 2)[el] = P2[el] - Y
     if not jacobian:
         return F
     n = len(cmp)
@@ -209,6 +237,20 @@ def compliant_rows(Pt, v, ueffN, h, theta, cmp, capv, mue, rt, S, T, jacobian=Fa
     D[sl, 1, 1] = 1.0
     E[sl, 1, 0] = T[sl, 1, 0] - (mue * sgn * dPc)[sl]
     E[sl, 1, 1] = S[sl, 1] + T[sl, 1, 1]
+    if el.size:  # dF = dP̃ - ∂Π/∂x dx, dx_N = dP_s/dv_N dv_N, dx_T = dP̃_T - ρ_T dv_T
+        a, b, c_, d = JP[:, 0, 0], JP[:, 0, 1], JP[:, 1, 0], JP[:, 1, 1]
+        dPs = np.where(comp & (uN < 0.0), -kc, 0.0)[el]
+        Se, Te, re = S[el], T[el], rt[el]
+        gT = Se[:, 1] + Te[:, 1, 1]  # dP̃_T/dv_T
+        D[el] = 0.0
+        E[el] = 0.0
+        D[el, 0, 0] = 1.0
+        D[el, 0, 1] = -b
+        D[el, 1, 1] = 1.0 - d
+        E[el, 0, 0] = Se[:, 0] + Te[:, 0, 0] - a * dPs - b * Te[:, 1, 0]
+        E[el, 0, 1] = Te[:, 0, 1] - b * (gT - re)
+        E[el, 1, 0] = Te[:, 1, 0] - c_ * dPs - d * Te[:, 1, 0]
+        E[el, 1, 1] = gT - d * (gT - re)
     return F, D, E
 
 
@@ -301,7 +343,8 @@ def _newton(W: BlockCSR, q, mu, r, tol, max_iter, gs, max_sweeps_total, coh=None
     def ac(r_, u_, jacobian=False):
         if dim == 3:
             return alart_curnier_3d(r_, u_, mue, rn, rt, jacobian=jacobian)
-        return alart_curnier(r_, u_, mue, rn, rt, jacobian=jacobian, cap=capv if coh is not None else None)
+        return alart_curnier(r_, u_, mue, rn, rt, jacobian=jacobian, cap=capv if coh is not None else None,
+                             css=coh[1][:, P_CSS] if coh is not None else None)
 
     def merits_of(F):
         """(½‖F‖², ½‖Σ⁻¹F‖²): the merit and, with interface laws, the merit of the rows divided by their gain σ."""
@@ -328,7 +371,8 @@ def _newton(W: BlockCSR, q, mu, r, tol, max_iter, gs, max_sweeps_total, coh=None
                 E += np.einsum("kij,kjl->kil", D, T)
         cm = cmp > 0.0  # coupled pass: compliant normal laws' rows as functions of the jump (compliant_rows)
         if inside and compliant and np.any(cm):
-            o2 = compliant_rows(Pt, u_, coh[4][:, 0], coh[6], coh[7], cmp, capv, mue, rt, S, T, jacobian)
+            o2 = compliant_rows(Pt, u_, coh[4][:, 0], coh[6], coh[7], cmp, capv, mue, rt, S, T, jacobian,
+                                css=coh[1][:, P_CSS])
             F2 = o2[0] if jacobian else o2
             F = F.copy()
             F.reshape(-1, 2)[cm] = F2.reshape(-1, 2)[cm]
