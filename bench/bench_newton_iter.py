@@ -55,16 +55,16 @@ def main(argv=None):
     p.add_argument("--superlu", action="store_true", help="newton.BLOCK_LU = False")
     p.add_argument("--no-profile", action="store_true")
     a = p.parse_args(argv)
-    sys.path.insert(0, os.path.join(ROOT, "bench"))
     sys.path.insert(0, os.path.abspath(a.tree))
+    from fem_blocks.solver import newton  # before bench_split_step, which puts this tree first on sys.path
+    sys.path.insert(0, os.path.join(ROOT, "bench"))
     import bench_split_step as bss
-    from fem_blocks.solver import newton
     assert os.path.abspath(newton.__file__).startswith(os.path.abspath(a.tree)), newton.__file__
     if a.superlu:
         newton.BLOCK_LU = False
     for path in a.paths:
         args, kw = bss.load_problem(path)
-        prof = None if a.no_profile else cProfile.Profile()
+        prof = None if a.no_profile else cProfile.Profile(time.process_time)
         t0, w0 = time.process_time(), time.perf_counter()
         if prof is not None:
             prof.enable()

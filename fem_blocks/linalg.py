@@ -463,19 +463,42 @@ def _block_lu_solve(fptr, fidx, fdiag, vals, dinv, perm, b, x):
             x[d * a + r] = y[i, r]
 
 
-BLOCK_LU_ORDERINGS = ("natural", "rcm")
+BLOCK_LU_ORDERINGS = ("natural", "rcm", "nd", "qmd")
+
+
+def _block_ordering(G: sp.csr_matrix, name: str) -> np.ndarray:
+    """iperm (old -> new) of the block graph G: natural, reverse Cuthill–McKee (scipy), nested dissection or
+    quotient minimum degree (PETSc's MatGetOrdering: its row IS maps new -> old)."""
+    n = G.shape[0]
+    if name == "natural":
+        return np.arange(n, dtype=np.int64)
+    if name == "rcm":
+        from scipy.sparse.csgraph import reverse_cuthill_mckee
+        perm = reverse_cuthill_mckee(G, symmetric_mode=True)
+    elif name in ("nd", "qmd"):
+        A = PETSc.Mat().createAIJ(size=(n, n), csr=(G.indptr.astype(PETSc.IntType), G.indices.astype(PETSc.IntType),
+                                                    G.data.astype(PETSc.ScalarType)), comm=PETSc.COMM_SELF)
+        rows, cols = A.getOrdering(name)
+        perm = rows.getIndices().copy()
+        for obj in (rows, cols, A):
+            obj.destroy()
+    else:
+        raise ValueError(f"BlockLU ordering {name!r}: expected auto, {', '.join(BLOCK_LU_ORDERINGS)}")
+    iperm = np.empty(n, dtype=np.int64)
+    iperm[np.asarray(perm, dtype=np.int64)] = np.arange(n)
+    return iperm
 
 
 class BlockLU:
     """Sparse LU of matrices with one fixed block pattern (d x d blocks, symmetric pattern: Newton's J = D + E W has
     the pattern of the Delassus W), the symbolic analysis done once: the block ordering (natural or reverse
-    Cuthill–McKee, whichever needs fewer block multiply-adds), the elimination tree and the filled pattern of L + U.
+    Cuthill–McKee, nested dissection or quotient minimum degree, whichever needs the fewest block multiply-adds),
+    the elimination tree and the filled pattern of L + U.
     `factor(blocks)` refreshes the values (blocks in the order of the pattern) and factors without pivoting between
     blocks (each diagonal block inverted exactly); `solve(b)` = A⁻¹ b. No pivoting: the caller checks the backward
     error (`solve_checked`) and falls back to a pivoting LU (lu_solve) when it is not small."""
 
     def __init__(self, indptr, indices, dim: int, ordering: str = "auto"):
-        from scipy.sparse.csgraph import reverse_cuthill_mckee
         indptr = np.ascontiguousarray(indptr, dtype=np.int64)
         indices = np.ascontiguousarray(indices, dtype=np.int64)
         n = len(indptr) - 1
@@ -486,14 +509,7 @@ class BlockLU:
         names = BLOCK_LU_ORDERINGS if ordering == "auto" else (ordering,)
         best = None
         for name in names:
-            if name == "natural":
-                iperm = np.arange(n, dtype=np.int64)
-            elif name == "rcm":
-                perm = reverse_cuthill_mckee(G, symmetric_mode=True).astype(np.int64)
-                iperm = np.empty(n, dtype=np.int64)
-                iperm[perm] = np.arange(n)
-            else:
-                raise ValueError(f"BlockLU ordering {name!r}: expected auto, natural or rcm")
+            iperm = _block_ordering(G, name)
             fptr, fidx, fdiag, flops = _symbolic(indptr, indices, iperm)
             if best is None or flops < best[-1]:
                 best = (name, iperm, fptr, fidx, fdiag, flops)
@@ -506,6 +522,21 @@ class BlockLU:
         self._work = np.zeros((n, dim, dim))
         self.pivot = 0.0
         self._blocks = None
+
+    _cache: dict = {}
+
+    @classmethod
+    def for_pattern(cls, indptr, indices, dim: int) -> "BlockLU":
+        """The BlockLU (ordering "auto") of this block pattern, its symbolic analysis reused while the pattern recurs
+        (the contact set of consecutive steps often does not change; the last 4 patterns are kept)."""
+        key = (dim, np.asarray(indptr, dtype=np.int64).tobytes(), np.asarray(indices, dtype=np.int64).tobytes())
+        lu = cls._cache.pop(key, None)
+        if lu is None:
+            lu = cls(indptr, indices, dim)
+        cls._cache[key] = lu
+        while len(cls._cache) > 4:
+            del cls._cache[next(iter(cls._cache))]
+        return lu
 
     @property
     def nnz_blocks(self) -> int:

@@ -400,7 +400,8 @@ def _newton(W: BlockCSR, q, mu, r, tol, max_iter, gs, max_sweeps_total, coh=None
     merits = []  # merits of the last iterates (non-monotone line search)
     best, last = res, 0  # stagnation watch: residual and iteration of the last halving (or restart)
     # J's pattern is W's: its LU's ordering and fill are analysed once here (dim * n < LU_SMALL; MUMPS above)
-    blu = BlockLU(W.indptr, W.indices, dim) if BLOCK_LU and dim * n < LU_SMALL and res > tol and max_iter > 0 else None
+    use_blu = BLOCK_LU and dim * n < LU_SMALL and res > tol and max_iter > 0
+    blu = BlockLU.for_pattern(W.indptr, W.indices, dim) if use_blu else None
     Jb = np.empty_like(W.blocks)
     while res > tol and n_it < max_iter and n_gs < max_sweeps_total:
         r0_it = r
