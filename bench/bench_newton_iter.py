@@ -45,6 +45,8 @@ def profile_split(prof: cProfile.Profile) -> dict:
                         continue  # counted in _direction
                     s += ct if kind == "cum" else tt
         out[g] = s
+    out["F_calls"] = sum(nc for (f, _, fn), (cc, nc, tt, ct, callers) in st.items()
+                         if fn == "fun" and f.endswith("newton.py"))
     return out
 
 
@@ -79,9 +81,11 @@ def main(argv=None):
                    cpu_s=round(cpu, 3), wall_s=round(wall, 3), ms_per_iter=round(1e3 * cpu / it, 2))
         if prof is not None:
             split = profile_split(prof)
+            calls = split.pop("F_calls")
             for g, s in split.items():
                 rec[f"{g}_ms"] = round(1e3 * s / it, 2)
             rec["rest_ms"] = round(1e3 * (cpu - sum(split.values())) / it, 2)
+            rec["F_calls_per_iter"] = round(calls / it, 1)
         print(json.dumps(rec), flush=True)
     return 0
 

@@ -10,8 +10,10 @@ elastic bricks): its sweeps count grows with the size of the wall. Newton on the
 
 with ρ_N = 1/W_αα,NN and ρ_T = 1/W_αα,TT. F is piecewise linear in r; a generalized Jacobian is
 J = D + E W with 2×2 block-diagonal D, E chosen per contact by its case (open, stick, slip), so J has the
-block pattern of W. Each iteration solves J Δr = -F with a sparse LU (scipy SuperLU below 3000 unknowns,
-MUMPS above: linalg.lu_solve), then a backtracking line search on ½‖F‖² (Armijo). When the line search fails
+block pattern of W. Each iteration assembles J's blocks in W's pattern (_assemble_jacobian, numba) and solves
+J Δr = -F with linalg.BlockLU below 3000 unknowns (block LU, ordering and fill analysed once per block pattern, no
+pivoting between blocks, backward error checked; SuperLU when that check fails) and MUMPS above (linalg.lu_solve),
+then a backtracking line search on ½‖F‖² (Armijo). When the line search fails
 (Newton's direction is not a descent direction where the cases change), a few NLGS sweeps are taken from the
 current iterate and Newton resumes.
 
@@ -419,18 +421,21 @@ def _newton(W: BlockCSR, q, mu, r, tol, max_iter, gs, max_sweeps_total, coh=None
         t = 1.0
         if ok:
             du = Wsp @ dr
+            scaled = []  # gain-scaled merits of the points tried (the second search tries the same t first)
             for _ in range(30):
                 r_t, u_t = r + t * dr, u + t * du
                 thr = (1.0 - 2e-4 * t) * f0 if memory == 1 else fref - 2e-4 * t * f0
-                if merit(r_t, u_t)[0] <= thr:
+                m0, m1 = merit(r_t, u_t)
+                if m0 <= thr:
                     accepted = True
                     break
+                scaled.append(m1)
                 t *= 0.5
             if not accepted and sig is not None:  # the same direction, Armijo on the gain-scaled merit
                 t = 1.0
-                for _ in range(30):
+                for k in range(30):
                     r_t, u_t = r + t * dr, u + t * du
-                    if merit(r_t, u_t)[1] <= (1.0 - 2e-4 * t) * f0s:
+                    if (scaled[k] if k < len(scaled) else merit(r_t, u_t)[1]) <= (1.0 - 2e-4 * t) * f0s:
                         accepted = True
                         break
                     t *= 0.5
