@@ -11,8 +11,9 @@ elastic bricks): its sweeps count grows with the size of the wall. Newton on the
 with ρ_N = 1/W_αα,NN and ρ_T = 1/W_αα,TT. F is piecewise linear in r; a generalized Jacobian is
 J = D + E W with 2×2 block-diagonal D, E chosen per contact by its case (open, stick, slip), so J has the
 block pattern of W. Each iteration assembles J's blocks in W's pattern (_assemble_jacobian, numba) and solves
-J Δr = -F with linalg.BlockLU below 3000 unknowns (block LU, ordering and fill analysed once per block pattern, no
-pivoting between blocks, backward error checked; SuperLU when that check fails) and MUMPS above (linalg.lu_solve),
+J Δr = -F with linalg.BlockLU in 2D below 3000 unknowns (block LU, ordering and fill analysed once per block pattern,
+no pivoting between blocks, backward error checked; SuperLU when that check fails), else linalg.lu_solve (SuperLU,
+MUMPS above 3000 unknowns),
 then a backtracking line search on ½‖F‖² (Armijo). When the line search fails
 (Newton's direction is not a descent direction where the cases change), a few NLGS sweeps are taken from the
 current iterate and Newton resumes.
@@ -83,7 +84,7 @@ from .problem import SolverResult
 
 COMPLIANT_ROWS = True  # coupled pass: compliant_rows for the compliant contacts (False: Alart–Curnier rows; bench)
 RETRY_AC_ROWS = True  # a failed compliant coupled pass is retried with the Alart–Curnier rows before the staggered one
-BLOCK_LU = True  # Newton's linear solve: linalg.BlockLU below LU_SMALL unknowns (False: lu_solve only; bench)
+BLOCK_LU = True  # 2D Newton's linear solve: linalg.BlockLU below LU_SMALL unknowns (False: lu_solve only; bench)
 
 
 def _rho(W: BlockCSR):
@@ -401,8 +402,9 @@ def _newton(W: BlockCSR, q, mu, r, tol, max_iter, gs, max_sweeps_total, coh=None
     eps = 1e-6 * wdiag
     merits = []  # merits of the last iterates (non-monotone line search)
     best, last = res, 0  # stagnation watch: residual and iteration of the last halving (or restart)
-    # J's pattern is W's: its LU's ordering and fill are analysed once here (dim * n < LU_SMALL; MUMPS above)
-    use_blu = BLOCK_LU and dim * n < LU_SMALL and res > tol and max_iter > 0
+    # J's pattern is W's: its LU's ordering and fill are analysed once per pattern (2D, dim * n < LU_SMALL). 3D keeps
+    # lu_solve: BlockLU took 1.23 s against 0.57 s on FCLIB's KaplasTower (570 contacts; docs/benchmarks.md)
+    use_blu = BLOCK_LU and dim == 2 and dim * n < LU_SMALL and res > tol and max_iter > 0
     blu = BlockLU.for_pattern(W.indptr, W.indices, dim) if use_blu else None
     Jb = np.empty_like(W.blocks)
     while res > tol and n_it < max_iter and n_gs < max_sweeps_total:
