@@ -9,6 +9,13 @@ Sparse direct factorizations with PETSc (petsc4py), shared by all instances of a
 `Factor(A)` factors a symmetric positive definite scipy CSR matrix once (PETSc's own LU for small
 systems, CHOLMOD Cholesky from 1000 dofs up; superlu_dist is never used, see docs/stack-facts.md §2) and
 solves `A x = b` for one or many right-hand sides (`MatMatSolve` on a dense block).
+
+`BlockLU` (Newton's J = D + E W, whose block pattern is W's and whose values change every iteration): the symbolic
+analysis once per pattern — ordering (natural, reverse Cuthill–McKee, nested dissection or minimum degree: the fewest
+block multiply-adds Σ_k |U_k,>k|²), elimination tree, filled pattern of L + U — then per matrix the numeric block LU
+P A Pᵀ = L U without pivoting between blocks (L unit block-lower, U_ii inverted exactly) and x = Pᵀ U⁻¹ L⁻¹ P b,
+accepted when the backward error ‖A x - b‖∞ <= 1e-10 (‖A‖∞‖x‖∞ + ‖b‖∞) after at most one step of iterative refinement;
+otherwise the caller uses the pivoting `lu_solve` (SuperLU / MUMPS).
 """
 from __future__ import annotations
 
