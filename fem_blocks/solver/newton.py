@@ -10,8 +10,11 @@ elastic bricks): its sweeps count grows with the size of the wall. Newton on the
 
 with ρ_N = 1/W_αα,NN and ρ_T = 1/W_αα,TT. F is piecewise linear in r; a generalized Jacobian is
 J = D + E W with 2×2 block-diagonal D, E chosen per contact by its case (open, stick, slip), so J has the
-block pattern of W. Each iteration solves J Δr = -F with a sparse LU (scipy SuperLU below 3000 unknowns,
-MUMPS above: linalg.lu_solve), then a backtracking line search on ½‖F‖² (Armijo). When the line search fails
+block pattern of W. Each iteration assembles J's blocks in W's pattern (_assemble_jacobian, numba) and solves
+J Δr = -F with linalg.BlockLU in 2D below 3000 unknowns (block LU, ordering and fill analysed once per block pattern,
+no pivoting between blocks, backward error checked; SuperLU when that check fails), else linalg.lu_solve (SuperLU,
+MUMPS above 3000 unknowns),
+then a backtracking line search on ½‖F‖² (Armijo). When the line search fails
 (Newton's direction is not a descent direction where the cases change), a few NLGS sweeps are taken from the
 current iterate and Newton resumes.
 
@@ -74,13 +77,14 @@ from numba import njit
 from ..errors import InputError
 from ..laws import MIXED, P_CN, P_CSS, P_CT, S_BETA, S_BROKEN, cap_stress, compression_stiffness, linear_part, \
     mixed_damage_gradient, viscous_damage
-from ..linalg import BlockCSR, lu_solve, matvec_bcsr
+from ..linalg import LU_SMALL, BlockCSR, BlockLU, lu_solve, matvec_bcsr
 from . import nlgs
 from .problem import SolverResult
 
 
 COMPLIANT_ROWS = True  # coupled pass: compliant_rows for the compliant contacts (False: Alart–Curnier rows; bench)
 RETRY_AC_ROWS = True  # a failed compliant coupled pass is retried with the Alart–Curnier rows before the staggered one
+BLOCK_LU = True  # 2D Newton's linear solve: linalg.BlockLU below LU_SMALL unknowns (False: lu_solve only; bench)
 
 
 def _rho(W: BlockCSR):
@@ -294,6 +298,40 @@ def _cohesive_terms(law, par, st, x, ueff, v, area, h, theta, S, c, mue, cmp, ca
                 cmp[a] = 1.0 / (h * h * theta * kc)
 
 
+@njit(cache=True)
+def _assemble_jacobian(indptr, blocks, diag_pos, D, E, eps, Jb):
+    """Blocks of J = D + E (W + ε I) in the block pattern of W (D, E block-diagonal, (n, d, d)):
+    J_αβ = E_α W_αβ (β ≠ α), J_αα = E_α W_αα + (D_α + ε E_α). The same operations in the same order as
+    einsum("kij,kjl->kil", E[rows], W.blocks) followed by J_αα += D_α + ε E_α (bitwise equal)."""
+    n = indptr.shape[0] - 1
+    d = blocks.shape[1]
+    for a in range(n):
+        for p in range(indptr[a], indptr[a + 1]):
+            for i in range(d):
+                for l in range(d):
+                    s = 0.0
+                    for j in range(d):
+                        s += E[a, i, j] * blocks[p, j, l]
+                    Jb[p, i, l] = s
+        p = diag_pos[a]
+        for i in range(d):
+            for l in range(d):
+                Jb[p, i, l] += D[a, i, l] + eps * E[a, i, l]
+
+
+def _direction(blu, W, Jb, F):
+    """Newton's direction Δr = -J⁻¹ F for J of the blocks Jb (pattern of W): the block LU with its symbolic
+    analysis done once per solve (linalg.BlockLU, no pivoting between blocks, backward error checked), else — or
+    when that check fails — a pivoting LU (linalg.lu_solve: SuperLU below LU_SMALL unknowns, MUMPS above).
+    None if J is singular."""
+    if blu is not None:
+        dr = blu.solve_checked(Jb, -F)
+        if dr is not None:
+            return dr
+    n, dim = W.n, W.dim
+    return lu_solve(sp.bsr_matrix((Jb, W.indices, W.indptr), shape=(dim * n, dim * n)), -F)
+
+
 def _newton(W: BlockCSR, q, mu, r, tol, max_iter, gs, max_sweeps_total, coh=None, memory=1, stall_window=0,
             fallback_sweeps=10, stall_sweeps=20, compliant=False, probe=None):
     """Core iteration (2D or 3D by W.dim). coh = (law, par, st, x, ueff, area, h, theta, inside) for interface laws
@@ -309,7 +347,6 @@ def _newton(W: BlockCSR, q, mu, r, tol, max_iter, gs, max_sweeps_total, coh=None
     n = W.n
     dim = W.dim
     Wsp = sp.bsr_matrix((W.blocks, W.indices, W.indptr), shape=(dim * n, dim * n))
-    rows = np.repeat(np.arange(n), np.diff(W.indptr))
     rn, rt = _rho(W)
     qnorm = float(np.linalg.norm(q)) or 1.0
     S = np.zeros((n, 2))
@@ -409,6 +446,11 @@ def _newton(W: BlockCSR, q, mu, r, tol, max_iter, gs, max_sweeps_total, coh=None
     eps = 1e-6 * wdiag
     merits = []  # merits of the last iterates (non-monotone line search)
     best, last = res, 0  # stagnation watch: residual and iteration of the last halving (or restart)
+    # J's pattern is W's: its LU's ordering and fill are analysed once per pattern (2D, dim * n < LU_SMALL). 3D keeps
+    # lu_solve: BlockLU took 1.23 s against 0.57 s on FCLIB's KaplasTower (570 contacts; docs/benchmarks.md)
+    use_blu = BLOCK_LU and dim == 2 and dim * n < LU_SMALL and res > tol and max_iter > 0
+    blu = BlockLU.for_pattern(W.indptr, W.indices, dim) if use_blu else None
+    Jb = np.empty_like(W.blocks)
     while res > tol and n_it < max_iter and n_gs < max_sweeps_total:
         r0_it = r
         F, D, E = fun(r, u, jacobian=True)
@@ -416,29 +458,30 @@ def _newton(W: BlockCSR, q, mu, r, tol, max_iter, gs, max_sweeps_total, coh=None
         merits.append(f0)
         del merits[:-memory]
         fref = max(merits)
-        Jb = np.einsum("kij,kjl->kil", E[rows], W.blocks)
-        Jb[W.diag_pos] += D + eps * E
-        J = sp.bsr_matrix((Jb, W.indices, W.indptr), shape=(dim * n, dim * n))
+        _assemble_jacobian(W.indptr, W.blocks, W.diag_pos, D, E, float(eps), Jb)
         eps_it = eps
         n_it += 1
-        dr = lu_solve(J, -F)  # SuperLU on small systems, MUMPS on large ones; None if J is singular
+        dr = _direction(blu, W, Jb, F)  # None if J is singular
         ok = dr is not None
         accepted = False
         t = 1.0
         if ok:
             du = Wsp @ dr
+            scaled = []  # gain-scaled merits of the points tried (the second search tries the same t first)
             for _ in range(30):
                 r_t, u_t = r + t * dr, u + t * du
                 thr = (1.0 - 2e-4 * t) * f0 if memory == 1 else fref - 2e-4 * t * f0
-                if merit(r_t, u_t)[0] <= thr:
+                m0, m1 = merit(r_t, u_t)
+                if m0 <= thr:
                     accepted = True
                     break
+                scaled.append(m1)
                 t *= 0.5
             if not accepted and sig is not None:  # the same direction, Armijo on the gain-scaled merit
                 t = 1.0
-                for _ in range(30):
+                for k in range(30):
                     r_t, u_t = r + t * dr, u + t * du
-                    if merit(r_t, u_t)[1] <= (1.0 - 2e-4 * t) * f0s:
+                    if (scaled[k] if k < len(scaled) else merit(r_t, u_t)[1]) <= (1.0 - 2e-4 * t) * f0s:
                         accepted = True
                         break
                     t *= 0.5
@@ -458,6 +501,7 @@ def _newton(W: BlockCSR, q, mu, r, tol, max_iter, gs, max_sweeps_total, coh=None
             u = Wsp @ r + q
         res = residual(r, u)
         if probe is not None:
+            J = sp.bsr_matrix((Jb.copy(), W.indices, W.indptr), shape=(dim * n, dim * n))
             probe(dict(it=n_it, r=r0_it, F=F, J=J, t=t if accepted else 0.0, res=res, gs=n_gs, eps=eps_it / wdiag,
                        D=D, E=E, rn=rn, rt=rt, x=None if coh is None else coh[3].copy(),
                        Ffun=lambda r_: fun(r_, Wsp @ r_ + q), restore=lambda: residual(r, u)))
