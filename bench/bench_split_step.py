@@ -31,6 +31,7 @@ import numpy as np
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
 
+from fem_blocks.laws import NPAR  # noqa: E402
 from fem_blocks.linalg import BlockCSR  # noqa: E402
 from fem_blocks.solver import newton  # noqa: E402
 
@@ -53,7 +54,10 @@ def save_problem(path, W, q, mu, law, par, st, ueff, area, h, theta, r0, kw):
 def load_problem(path):
     z = np.load(path)
     W = BlockCSR(z["indptr"], z["indices"], np.ascontiguousarray(z["blocks"]), z["diag_pos"])
-    args = (W, z["q"], z["mu"], z["law"], z["par"], z["st"], z["ueff"], z["area"], float(z["h"]), float(z["theta"]))
+    par = z["par"]
+    if par.shape[1] < NPAR:  # captured before parameter columns were appended (19: hardening cap, 21: C_ss): default 0
+        par = np.hstack([par, np.zeros((par.shape[0], NPAR - par.shape[1]))])
+    args = (W, z["q"], z["mu"], z["law"], par, z["st"], z["ueff"], z["area"], float(z["h"]), float(z["theta"]))
     return args, dict(r0=z["r0"], tol=float(z["tol"]), max_sweeps_total=int(z["max_sweeps_total"]))
 
 

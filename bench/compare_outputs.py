@@ -1,7 +1,7 @@
 """Behaviour does not change: run every demo at commit REF and in the working tree and compare their numbers.
 
 Usage: .venv/bin/python bench/compare_outputs.py REF [--steps N] [--only NAME,NAME] [--skip NAME,NAME]
-                                                      [--rtol 1e-12] [--work DIR]
+                                                      [--rename OLD=NEW,...] [--rtol 1e-12] [--work DIR]
 
 REF (a commit, branch or tag) is exported with `git archive` into a scratch folder; every case is run twice, once
 with that tree and once with the working tree (each on its own PYTHONPATH, cwd = the tree), into DIR/ref/NAME and
@@ -9,6 +9,9 @@ DIR/new/NAME; a later call with the same --work (same REF and --steps) reuses th
 `--steps N`: the split-brick shear walls take 20-50 minutes each in full), every `demos/*.py` demo through its
 `main(out_dir[, quick])` (its returned dict is written to `returned.json`), and benchmark 1 (LMGC90's brick wall,
 `bench/bench_lmgc90_wall.py`, 200 steps or N, floor reaction and top settlement per step in `history.csv`).
+
+Cases are paired by name; `--rename OLD=NEW` pairs REF's case OLD with the working tree's case NEW (a demo file
+renamed between the two), reported and filtered (--only, --skip) under the new name.
 
 Compared: every column of every `*.csv` and every numeric leaf of `summary.json` / `returned.json`, except the
 wall-clock ones (names matching WALL_CLOCK below). Two numbers agree when they are bitwise equal; otherwise the
@@ -189,12 +192,33 @@ def compare_dirs(da: str, db: str) -> tuple:
     return diffs, worst, notes
 
 
+def rename_cases(ref_cases: dict, spec: str) -> dict:
+    """REF's cases under the working tree's names: `spec` "OLD=NEW,..." renames case OLD to NEW (ValueError naming the
+    pair when OLD is not a case of REF, NEW is named twice or the pair is not OLD=NEW)."""
+    out = dict(ref_cases)
+    pairs = [p.split("=") for p in filter(None, spec.split(","))]
+    for p in pairs:
+        if len(p) != 2 or not all(p):
+            raise ValueError(f"--rename {'='.join(p)!r}: expected OLD=NEW")
+    for k, side in ((1, "new"), (0, "old")):
+        if len({p[k] for p in pairs}) != len(pairs):
+            raise ValueError(f"--rename {spec!r}: the same {side} name appears twice")
+    moved = {}
+    for old, new in pairs:
+        if old not in ref_cases:
+            raise ValueError(f"--rename {old}={new}: {old!r} is not a case of the reference tree")
+        moved[new] = out.pop(old)
+    out.update(moved)  # after all pops: a chain of renames (a=b, b=c) swaps names without losing a case
+    return out
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("ref")
     ap.add_argument("--steps", type=int, default=0, help="cut every stage of the case-file demos to N steps")
     ap.add_argument("--only", default="", help="comma-separated case names")
     ap.add_argument("--skip", default="", help="comma-separated case names")
+    ap.add_argument("--rename", default="", help="comma-separated OLD=NEW: REF's case OLD is the tree's case NEW")
     ap.add_argument("--rtol", type=float, default=1e-12)
     ap.add_argument("--work", default=None, help="scratch folder (default: a new temporary one, kept)")
     a = ap.parse_args(argv)
@@ -207,7 +231,11 @@ def main(argv=None) -> int:
     rev = subprocess.run(["git", "-C", ROOT, "rev-parse", "--short", a.ref], capture_output=True, text=True).stdout
     only = set(filter(None, a.only.split(",")))
     skip = set(filter(None, a.skip.split(",")))
-    ref_cases = {n: argv for n, argv in cases(ref_tree, a.steps)}
+    try:
+        ref_cases = rename_cases(dict(cases(ref_tree, a.steps)), a.rename)
+    except ValueError as e:
+        print(f"compare_outputs: {e}", file=sys.stderr)
+        return 2
     new_cases = {n: argv for n, argv in cases(ROOT, a.steps)}
     names = [n for n in sorted(set(ref_cases) | set(new_cases)) if (not only or n in only) and n not in skip]
     print(f"ref {a.ref} ({rev.strip()}) vs working tree {ROOT}; steps per stage: {a.steps or 'all (--quick)'}; "

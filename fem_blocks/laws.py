@@ -40,6 +40,11 @@ f_c(κ) = f_ci + (f_c - f_ci) sqrt(2κ/κ_p - κ²/κ_p²) for κ = |u_p| < κ_p
 f_c exp(-f_c (κ - κ_p)/G_fc) (G_fc counts the softening branch only: the whole crushing dissipates
 κ_p (f_ci + (π/4)(f_c - f_ci)) + G_fc per unit area).
 
+Elliptic cap (mixed law, optional `C_ss` >= 0, default 0: the cap above): the admissible impulses are
+{P̃_N² + C_ss |P̃_T|² <= (h f_c(κ) A)², |P̃_T| <= μ P̃_N, P̃_N >= 0} (Lourenço–Rots' cap C_nn σ² + C_ss τ² = σ̄_c²,
+C_nn = 1, C_n = 0, on the frictional part r̃), with associated flow on the ellipse, v' = -λ (P̃_N, C_ss P̃_T); the
+plastic closure is its normal part (solver/nlgs.py _cap_ell, _cap3_ell; solver/newton.py rows; commit_step).
+
 Compression: Signorini is always kept on r̃. For coulomb, brittle and fremond it is rigid (g - g0 >= 0); the
 elastic and mixed laws have a compliant joint in compression (stiffness c_N, k_n): g̃ + r̃_N/(k A) >= 0 ⊥
 r̃_N >= 0, so the normal spring acts in tension through r_adh and in compression through r̃ (on which
@@ -58,8 +63,8 @@ LAW_NAMES = {"coulomb": COULOMB, "elastic": ELASTIC, "brittle": BRITTLE, "dugdal
              "fremond": FREMOND, "mixed": MIXED}
 # parameter columns (per unit area)
 P_MU, P_CN, P_CT, P_RC, P_SC, P_LC, P_W, P_B, P_P, P_MUR, P_MUKIND, P_FT, P_C, P_GI, P_GII, P_SOFT, P_FC, P_ETA, \
-    P_GFC, P_KP, P_FCI, P_IMPLEX = range(22)
-NPAR = 22
+    P_GFC, P_KP, P_FCI, P_CSS, P_IMPLEX = range(23)
+NPAR = 23
 # state columns; 3D (u = (u_N, u_T, u_S)) appends the second tangential jump S_US, the 2D columns stay in place.
 # S_HIST: Dugdale's largest opening; mixed and fremond: the rate of the internal variable over the last committed
 # step, (x_n - x_{n-1})/h_n, for the IMPL-EX extrapolation (written by commit_step only with damage_integration =
@@ -74,7 +79,7 @@ LAW_KEYS = _specs.LAW_KEYS  # the parameters each law takes (specs.LAW_PARAMS, t
 # parameter name -> column of the parameter vector (mixed: k_n, k_s, tan_phi share the columns of c_N, c_T, mu)
 _COLUMNS = dict(mu=P_MU, c_N=P_CN, c_T=P_CT, r_c=P_RC, s_c=P_SC, l_c=P_LC, w=P_W, b=P_B, p=P_P, mu_r=P_MUR,
                 k_n=P_CN, k_s=P_CT, f_t=P_FT, c=P_C, G_I=P_GI, G_II=P_GII, tan_phi=P_MU, damage_viscosity=P_ETA,
-                f_c=P_FC, G_fc=P_GFC, kappa_p=P_KP, f_ci=P_FCI)
+                f_c=P_FC, G_fc=P_GFC, kappa_p=P_KP, f_ci=P_FCI, C_ss=P_CSS)
 
 
 def pack(law: str, values: dict) -> tuple[int, np.ndarray]:
@@ -414,7 +419,10 @@ def commit_step(law, par, st, trial, ueff, P, v, area, h, theta):
     P (impulses) and v (shifted velocities, u = u_eff + hθ v) are flat, d entries per contact. At the cap
     (P̃_N = P_N + hA(k_N u_N + f_N) >= h f_c A, f_c = cap_stress at the committed state) the closure is plastic: Δu_p = min(0, hθ(v_N + cmp P̃_N)) (cmp the
     compliance 1/(h²θ k A) of compliant joints in compression); the laws see the elastic jump u_N - Δu_p, then
-    u_p += Δu_p and f_c A |Δu_p| is dissipated. Called by ContactStep (step.py) at the end of every cohesive step."""
+    u_p += Δu_p and f_c A |Δu_p| is dissipated. Elliptic cap (C_ss > 0): at the cap when P̃_N² + C_ss |P̃_T|² >=
+    (h f_c A)² (P̃_T = P_T + hA k_T u_T), the same Δu_p (the normal part of the associated flow), and the cap's whole
+    plastic work f_c A |Δu_p| h f_c A/P̃_N is dissipated (its tangential slip λ C_ss P̃_T included).
+    Called by ContactStep (step.py) at the end of every cohesive step."""
     d = ueff.shape[1]
     for a in range(law.shape[0]):
         uN = ueff[a, 0] + h * theta * v[d * a]
@@ -422,6 +430,7 @@ def commit_step(law, par, st, trial, ueff, P, v, area, h, theta):
         dup = 0.0
         fc = cap_stress(par[a], st[a])
         capv = h * fc * area[a]
+        wfac = 1.0  # cap work per f_c A |Δu_p| (the elliptic cap's tangential plastic slip adds to it)
         if capv > 0.0:
             tension = uN > 1e-15
             kN, kT, fN, fT, m = linear_part(law[a], par[a], st[a], trial[a], tension)
@@ -431,7 +440,19 @@ def commit_step(law, par, st, trial, ueff, P, v, area, h, theta):
                 kc = compression_stiffness(law[a], par[a]) * area[a]
                 if kc > 0.0:
                     cmp = 1.0 / (h * h * theta * kc)
-            if Pt >= capv * (1 - 1e-9):
+            css = par[a, P_CSS]
+            if css > 0.0:  # elliptic cap: on the ellipse P̃_N² + C_ss |P̃_T|² = (h f_c A)²
+                Pt1 = P[d * a + 1] + h * area[a] * (kT * uT + fT)
+                PtT2 = Pt1 * Pt1
+                if d == 3:
+                    Pt2 = P[d * a + 2] + h * area[a] * kT * (ueff[a, 2] + h * theta * v[d * a + 2])
+                    PtT2 += Pt2 * Pt2
+                # (a tolerance of 1e-6 on P_c²: a converged Newton iterate lies on the curved ellipse only to the
+                # residual tolerance; off the cap v'_N = 0 to that tolerance, so min(0, hθ v'_N) adds noise at most)
+                if Pt > 0.0 and Pt * Pt + css * PtT2 >= capv * capv * (1 - 1e-6):
+                    dup = min(0.0, h * theta * (v[d * a] + cmp * Pt))
+                    wfac = capv / Pt  # associated flow: work (P̃_N² + C_ss |P̃_T|²)|Δu_p|/(h P̃_N)
+            elif Pt >= capv * (1 - 1e-9):
                 dup = min(0.0, h * theta * (v[d * a] + cmp * Pt))
         x = trial[a]
         implex = is_implex(law[a], par[a]) and st[a, S_BROKEN] == 0.0
@@ -447,4 +468,7 @@ def commit_step(law, par, st, trial, ueff, P, v, area, h, theta):
             st[a, S_HIST] = (x - x0) / h  # ẋ_{n+1}: the next step's extrapolation
         if dup != 0.0:
             st[a, S_UP] += dup
-            st[a, S_DISS] += fc * area[a] * abs(dup)
+            if wfac == 1.0:
+                st[a, S_DISS] += fc * area[a] * abs(dup)
+            else:
+                st[a, S_DISS] += fc * area[a] * abs(dup) * wfac

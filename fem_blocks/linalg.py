@@ -9,6 +9,13 @@ Sparse direct factorizations with PETSc (petsc4py), shared by all instances of a
 `Factor(A)` factors a symmetric positive definite scipy CSR matrix once (PETSc's own LU for small
 systems, CHOLMOD Cholesky from 1000 dofs up; superlu_dist is never used, see docs/stack-facts.md §2) and
 solves `A x = b` for one or many right-hand sides (`MatMatSolve` on a dense block).
+
+`BlockLU` (Newton's J = D + E W, whose block pattern is W's and whose values change every iteration): the symbolic
+analysis once per pattern — ordering (natural, reverse Cuthill–McKee, nested dissection or minimum degree: the fewest
+block multiply-adds Σ_k |U_k,>k|²), elimination tree, filled pattern of L + U — then per matrix the numeric block LU
+P A Pᵀ = L U without pivoting between blocks (L unit block-lower, U_ii inverted exactly) and x = Pᵀ U⁻¹ L⁻¹ P b,
+accepted when the backward error ‖A x - b‖∞ <= 1e-10 (‖A‖∞‖x‖∞ + ‖b‖∞) after at most one step of iterative refinement;
+otherwise the caller uses the pivoting `lu_solve` (SuperLU / MUMPS).
 """
 from __future__ import annotations
 
@@ -198,3 +205,400 @@ def lu_solve(A: sp.spmatrix, b: np.ndarray, method: str = "auto") -> np.ndarray 
     finally:
         F.destroy()
     return None if failed or not np.all(np.isfinite(x)) else x
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Block LU with the symbolic analysis done once (Newton's J = D + E W: the block pattern of W, values change)
+# ---------------------------------------------------------------------------------------------------------------
+
+@njit(cache=True)
+def _etree(indptr, indices, iperm):
+    """Elimination tree of the symmetric block pattern (indptr, indices) in the order iperm (old -> new): parent[j]
+    = min{i > j : L_ij ≠ 0} (Liu's algorithm with path compression; -1 at a root)."""
+    n = indptr.shape[0] - 1
+    perm = np.empty(n, dtype=np.int64)
+    for a in range(n):
+        perm[iperm[a]] = a
+    parent = np.full(n, -1, dtype=np.int64)
+    ancestor = np.full(n, -1, dtype=np.int64)
+    for i in range(n):
+        a = perm[i]
+        for p in range(indptr[a], indptr[a + 1]):
+            k = iperm[indices[p]]
+            while k != -1 and k < i:
+                nxt = ancestor[k]
+                ancestor[k] = i
+                if nxt == -1:
+                    parent[k] = i
+                k = nxt
+    return parent, perm
+
+
+@njit(cache=True)
+def _symbolic(indptr, indices, iperm):
+    """Filled block pattern of L + U (no pivoting, symmetric pattern) in the order iperm: row i of L holds the nodes
+    on the elimination-tree paths from each k < i with A_ik ≠ 0 up to i (row subtrees), U = pattern of Lᵀ.
+    Returns (fptr, fidx, fdiag, flops): block CSR of L + U (sorted rows, fdiag = position of the diagonal) and
+    Σ_k |U_k,>k|² (2×2 or 3×3 block multiply-adds of the numeric factorisation)."""
+    n = indptr.shape[0] - 1
+    parent, perm = _etree(indptr, indices, iperm)
+    mark = np.full(n, -1, dtype=np.int64)
+    lcount = np.zeros(n, dtype=np.int64)
+    ucount = np.zeros(n, dtype=np.int64)
+    for i in range(n):  # pass 1: counts
+        mark[i] = i
+        a = perm[i]
+        for p in range(indptr[a], indptr[a + 1]):
+            k = iperm[indices[p]]
+            while k < i and mark[k] != i:
+                mark[k] = i
+                lcount[i] += 1
+                ucount[k] += 1
+                k = parent[k]
+    fptr = np.zeros(n + 1, dtype=np.int64)
+    for i in range(n):
+        fptr[i + 1] = fptr[i] + lcount[i] + 1 + ucount[i]
+    fidx = np.empty(fptr[n], dtype=np.int64)
+    fdiag = np.empty(n, dtype=np.int64)
+    lpos = fptr[:-1].copy()
+    upos = np.empty(n, dtype=np.int64)
+    for i in range(n):
+        fdiag[i] = fptr[i] + lcount[i]
+        fidx[fdiag[i]] = i
+        upos[i] = fdiag[i] + 1
+    mark[:] = -1
+    for i in range(n):  # pass 2: L row i (unsorted) and, transposed, U rows (ascending i: sorted)
+        mark[i] = i
+        a = perm[i]
+        for p in range(indptr[a], indptr[a + 1]):
+            k = iperm[indices[p]]
+            while k < i and mark[k] != i:
+                mark[k] = i
+                fidx[lpos[i]] = k
+                lpos[i] += 1
+                fidx[upos[k]] = i
+                upos[k] += 1
+                k = parent[k]
+        fidx[fptr[i]:fdiag[i]] = np.sort(fidx[fptr[i]:fdiag[i]])
+    flops = 0
+    for k in range(n):
+        flops += ucount[k] * ucount[k]
+    return fptr, fidx, fdiag, flops
+
+
+@njit(cache=True)
+def _scatter_map(indptr, indices, iperm, fptr, fidx):
+    """Position in the filled pattern of every block of the original pattern (row a, column indices[p])."""
+    n = indptr.shape[0] - 1
+    src = np.empty(indices.shape[0], dtype=np.int64)
+    for a in range(n):
+        i = iperm[a]
+        row = fidx[fptr[i]:fptr[i + 1]]
+        for p in range(indptr[a], indptr[a + 1]):
+            src[p] = fptr[i] + np.searchsorted(row, iperm[indices[p]])
+    return src
+
+
+@njit(cache=True)
+def _inv_block(A, out):
+    """out = A⁻¹ (2×2 or 3×3, cofactors); returns |det A| / (max|A_ij|^d), 0 for a singular or non-finite block."""
+    d = A.shape[0]
+    s = 0.0
+    for i in range(d):
+        for j in range(d):
+            s = max(s, abs(A[i, j]))
+    if d == 2:
+        det = A[0, 0] * A[1, 1] - A[0, 1] * A[1, 0]
+        if det == 0.0 or not np.isfinite(det):
+            return 0.0
+        out[0, 0], out[0, 1] = A[1, 1] / det, -A[0, 1] / det
+        out[1, 0], out[1, 1] = -A[1, 0] / det, A[0, 0] / det
+        return abs(det) / (s * s)
+    c00 = A[1, 1] * A[2, 2] - A[1, 2] * A[2, 1]
+    c01 = A[1, 2] * A[2, 0] - A[1, 0] * A[2, 2]
+    c02 = A[1, 0] * A[2, 1] - A[1, 1] * A[2, 0]
+    det = A[0, 0] * c00 + A[0, 1] * c01 + A[0, 2] * c02
+    if det == 0.0 or not np.isfinite(det):
+        return 0.0
+    out[0, 0] = c00 / det
+    out[1, 0] = c01 / det
+    out[2, 0] = c02 / det
+    out[0, 1] = (A[0, 2] * A[2, 1] - A[0, 1] * A[2, 2]) / det
+    out[1, 1] = (A[0, 0] * A[2, 2] - A[0, 2] * A[2, 0]) / det
+    out[2, 1] = (A[0, 1] * A[2, 0] - A[0, 0] * A[2, 1]) / det
+    out[0, 2] = (A[0, 1] * A[1, 2] - A[0, 2] * A[1, 1]) / det
+    out[1, 2] = (A[0, 2] * A[1, 0] - A[0, 0] * A[1, 2]) / det
+    out[2, 2] = (A[0, 0] * A[1, 1] - A[0, 1] * A[1, 0]) / det
+    return abs(det) / (s * s * s)
+
+
+@njit(cache=True)
+def _block_lu_numeric(fptr, fidx, fdiag, src, blocks, vals, dinv, work):
+    """Numeric block LU without pivoting between blocks (up-looking, row by row): A = L U with L unit block-lower
+    and U block-upper on the filled pattern (fptr, fidx), A's blocks scattered by src. For row i (ascending):
+    w = A_i,:;  for k < i in the pattern (ascending): L_ik = w_k U_kk⁻¹,  w_j -= L_ik U_kj (j > k);  then
+    L_i,<i = w_<i, U_i,>=i = w_>=i. Zero multipliers are skipped (open contacts: E = 0 rows of J). dinv[i] = U_ii⁻¹.
+    Returns the smallest scaled |det U_ii| (0: a singular or non-finite pivot block)."""
+    n = fptr.shape[0] - 1
+    d = blocks.shape[1]
+    vals[:] = 0.0
+    for p in range(src.shape[0]):
+        vals[src[p]] = blocks[p]
+    m = np.empty((d, d))
+    piv = np.inf
+    for i in range(n):
+        for p in range(fptr[i], fptr[i + 1]):
+            j = fidx[p]
+            for r in range(d):
+                for c in range(d):
+                    work[j, r, c] = vals[p, r, c]
+        if d == 2:  # the 2D case unrolled (2×2 blocks in registers)
+            for p in range(fptr[i], fdiag[i]):
+                k = fidx[p]
+                w00, w01, w10, w11 = work[k, 0, 0], work[k, 0, 1], work[k, 1, 0], work[k, 1, 1]
+                m00 = w00 * dinv[k, 0, 0] + w01 * dinv[k, 1, 0]
+                m01 = w00 * dinv[k, 0, 1] + w01 * dinv[k, 1, 1]
+                m10 = w10 * dinv[k, 0, 0] + w11 * dinv[k, 1, 0]
+                m11 = w10 * dinv[k, 0, 1] + w11 * dinv[k, 1, 1]
+                work[k, 0, 0], work[k, 0, 1], work[k, 1, 0], work[k, 1, 1] = m00, m01, m10, m11
+                if m00 == 0.0 and m01 == 0.0 and m10 == 0.0 and m11 == 0.0:
+                    continue
+                for q in range(fdiag[k] + 1, fptr[k + 1]):
+                    j = fidx[q]
+                    u00, u01, u10, u11 = vals[q, 0, 0], vals[q, 0, 1], vals[q, 1, 0], vals[q, 1, 1]
+                    work[j, 0, 0] -= m00 * u00 + m01 * u10
+                    work[j, 0, 1] -= m00 * u01 + m01 * u11
+                    work[j, 1, 0] -= m10 * u00 + m11 * u10
+                    work[j, 1, 1] -= m10 * u01 + m11 * u11
+            for p in range(fptr[i], fptr[i + 1]):
+                j = fidx[p]
+                vals[p, 0, 0], vals[p, 0, 1], vals[p, 1, 0], vals[p, 1, 1] = \
+                    work[j, 0, 0], work[j, 0, 1], work[j, 1, 0], work[j, 1, 1]
+            g = _inv_block(vals[fdiag[i]], dinv[i])
+            if g < piv:
+                piv = g
+            if g == 0.0:
+                return 0.0
+            continue
+        for p in range(fptr[i], fdiag[i]):
+            k = fidx[p]
+            nz = False
+            for r in range(d):
+                for c in range(d):
+                    s = 0.0
+                    for t in range(d):
+                        s += work[k, r, t] * dinv[k, t, c]
+                    m[r, c] = s
+                    if s != 0.0:
+                        nz = True
+            work[k] = m
+            if not nz:
+                continue
+            for q in range(fdiag[k] + 1, fptr[k + 1]):
+                j = fidx[q]
+                for r in range(d):
+                    for c in range(d):
+                        s = 0.0
+                        for t in range(d):
+                            s += m[r, t] * vals[q, t, c]
+                        work[j, r, c] -= s
+        for p in range(fptr[i], fptr[i + 1]):
+            vals[p] = work[fidx[p]]
+        g = _inv_block(vals[fdiag[i]], dinv[i])
+        if g < piv:
+            piv = g
+        if g == 0.0:
+            return 0.0
+    return piv
+
+
+@njit(cache=True)
+def _block_lu_solve(fptr, fidx, fdiag, vals, dinv, perm, b, x):
+    """x = A⁻¹ b from the block LU (permuted: row/column i of L U is block perm[i] of A): L y = P b, U z = y."""
+    n = fptr.shape[0] - 1
+    d = vals.shape[1]
+    y = np.empty((n, d))
+    if d == 2:  # unrolled
+        for i in range(n):
+            a = perm[i]
+            y0, y1 = b[2 * a], b[2 * a + 1]
+            for p in range(fptr[i], fdiag[i]):
+                k = fidx[p]
+                y0 -= vals[p, 0, 0] * y[k, 0] + vals[p, 0, 1] * y[k, 1]
+                y1 -= vals[p, 1, 0] * y[k, 0] + vals[p, 1, 1] * y[k, 1]
+            y[i, 0], y[i, 1] = y0, y1
+        for i in range(n - 1, -1, -1):
+            y0, y1 = y[i, 0], y[i, 1]
+            for p in range(fdiag[i] + 1, fptr[i + 1]):
+                j = fidx[p]
+                y0 -= vals[p, 0, 0] * y[j, 0] + vals[p, 0, 1] * y[j, 1]
+                y1 -= vals[p, 1, 0] * y[j, 0] + vals[p, 1, 1] * y[j, 1]
+            z0 = dinv[i, 0, 0] * y0 + dinv[i, 0, 1] * y1
+            z1 = dinv[i, 1, 0] * y0 + dinv[i, 1, 1] * y1
+            y[i, 0], y[i, 1] = z0, z1
+            a = perm[i]
+            x[2 * a], x[2 * a + 1] = z0, z1
+        return
+    for i in range(n):
+        a = perm[i]
+        for r in range(d):
+            y[i, r] = b[d * a + r]
+        for p in range(fptr[i], fdiag[i]):
+            k = fidx[p]
+            for r in range(d):
+                s = 0.0
+                for t in range(d):
+                    s += vals[p, r, t] * y[k, t]
+                y[i, r] -= s
+    z = np.empty(d)
+    for i in range(n - 1, -1, -1):
+        for p in range(fdiag[i] + 1, fptr[i + 1]):
+            j = fidx[p]
+            for r in range(d):
+                s = 0.0
+                for t in range(d):
+                    s += vals[p, r, t] * y[j, t]
+                y[i, r] -= s
+        for r in range(d):
+            s = 0.0
+            for t in range(d):
+                s += dinv[i, r, t] * y[i, t]
+            z[r] = s
+        y[i] = z
+        a = perm[i]
+        for r in range(d):
+            x[d * a + r] = y[i, r]
+
+
+BLOCK_LU_ORDERINGS = ("natural", "rcm", "nd", "qmd")
+
+
+def _block_ordering(G: sp.csr_matrix, name: str) -> np.ndarray:
+    """iperm (old -> new) of the block graph G: natural, reverse Cuthill–McKee (scipy), nested dissection or
+    quotient minimum degree (PETSc's MatGetOrdering: its row IS maps new -> old)."""
+    n = G.shape[0]
+    if name == "natural":
+        return np.arange(n, dtype=np.int64)
+    if name == "rcm":
+        from scipy.sparse.csgraph import reverse_cuthill_mckee
+        perm = reverse_cuthill_mckee(G, symmetric_mode=True)
+    elif name in ("nd", "qmd"):
+        A = PETSc.Mat().createAIJ(size=(n, n), csr=(G.indptr.astype(PETSc.IntType), G.indices.astype(PETSc.IntType),
+                                                    G.data.astype(PETSc.ScalarType)), comm=PETSc.COMM_SELF)
+        rows, cols = A.getOrdering(name)
+        perm = rows.getIndices().copy()
+        for obj in (rows, cols, A):
+            obj.destroy()
+    else:
+        raise ValueError(f"BlockLU ordering {name!r}: expected auto, {', '.join(BLOCK_LU_ORDERINGS)}")
+    iperm = np.empty(n, dtype=np.int64)
+    iperm[np.asarray(perm, dtype=np.int64)] = np.arange(n)
+    return iperm
+
+
+class BlockLU:
+    """Sparse LU of matrices with one fixed block pattern (d x d blocks, symmetric pattern: Newton's J = D + E W has
+    the pattern of the Delassus W), the symbolic analysis done once: the block ordering (natural or reverse
+    Cuthill–McKee, nested dissection or quotient minimum degree, whichever needs the fewest block multiply-adds),
+    the elimination tree and the filled pattern of L + U.
+    `factor(blocks)` refreshes the values (blocks in the order of the pattern) and factors without pivoting between
+    blocks (each diagonal block inverted exactly); `solve(b)` = A⁻¹ b. No pivoting: the caller checks the backward
+    error (`solve_checked`) and falls back to a pivoting LU (lu_solve) when it is not small."""
+
+    def __init__(self, indptr, indices, dim: int, ordering: str = "auto"):
+        indptr = np.ascontiguousarray(indptr, dtype=np.int64)
+        indices = np.ascontiguousarray(indices, dtype=np.int64)
+        n = len(indptr) - 1
+        self.n, self.dim, self.indptr, self.indices = n, dim, indptr, indices
+        G = sp.csr_matrix((np.ones(len(indices)), indices, indptr), shape=(n, n))
+        if (G != G.T).nnz:
+            raise ValueError("BlockLU: the block pattern must be symmetric")
+        names = BLOCK_LU_ORDERINGS if ordering == "auto" else (ordering,)
+        best = None
+        for name in names:
+            iperm = _block_ordering(G, name)
+            fptr, fidx, fdiag, flops = _symbolic(indptr, indices, iperm)
+            if best is None or flops < best[-1]:
+                best = (name, iperm, fptr, fidx, fdiag, flops)
+        self.ordering, iperm, self.fptr, self.fidx, self.fdiag, self.flops = best
+        self.perm = np.empty(n, dtype=np.int64)
+        self.perm[iperm] = np.arange(n)
+        self.src = _scatter_map(indptr, indices, iperm, self.fptr, self.fidx)
+        self.vals = np.zeros((len(self.fidx), dim, dim))
+        self.dinv = np.zeros((n, dim, dim))
+        self._work = np.zeros((n, dim, dim))
+        self.pivot = 0.0
+        self._blocks = None
+
+    _cache: dict = {}
+
+    @classmethod
+    def for_pattern(cls, indptr, indices, dim: int) -> "BlockLU":
+        """The BlockLU (ordering "auto") of this block pattern, its symbolic analysis reused while the pattern recurs
+        (the contact set of consecutive steps often does not change; the last 4 patterns are kept)."""
+        key = (dim, np.asarray(indptr, dtype=np.int64).tobytes(), np.asarray(indices, dtype=np.int64).tobytes())
+        lu = cls._cache.pop(key, None)
+        if lu is None:
+            lu = cls(indptr, indices, dim)
+        cls._cache[key] = lu
+        while len(cls._cache) > 4:
+            del cls._cache[next(iter(cls._cache))]
+        return lu
+
+    @property
+    def nnz_blocks(self) -> int:
+        """Blocks of L + U (fill included)."""
+        return len(self.fidx)
+
+    def factor(self, blocks: np.ndarray) -> bool:
+        """Numeric factorisation of the matrix with these blocks; False when a pivot block is singular (or not
+        finite) or nearly so (scaled |det| < 1e-13)."""
+        blocks = np.ascontiguousarray(blocks, dtype=np.float64)
+        self._blocks = blocks
+        self.pivot = _block_lu_numeric(self.fptr, self.fidx, self.fdiag, self.src, blocks, self.vals, self.dinv,
+                                       self._work)
+        return self.pivot > 1e-13
+
+    def solve(self, b: np.ndarray) -> np.ndarray:
+        x = np.empty(self.n * self.dim)
+        _block_lu_solve(self.fptr, self.fidx, self.fdiag, self.vals, self.dinv, self.perm,
+                        np.ascontiguousarray(b, dtype=np.float64), x)
+        return x
+
+    def solve_checked(self, blocks: np.ndarray, b: np.ndarray, tol: float = 1e-10) -> np.ndarray | None:
+        """x = A⁻¹ b with A of these blocks, or None when the factorisation fails or the backward error
+        ‖A x - b‖ / (‖A‖_∞ ‖x‖_∞ + ‖b‖_∞) stays above tol after one step of iterative refinement
+        (the caller then uses a pivoting LU)."""
+        if not self.factor(blocks):
+            return None
+        b = np.asarray(b, dtype=np.float64)
+        x = self.solve(b)
+        r = np.empty_like(x)
+        anorm = _bcsr_inf_norm(self.indptr, blocks)
+        for it in range(2):
+            if not np.all(np.isfinite(x)):
+                return None
+            matvec_bcsr(self.indptr, self.indices, blocks, x, r)
+            r -= b
+            scale = anorm * float(np.max(np.abs(x), initial=0.0)) + float(np.max(np.abs(b), initial=0.0))
+            if float(np.max(np.abs(r), initial=0.0)) <= tol * scale or scale == 0.0:
+                return x
+            if it == 0:
+                x = x - self.solve(r)
+        return None
+
+
+@njit(cache=True)
+def _bcsr_inf_norm(indptr, blocks):
+    """‖A‖_∞ (largest absolute row sum) of a block-CSR matrix."""
+    n = indptr.shape[0] - 1
+    d = blocks.shape[1]
+    best = 0.0
+    for a in range(n):
+        for r in range(d):
+            s = 0.0
+            for p in range(indptr[a], indptr[a + 1]):
+                for c in range(d):
+                    s += abs(blocks[p, r, c])
+            best = max(best, s)
+    return best

@@ -67,7 +67,8 @@ def history_columns(model: Model) -> list[str]:
             cols += [f"{name}.R{d}" for d in model.dofs]  # 0 on free dofs; stages may drive or free dofs
             cols += [f"{name}.I{d}" for d in model.dofs]  # inertial part of R (dynamics.py docstring)
     if model.contact is not None:
-        cols += ["contacts", "closed", "slip", "sweeps", "change", "residual", "converged", "dissipated"]
+        cols += ["contacts", "closed", "slip", "sweeps", "change", "residual", "converged", "dissipated",
+                 "friction_dissipated"]
     return cols
 
 
@@ -89,7 +90,9 @@ def history_row(model: Model, info, stage_index: int, sim=None, h=None) -> dict:
         c = info.contact or {}
         row.update(contacts=c.get("contacts", 0), closed=c.get("active", 0), slip=c.get("slip", 0),
                    sweeps=c.get("sweeps", 0), change=c.get("change", 0.0), residual=c.get("residual", 0.0),
-                   converged=int(c.get("converged", True)), dissipated=_dissipated(sim))
+                   converged=int(c.get("converged", True)), dissipated=_dissipated(sim),
+                   friction_dissipated=0.0 if sim is None or sim.last_contact is None
+                   else sim.last_contact.friction_total)
     return row
 
 
@@ -797,6 +800,8 @@ def _summary(case, model, sim, info, run, t_start, t_setup, pv, pc, status) -> d
     if model.contact is not None and res is not None and res.state is not None:
         from .laws import S_DISS
         summary["dissipated_energy_J"] = float(res.state[:, S_DISS].sum())
+    if model.contact is not None and res is not None:
+        summary["friction_dissipated_J"] = float(res.friction_total)  # contact/friction.py
     return summary
 
 
@@ -845,18 +850,26 @@ def _cycles(hist: dict, body: str, fk: str, dk: str, out_dir: str, title: str) -
     u = np.asarray(hist[f"{body}.{dk}"], float)
     cyc = cycles_block(hist.get("time", np.arange(len(u), dtype=float)), u, hist[f"{body}.{fk}"], u_scale=us,
                        u_unit=_unit_key(uu), f_scale=fs, f_unit=_unit_key(fu), dissipated=hist.get("dissipated"),
-                       stored=stored if np.ndim(stored) else None)
+                       stored=stored if np.ndim(stored) else None, friction=hist.get("friction_dissipated"))
     if cyc is None:
         return {}
     write_hysteresis(os.path.join(out_dir, "hysteresis.png"), hist, body, fk, dk, cyc, title=title)
     return {"cycles": cyc, "hysteresis": "hysteresis.png"}
 
 
+def _cracked_bricks(b) -> dict:
+    """summary.json `cracked_bricks` of a split-brick wall (output/figures.brick_cracks; {} without brick cracks)."""
+    if b is None:
+        return {}
+    return {"cracked_bricks": dict(count=b["n_cracked"], of=b["n_bricks"], threshold_mm=1e3 * b["threshold_m"],
+                                   max_width_mm=1e3 * b["max_width_m"], bricks=b["cracked_names"])}
+
+
 def _figures(case, sim, model, out_dir, hist: dict, conv=None) -> dict:
     """force_displacement.png and crack_pattern.png, and the curve's peak figures for summary.json (keys named
     with their unit: translations mm / forces kN, rotations rad / moments kN·m; figures.dof_unit). `hist`: the
     run's history columns (HistoryWriter.columns_dict: the rows of history.csv, kept in memory)."""
-    from .output.figures import curve_data, dof_unit, write_crack_pattern, write_curve
+    from .output.figures import curve_data, dof_unit, post_peak, post_peak_summary, write_crack_pattern, write_curve
     out = {}
     if case.dimension == 3:  # deformed blocks, off-screen (pyvista when installed, else matplotlib)
         from .output.figures import write_blocks_3d
@@ -864,9 +877,13 @@ def _figures(case, sim, model, out_dir, hist: dict, conv=None) -> dict:
         out["blocks_png"] = "blocks.png"
     elif case.output.get("crack_pattern", default_of(OutputSpec, "crack_pattern")) \
             and any(b.kind == 0 for b in model.bodies):
-        write_crack_pattern(os.path.join(out_dir, "crack_pattern.png"), sim, sim.last_contact, model.contact,
-                            title=case.name)
+        d = write_crack_pattern(os.path.join(out_dir, "crack_pattern.png"), sim, sim.last_contact, model.contact,
+                                title=case.name)
         out["crack_pattern"] = "crack_pattern.png"
+        out.update(_cracked_bricks(d["bricks"]))
+    elif getattr(model, "contact", None) is not None and sim is not None:  # no figure: the count all the same
+        from .output.figures import brick_cracks
+        out.update(_cracked_bricks(brick_cracks(sim.last_contact, model.contact)))
     cv = case.output.get("curve")
     if cv:
         body, fk, dk = cv["body"], f"R{cv['force']}", f"u{cv['displacement']}"
@@ -878,16 +895,21 @@ def _figures(case, sim, model, out_dir, hist: dict, conv=None) -> dict:
                     f"worst residual {conv['worst_residual']:.3g} at step {conv['worst_step']} "
                     f"(t = {conv['worst_time']:.4g} s)")
         refs = getattr(case, "references", None)  # [[reference]] entries (a Case has them; a stand-in may not)
-        write_curve(os.path.join(out_dir, "force_displacement.png"), hist, body, fk, dk, title=case.name, note=note,
-                    references=refs)
         c = curve_data(hist, body, fk, dk)
+        cyc = _cycles(hist, body, fk, dk, out_dir, case.name)
+        pp = None if cyc else post_peak(c["x"], c["y"])  # monotone curves: the softening branch, read once
+        write_curve(os.path.join(out_dir, "force_displacement.png"), hist, body, fk, dk, title=case.name, note=note,
+                    references=refs, softening=pp)
+        if pp is not None:
+            out["post_peak"] = post_peak_summary(pp, _unit_key(c["xunit"]), _unit_key(c["yunit"]),
+                                                 "rotation" if cv["displacement"].startswith("r") else "displacement")
         if refs:  # model peak vs each [[reference]] (output/summary.reference_comparison)
             from .output.figures import reference_data
             from .output.summary import reference_comparison
             out["reference"] = [reference_comparison(c["x"], c["y"], r, _unit_key(c["yunit"]), _unit_key(c["xunit"]),
                                                      "rotation" if cv["displacement"].startswith("r") else
                                                      "displacement") for r in reference_data(refs, fk, dk)]
-        out.update(_cycles(hist, body, fk, dk, out_dir, case.name))
+        out.update(cyc)
         F, D = np.abs(c["y"]), np.abs(c["x"])  # the peak: largest |force|; magnitudes, as before
         if F.size == 0 or not np.any(np.isfinite(F)):
             return out

@@ -173,6 +173,10 @@ LAW_PARAMS: dict[str, LawParam] = {
     "f_ci": LawParam("stress", dict(coulomb=0.0, elastic=0.0, brittle=0.0, fremond=0.0, mixed=0.0),
                      "initial cap of the hardening branch, f_ci <= f_c (needs kappa_p; omit: f_c/3)", lo_open=True,
                      expected="initial cap f_ci > 0 [Pa] (omit: f_c/3)", finite=True),
+    "C_ss": LawParam(None, dict(mixed=0.0),
+                     "shear term of the elliptic cap (r̃_N/A)^2 + C_ss (r̃_T/A)^2 <= f_c(κ)^2 (needs f_c; 0: the cap "
+                     "bounds the normal stress only)",
+                     expected="cap shear coefficient C_ss >= 0 (dimensionless; 0: no shear term)", finite=True),
 }
 LAWS = ("coulomb", "elastic", "brittle", "fremond", "mixed")
 # the parameters each law accepts, from the table
@@ -238,6 +242,13 @@ def validate_law_params(law: str, params: dict, name: str) -> dict:
         raise InputError(f"{name}.f_ci: needs kappa_p [m] (f_ci is the start of the cap's hardening branch)")
     else:
         out["kappa_p"] = out["f_ci"] = 0.0
+    if "C_ss" in params:  # only the mixed law takes it (an unknown key for the others, above)
+        if "f_c" not in params:
+            raise InputError(f"{name}.C_ss: needs the compressive strength f_c [Pa] (C_ss is the shear term of the "
+                             "cap's ellipse)")
+        get("C_ss")
+    elif law == "mixed":
+        out["C_ss"] = 0.0
     if law == "mixed":
         for k in ("k_n", "k_s", "f_t", "c", "G_I", "G_II", "tan_phi", "softening", "damage_viscosity",
                   "damage_integration"):

@@ -258,9 +258,15 @@ def test_block_sliding_on_coulomb_dissipates_4_mu_n_a_per_cycle(tmp_path):
         assert (r["peak_force_pos_kN"], r["peak_force_neg_kN"]) == pytest.approx((MU * N / 1e3, -MU * N / 1e3),
                                                                                   rel=1e-6)
         assert r["dissipated_J"] == 0.0  # Coulomb friction is not in the laws' dissipated energy
+        assert r["friction_J"] == pytest.approx(4 * MU * N * a, rel=1e-6)  # it is in friction_dissipated
         assert abs(r["stored_change_J"]) < 1e-6 * r["energy_J"]
     # the energy balance: the only moving driver is block.x, so ∮F du is the drivers' work in the stage
     assert cyc["energy_total_J"] == pytest.approx(s["final_energy"]["driver_work"], rel=1e-6)
+    assert s["friction_dissipated_J"] == pytest.approx(4 * MU * N * 3e-3, rel=1e-6)  # the two cycles: all friction
+    hist = (tmp_path / "out" / "history.csv").read_text().splitlines()
+    cols = hist[0].split(",")
+    assert cols[cols.index("dissipated") + 1] == "friction_dissipated"
+    assert float(hist[-1].split(",")[cols.index("friction_dissipated")]) == s["friction_dissipated_J"]
 
 
 @pytest.mark.dolfinx
@@ -285,3 +291,6 @@ def test_energy_balance_with_a_brittle_joint(tmp_path):
     assert c1["energy_J"] - c1["dissipated_J"] - c1["stored_change_J"] == pytest.approx(
         4 * MU * N * 1e-3 + 0.5 * k * m * du ** 2, rel=1e-6)
     assert c2["dissipated_J"] == 0.0 and c2["energy_J"] == pytest.approx(4 * MU * N * 2e-3, rel=1e-6)
+    # friction acts on r̃ (in parallel with the spring, then alone): 4 μ N a per cycle, the spring's work not in it
+    assert c1["friction_J"] == pytest.approx(4 * MU * N * 1e-3, rel=1e-6)
+    assert c2["friction_J"] == pytest.approx(4 * MU * N * 2e-3, rel=1e-6)

@@ -12,7 +12,8 @@ contact set the step was solved on, shared with the step but never modified afte
 Per contact (nc rows, local frame (n, t) in 2D, (n, t, s) in 3D, docs/method.md §3–§5):
 P impulses (nc, d) [N s], r = P / h reactions [N], v the shifted local velocity at the end of the step
 (normal v_N + gbar / (h theta)), gt_end = h theta v_N the joint-corrected gap g - g0 at the end of the step [m],
-status 0 open / 1 stick / 2 slip, law codes and the committed law state (laws.py columns).
+status 0 open / 1 stick / 2 slip, law codes and the committed law state (laws.py columns), the step's frictional
+dissipation per contact `friction` = -r̃_T · Δu_T [J] and its running total `friction_total` (contact/friction.py).
 """
 from __future__ import annotations
 
@@ -38,6 +39,8 @@ class ContactResult:
     group_corr: list = field(default_factory=list)  # per Simulation group: (ndof, k) correction, or None
     rigid_corr: np.ndarray = None     # (n_rigid, rigid ndof) velocity correction W p, in sim.rigid order
     rigid_impulse: np.ndarray = None  # (n_rigid, rigid ndof) contact impulse p on each rigid body
+    friction: np.ndarray = None       # (nc,) frictional dissipation of this step per contact [J] (contact/friction.py)
+    friction_total: float = 0.0       # frictional dissipation of every step of the contact step so far [J]
 
     @property
     def n_contacts(self) -> int:

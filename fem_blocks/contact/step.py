@@ -83,6 +83,7 @@ class ContactStep:
         self._rigid_W_restored = None  # 3D resume: rigid W of the checkpoint, used at the next Delassus build
         self.n_unconverged = 0
         self.steps = 0
+        self.friction_total = 0.0  # frictional dissipation of every step so far [J] (contact/friction.py)
         self.timers = dict(detection=0.0, delassus=0.0, nlgs=0.0, correction=0.0, local=0.0)
 
     # ------------------------------------------------------------------ set-up
@@ -286,7 +287,8 @@ class ContactStep:
         """Arrays that determine the rest of the run: contact set, G blocks, reference gaps, impulses (warm
         start), law states and counters (the shuffled order's seed is `seed + steps`). The last step's outputs
         (ContactResult.export, "contact.out.*") are exported by the simulation that keeps the record."""
-        d = {"contact.steps": np.int64(self.steps), "contact.n_unconverged": np.int64(self.n_unconverged)}
+        d = {"contact.steps": np.int64(self.steps), "contact.n_unconverged": np.int64(self.n_unconverged),
+             "contact.friction_total": np.float64(self.friction_total)}
         if self.cs is None:
             return d
         for k in self._CS:
@@ -313,6 +315,7 @@ class ContactStep:
         velocity corrections are not checkpointed: they were applied), or None before the first contact step."""
         self.steps = int(d["contact.steps"])
         self.n_unconverged = int(d["contact.n_unconverged"])
+        self.friction_total = float(d.get("contact.friction_total", 0.0))  # (0 from a checkpoint that predates it)
         if "contact.cs.gap" not in d:
             return None
         self._setup(sim)
@@ -331,7 +334,7 @@ class ContactStep:
                                   and not bool(d["contact.W_dirty"]) else None)
         out = {k: np.array(d[f"contact.out.{k}"]) for k in OUT_FIELDS if f"contact.out.{k}" in d}
         return ContactResult(self.dim, {}, cs=self.cs, P=self.P.copy(), law=self.law.copy(),
-                             state=self.state.copy(), **out)
+                             state=self.state.copy(), friction_total=self.friction_total, **out)
 
     # ------------------------------------------------------------------ the step
     def warm_start(self, h: float) -> np.ndarray:
@@ -368,7 +371,7 @@ class ContactStep:
             return ContactResult(d, dict(contacts=0, active=0, sweeps=0, change=0.0, residual=0.0, converged=True,
                                          solver="none", message="no contact"), cs=cs, P=self.P.copy(),
                                  law=self.law.copy(), state=self.state.copy(), group_corr=gc, rigid_corr=rc,
-                                 rigid_impulse=ri)
+                                 rigid_impulse=ri, friction=np.zeros(0), friction_total=self.friction_total)
         ufree = s.gather("ufree")
         K = self._kin
         vfree = K.local_velocity(self.G, ufree, s.U_offset)
@@ -414,6 +417,9 @@ class ContactStep:
         self.P_prev, self.h_prev, self.h_last = self.P, self.h_last, h
         self.P = P
         v = res.u.reshape(-1, d).copy()
+        from .friction import friction_work  # -r̃_T · Δu_T per contact, from the committed state
+        friction = friction_work(self.law, self.par, self.state, P, v, vi, cs.area, h, th)
+        self.friction_total += float(friction.sum())
         imp = K.accumulate_impulse(self.G, P, s.n_udof, s.U_offset)
         gc, rc, ri = s.corrections(imp)
         tm["correction"] += perf_counter() - c3
@@ -436,4 +442,4 @@ class ContactStep:
         # v is the shifted normal velocity: g~_{i+1} = gbar + h theta v_N
         return ContactResult(d, stats, cs=cs, P=P.copy(), r=P / h, v=v, gt_end=h * th * v[:, 0], status=status,
                              law=self.law.copy(), state=self.state.copy(), group_corr=gc, rigid_corr=rc,
-                             rigid_impulse=ri)
+                             rigid_impulse=ri, friction=friction, friction_total=self.friction_total)

@@ -1,6 +1,7 @@
 """Run figures: force–displacement curve (from the run's history columns, kept in memory), crack pattern (deformed blocks, joints
-coloured by damage, or by opening for dry joints, drawn thicker where they open or slip) and 3D views of 3D
-bodies (write_blocks_3d)."""
+coloured by damage, or by opening for dry joints, drawn thicker where they open or slip; on split-brick walls the
+cracked bricks shaded and their cracks in their own colour, brick_cracks) and 3D views of 3D bodies
+(write_blocks_3d)."""
 from __future__ import annotations
 
 from types import SimpleNamespace
@@ -101,24 +102,91 @@ def auto_amplification(sim) -> float:
     return float(np.floor(amp / mag) * mag) if amp > 1 else 1.0
 
 
-def write_crack_pattern(path, sim, result, geometry=None, title=""):
-    """crack_pattern.png: the deformed blocks of `sim` and the joints of the 2D contact record `result` (None:
-    no contact step yet). `geometry`: the contact step's queries contact_points(cs, reference) and
-    joint_lengths(cs) (None: a model without contact)."""
+# A brick of a split-brick wall counts as cracked when the crack between its two halves (the "crack" interface) has
+# opened or slid by at least this width somewhere: w = sqrt(<u_N>+^2 + u_T^2) >= 0.1 mm (assumed: about the narrowest
+# crack read by eye on a tested wall, approximate; the brick cracks' own softening ends at u_f = 2 G_I / f_t = 0.08 mm
+# in pure mode I with the micro-model's values, so a counted crack carries no tension any more).
+BRICK_CRACK_WIDTH = 0.1e-3  # m
+
+
+def brick_cracks(result, geometry, threshold: float = BRICK_CRACK_WIDTH):
+    """The split bricks and which of them are cracked, from the 2D contact record `result` and the contact step
+    `geometry` (its `interfaces`, `body_parent`: the two halves of a brick share a parent id >= 0, and `body_names`).
+    A contact belongs to a brick crack when its interface has orientation "crack"; a brick is cracked when one of its
+    crack contacts has a crack width (crack_width) >= `threshold` [m]. None when the model has no brick crack
+    (no "crack" interface or no split brick). Returns dict(threshold_m, n_bricks, n_cracked, cracked (parent ids,
+    sorted), cracked_bodies (body indices of their halves), cracked_names (per cracked brick, its halves' names),
+    crack (nc,) bool: crack contacts, open (nc,) bool: crack contacts at or above the threshold, max_width_m)."""
+    itfs = list(getattr(geometry, "interfaces", []) or [])
+    parent = np.asarray(getattr(geometry, "body_parent", np.zeros(0, dtype=np.int64)), dtype=np.int64)
+    is_crack = np.array([getattr(itf, "orientation", "any") == "crack" for itf in itfs], dtype=bool)
+    bricks = np.unique(parent[parent >= 0])
+    if not is_crack.any() or bricks.size == 0:
+        return None
+    cs = None if result is None else result.cs
+    nc = 0 if cs is None else len(cs.gap)
+    if nc == 0 or result.state is None:
+        crack, width = np.zeros(nc, bool), np.zeros(nc)
+    else:
+        crack = is_crack[cs.interface]
+        width = crack_width(result.state)
+    opened = crack & (width >= threshold)
+    cracked = np.unique(parent[cs.cand_body[opened]]) if opened.any() else np.zeros(0, dtype=np.int64)
+    bodies = np.flatnonzero(np.isin(parent, cracked))
+    names = getattr(geometry, "body_names", None) or [str(i) for i in range(len(parent))]
+    return dict(threshold_m=float(threshold), n_bricks=int(bricks.size), n_cracked=int(cracked.size),
+                cracked=cracked, cracked_bodies=bodies,
+                cracked_names=[[names[b] for b in np.flatnonzero(parent == p)] for p in cracked],
+                crack=crack, open=opened, max_width_m=float(width[crack].max()) if crack.any() else 0.0)
+
+
+def crack_pattern_data(sim, result, geometry=None) -> dict:
+    """What crack_pattern.png draws, from the simulation `sim` (deformed bodies), its 2D contact record `result`
+    (None: no contact step yet) and the contact step `geometry` (contact_points, joint_lengths, interfaces,
+    body_parent; None: a model without contact): amplification, body outlines, the joints' segments (seg, val,
+    label, widths [pt], the largest crack width w_max [m]; brick-crack contacts excluded) and, on a split-brick wall,
+    `bricks` (brick_cracks) with the segments of the cracks at or above its threshold (crack_seg, crack_widths) and
+    the legend's title `crack_label` ("brick cracks: n of N bricks cracked (crack width ≥ 0.1 mm)"; None without)."""
     amp = auto_amplification(sim)
     polys = body_outlines(sim, amp)
+    empty = np.zeros((0, 2, 2))
     if geometry is None:  # a model without contact
-        seg, val, label, width = np.zeros((0, 2, 2)), [], "", np.zeros(0)
+        seg, val, label, width = empty, np.zeros(0), "", np.zeros(0)
     elif result is None or result.cs is None or len(result.cs.gap) == 0:
         seg, val, label, width = joint_segments(result, None, None, None, amp)
     else:
         cs = result.cs
         seg, val, label, width = joint_segments(result, geometry.contact_points(cs, reference=True),
                                                 geometry.contact_points(cs), geometry.joint_lengths(cs), amp)
+    bricks = None if geometry is None else brick_cracks(result, geometry)
     lw, wmax = segment_widths(width)
-    return plot_crack_pattern(path, polys, seg, val, amp, title=title, value_label=label, widths=lw,
-                              width_note=f"line width: joint opening + slip (thickest {1e3 * wmax:.3g} mm)"
-                              if wmax > 0 else "")
+    out = dict(amplification=amp, polygons=polys, bricks=bricks, crack_seg=empty, crack_widths=np.zeros(0))
+    if bricks is not None and len(seg):
+        joint = ~bricks["crack"]
+        out.update(crack_seg=seg[bricks["open"]], crack_widths=np.maximum(lw[bricks["open"]], 2.0))  # >= 2 pt: visible
+        seg, val, width, lw = seg[joint], np.asarray(val)[joint], width[joint], lw[joint]
+    out.update(seg=seg, val=np.asarray(val, dtype=float), label=label, widths=lw, w_max=wmax,
+               crack_label=None if bricks is None else
+               f"brick cracks: {bricks['n_cracked']} of {bricks['n_bricks']} bricks cracked "
+               f"(crack width ≥ {1e3 * bricks['threshold_m']:.2g} mm)")
+    return out
+
+
+def write_crack_pattern(path, sim, result, geometry=None, title=""):
+    """crack_pattern.png: the deformed blocks of `sim` and the joints of the 2D contact record `result` (None:
+    no contact step yet); on a split-brick wall the cracked bricks shaded and their cracks drawn in their own colour,
+    with the count in the legend (crack_pattern_data). `geometry`: the contact step (None: a model without contact).
+    Returns the data drawn (crack_pattern_data)."""
+    d = crack_pattern_data(sim, result, geometry)
+    b = d["bricks"]
+    note = (f"line width: joint opening + slip (thickest {1e3 * d['w_max']:.3g} mm)" if d["w_max"] > 0 else "")
+    plot_crack_pattern(path, d["polygons"], d["seg"], d["val"], d["amplification"], title=title,
+                       value_label=d["label"], widths=d["widths"], width_note=note,
+                       shaded=None if b is None else b["cracked_bodies"],
+                       crack_segments=None if b is None else d["crack_seg"],
+                       crack_widths=None if b is None else d["crack_widths"],
+                       crack_label=d["crack_label"])
+    return d
 
 
 def dof_unit(column: str):
@@ -151,6 +219,46 @@ def curve_data(history: dict, body: str, force: str, displacement: str) -> dict:
                 xunit=ux, yunit=uy, unconverged=bad)
 
 
+POST_PEAK_FRACTION = 0.85  # the post-peak read-out: where the force has fallen to 85 % of the peak (a common
+                           # definition of the ultimate displacement of a masonry wall, e.g. in pushover analyses)
+
+
+def post_peak(x, y, fraction: float = POST_PEAK_FRACTION) -> dict | None:
+    """The softening branch of a monotone force–displacement curve (signed x, y in the figure's units; rows in time
+    order), read once for the figure and summary.json: the peak (largest |y|, row k), the end of the run (the last
+    finite row: |y_end|, |x_end|, |y_end| / |y_k|) and the post-peak point where |y| first falls to `fraction` of the
+    peak after it — linear between the last row above and the first row at or below, |x| there (None when the force
+    never falls that far within the run). Magnitudes, as the peak of summary.json. None without a finite point.
+    Returns dict(k, peak, d_peak, end, d_end, end_ratio, fraction, d_drop, f_drop, x_drop (signed), y_drop)."""
+    x = np.asarray(x, dtype=float).ravel()
+    y = np.asarray(y, dtype=float).ravel()
+    ok = np.flatnonzero(np.isfinite(x) & np.isfinite(y))
+    if ok.size == 0:
+        return None
+    F = np.abs(y[ok])
+    j = int(np.argmax(F))
+    k, peak, e = int(ok[j]), float(F[j]), int(ok[-1])
+    out = dict(k=k, peak=peak, d_peak=float(abs(x[k])), end=float(abs(y[e])), d_end=float(abs(x[e])),
+               end_ratio=float(abs(y[e]) / peak) if peak > 0 else None, fraction=float(fraction), d_drop=None,
+               f_drop=None, x_drop=None, y_drop=None)
+    target = fraction * peak
+    below = np.flatnonzero(F[j:] <= target)
+    if peak > 0 and below.size:
+        i = j + int(below[0])  # first row at or below the target after the peak; F[i - 1] > target
+        a, b = ok[i - 1], ok[i]
+        s = (F[i - 1] - target) / (F[i - 1] - F[i])
+        xd = float(x[a] + s * (x[b] - x[a]))
+        out.update(d_drop=abs(xd), f_drop=float(target), x_drop=xd, y_drop=float(np.sign(y[k]) * target))
+    return out
+
+
+def post_peak_summary(pp: dict, xunit: str, yunit: str, dname: str = "displacement") -> dict:
+    """summary.json `post_peak` from post_peak's dict (keys with the figure's units, e.g. `end_force_kN`)."""
+    pct = int(round(100 * pp["fraction"]))
+    return {f"end_force_{yunit}": pp["end"], f"end_{dname}_{xunit}": pp["d_end"], "end_to_peak": pp["end_ratio"],
+            "drop_fraction": pp["fraction"], f"{dname}_at_{pct}_percent_post_peak_{xunit}": pp["d_drop"]}
+
+
 def curve_arrays(history: dict, body: str, force: str, displacement: str):
     """(displacement, force) of `body`, signed, in the units of dof_unit."""
     c = curve_data(history, body, force, displacement)
@@ -176,21 +284,24 @@ def reference_data(references, force: str, displacement: str) -> list:
             for r in references or []]
 
 
-def write_curve(path, history: dict, body: str, force: str, displacement: str, title="", note="", references=None):
+def write_curve(path, history: dict, body: str, force: str, displacement: str, title="", note="", references=None,
+                softening=None):
     """force_displacement.png: signed curve (curve_data), unconverged steps marked; `note` (e.g. the count and
     worst residual of the unconverged steps) is added under the title; `references`: the case's [[reference]]
-    entries (specs.ReferenceSpec, SI), drawn in the figure's units (reference_data)."""
+    entries (specs.ReferenceSpec, SI), drawn in the figure's units (reference_data); `softening`: the post-peak
+    read-out (post_peak of the same curve) marked on the softening branch."""
     c = curve_data(history, body, force, displacement)
     return plot_curve(path, c["x"], c["y"], c["xlabel"], c["ylabel"], title=title,
                       marks=c["unconverged"] if c["unconverged"].any() else None,
                       marks_label=f"unconverged step ({int(c['unconverged'].sum())})", note=note,
-                      references=reference_data(references, force, displacement) or None)
+                      references=reference_data(references, force, displacement) or None,
+                      softening=softening, units=(c["xunit"], c["yunit"]))
 
 
 def write_hysteresis(path, history: dict, body: str, force: str, displacement: str, cycles: dict, title=""):
     """hysteresis.png: the signed curve (curve_data) with each cycle of `cycles` (summary.cycles_block) in its own
-    colour and legend entry (number, amplitude, ∮ F du), the rows before the first cycle in grey, unconverged
-    steps marked."""
+    colour and legend entry (number, amplitude, ∮ F du and, with the history column friction_dissipated, the cycle's
+    friction work), the rows before the first cycle in grey, unconverged steps marked."""
     c = curve_data(history, body, force, displacement)
     t = np.asarray(history.get("time", np.arange(len(c["x"]))), dtype=float)
     pieces, labels = [], []
@@ -201,6 +312,7 @@ def write_hysteresis(path, history: dict, body: str, force: str, displacement: s
             if f"displacement_pos_{c['xunit']}" in cyc else float("nan")
         pieces.append((max(i0, 0), i1))
         labels.append(f"cycle {cyc['index']}: ±{amp:.3g} {c['xunit']}, {cyc['energy_J']:.3g} J"
+                      + (f" (friction {cyc['friction_J']:.3g} J)" if "friction_J" in cyc else "")
                       + ("" if cyc["complete"] else " (incomplete)"))
     bad = c["unconverged"]
     return plot_hysteresis(path, c["x"], c["y"], pieces, labels, c["xlabel"], c["ylabel"],

@@ -33,15 +33,20 @@ def _no_data(ax):
 
 
 def plot_curve(path, x, y, xlabel, ylabel, title="", peak=True, marks=None, marks_label="", note="",
-               references=None):
+               references=None, softening=None, units=("", "")):
     """Curve y(x) (e.g. force–displacement); with peak=True the point of largest |y| is marked and annotated
     "peak y at x". `marks` (bool, one per point): points drawn as red crosses with a legend entry `marks_label`
     (e.g. unconverged steps); `note`: a second title line (in red); `references`: reference curves, bands and
-    peaks in the units of x and y (draw_references). Non-finite points are skipped. Returns `path`."""
-    return _save(curve_figure(x, y, xlabel, ylabel, title, peak, marks, marks_label, note, references), path, 120)
+    peaks in the units of x and y (draw_references); `softening`: the post-peak read-out (figures.post_peak of the
+    same curve): the level fraction × peak dashed from the peak to where the force falls to it (a triangle there,
+    its displacement in the legend) and the end of the run ("end: F (r % of the peak) at d"); `units` = (x unit,
+    y unit) for its labels. Non-finite points are skipped. Returns `path`."""
+    return _save(curve_figure(x, y, xlabel, ylabel, title, peak, marks, marks_label, note, references, softening,
+                              units), path, 120)
 
 
-def curve_figure(x, y, xlabel, ylabel, title="", peak=True, marks=None, marks_label="", note="", references=None):
+def curve_figure(x, y, xlabel, ylabel, title="", peak=True, marks=None, marks_label="", note="", references=None,
+                 softening=None, units=("", "")):
     """The matplotlib Figure of plot_curve (not saved)."""
     x = np.asarray(x, dtype=float).ravel()
     y = np.asarray(y, dtype=float).ravel()
@@ -71,6 +76,8 @@ def curve_figure(x, y, xlabel, ylabel, title="", peak=True, marks=None, marks_la
             ax.annotate(f"peak {y[k]:.4g} at {x[k]:.4g}", (x[k], y[k]), textcoords="offset points",
                         xytext=(-10 if right else 10, -16 if y[k] >= 0 else 12), ha="right" if right else "left",
                         color="C3", bbox=dict(facecolor="white", alpha=0.8, edgecolor="none", pad=1))
+        if softening is not None:
+            _draw_softening(ax, x, y, softening, units)
         ax.grid(alpha=0.3)
     if ax.get_legend_handles_labels()[0]:
         ax.legend(loc="best", fontsize=7 if references else 9)
@@ -82,6 +89,24 @@ def curve_figure(x, y, xlabel, ylabel, title="", peak=True, marks=None, marks_la
         ax.set_title(title)
     fig.tight_layout()
     return fig
+
+
+def _draw_softening(ax, x, y, pp, units):
+    """The post-peak read-out of plot_curve on `ax` (pp: figures.post_peak)."""
+    xu, yu = units
+    k = pp["k"]
+    pct = int(round(100 * pp["fraction"]))
+    if pp["x_drop"] is not None:
+        ax.plot([x[k], pp["x_drop"]], [pp["y_drop"]] * 2, ":", color="C1", lw=1.2)
+        ax.plot([pp["x_drop"]], [pp["y_drop"]], "v", color="C1", ms=8, zorder=4,
+                label=f"post-peak: {pct} % of the peak at {pp['d_drop']:.3g} {xu}")
+    else:
+        ax.plot([], [], "v", color="C1", ms=8, label=f"the force stays above {pct} % of the peak after it")
+    e = int(np.flatnonzero(np.isfinite(x) & np.isfinite(y))[-1])
+    if e != k:
+        ratio = "" if pp["end_ratio"] is None else f" ({100 * pp['end_ratio']:.0f} % of the peak)"
+        ax.plot([x[e]], [y[e]], "s", color="C1", ms=6, mfc="white", mew=1.5, zorder=4,
+                label=f"end: {pp['end']:.4g} {yu}{ratio} at {pp['d_end']:.3g} {xu}")
 
 
 _REF_COLOURS = ("C2", "C4", "C1", "C5", "C6", "C8", "C9")
@@ -159,12 +184,19 @@ def plot_hysteresis(path, x, y, pieces, labels, xlabel, ylabel, title="", marks=
     return _save(fig, path, 120)
 
 
+BRICK_FACE, BRICK_EDGE, CRACK_COLOUR = "#f3a48c", "#a8321e", "#1565c0"  # cracked bricks, brick cracks
+
+
 def plot_crack_pattern(path, polygons, segments, values, amplification, title="", value_label="damage",
-                       widths=None, width_note=""):
+                       widths=None, width_note="", shaded=None, crack_segments=None, crack_widths=None,
+                       crack_label=None):
     """Deformed block outlines (displacements already amplified by `amplification`) and joint/contact
     segments (m, 2, 2) coloured by `values` (m,) clipped to [0, 1] (NaN drawn grey), `widths` (m,) their line
     widths [pt] (default 2.2; `width_note` says what they mean), with a colourbar and the text
-    "displacements x{amplification:g}". Returns `path`."""
+    "displacements x{amplification:g}". Split-brick walls: `shaded` (indices into `polygons`) are filled in a
+    distinct colour (cracked bricks), `crack_segments` (k, 2, 2) with `crack_widths` (k,) [pt] are drawn in one
+    colour of their own, on top (brick cracks), and `crack_label` (e.g. "brick cracks: 3 of 64 bricks cracked")
+    heads a legend of the two. Returns `path`."""
     try:
         amp = float(amplification)
     except (TypeError, ValueError):
@@ -189,6 +221,17 @@ def plot_crack_pattern(path, polygons, segments, values, amplification, title=""
         raise InputError(f"widths: expected {len(seg)} line widths (one per segment), got {len(lw)}")
     if np.any(~np.isfinite(lw)) or np.any(lw <= 0):
         raise InputError("widths: expected finite line widths > 0 [pt]")
+    cseg = np.asarray(crack_segments if crack_segments is not None else np.zeros((0, 2, 2)), dtype=float)
+    cseg = cseg.reshape(-1, 2, 2) if cseg.size else np.zeros((0, 2, 2))
+    clw = np.full(len(cseg), 2.2) if crack_widths is None else np.asarray(crack_widths, dtype=float).ravel()
+    if len(clw) != len(cseg):
+        raise InputError(f"crack_widths: expected {len(cseg)} line widths (one per crack segment), got {len(clw)}")
+    shade = np.zeros(len(polys), bool)
+    if shaded is not None:
+        idx = np.asarray(shaded, dtype=np.int64).ravel()
+        if idx.size and (idx.min() < 0 or idx.max() >= len(polys)):
+            raise InputError(f"shaded: expected polygon indices in [0, {len(polys)}), got {idx.tolist()}")
+        shade[idx] = True
 
     from matplotlib import colormaps
     from matplotlib.cm import ScalarMappable
@@ -202,11 +245,24 @@ def plot_crack_pattern(path, polygons, segments, values, amplification, title=""
         _no_data(ax)
     else:
         if polys:
-            ax.add_collection(PolyCollection(polys, facecolors="#e8d5c0", edgecolors="#7a5c3e", linewidths=0.4))
+            ax.add_collection(PolyCollection(polys, facecolors=np.where(shade[:, None], _rgba(BRICK_FACE),
+                                                                        _rgba("#e8d5c0")),
+                                             edgecolors=np.where(shade[:, None], _rgba(BRICK_EDGE), _rgba("#7a5c3e")),
+                                             linewidths=np.where(shade, 1.0, 0.4)))
         if len(seg):
             order = np.argsort(lw, kind="stable")  # widest (open cracks) drawn last, on top
             ax.add_collection(LineCollection(seg[order], array=np.clip(val[order], 0.0, 1.0), cmap=cmap,
                                              norm=norm, linewidths=lw[order]))
+        if len(cseg):
+            ax.add_collection(LineCollection(cseg, colors=CRACK_COLOUR, linewidths=clw, zorder=3))
+        if crack_label is not None:
+            from matplotlib.lines import Line2D
+            from matplotlib.patches import Patch
+            ax.legend(handles=[Patch(facecolor=BRICK_FACE, edgecolor=BRICK_EDGE, label="cracked brick"),
+                               Line2D([], [], color=CRACK_COLOUR, lw=2.5, label="brick crack")],
+                      title=crack_label, title_fontsize=8, fontsize=8, loc="upper center",
+                      bbox_to_anchor=(0.5, -0.06), ncol=2, framealpha=0.9)
+        seg = np.concatenate([seg, cseg])
         pts = np.concatenate(polys + [seg.reshape(-1, 2)])
         pts = pts[np.all(np.isfinite(pts), axis=1)]
         if len(pts):
@@ -220,6 +276,11 @@ def plot_crack_pattern(path, polygons, segments, values, amplification, title=""
     fig.text(0.01, 0.01, f"displacements x{amp:g}" + (f"; {width_note}" if width_note else ""), fontsize=10)
     fig.tight_layout(rect=(0, 0.03, 1, 1))
     return _save(fig, path, 130)
+
+
+def _rgba(colour):
+    from matplotlib.colors import to_rgba
+    return np.array(to_rgba(colour))
 
 
 def _subdivide(polys, rgba):

@@ -182,7 +182,7 @@ def _work(u: np.ndarray, F: np.ndarray, start, end) -> float:
 
 
 def cycles_block(t, u, F, *, u_scale: float = 1e3, u_unit: str = "mm", f_scale: float = 1e-3, f_unit: str = "kN",
-                 dissipated=None, stored=None) -> dict | None:
+                 dissipated=None, stored=None, friction=None) -> dict | None:
     """summary.json `cycles`: the cycles of a force–displacement record (history rows in time order, SI: t [s],
     u the driven displacement [m or rad], F its reaction [N or N m]); None when the displacement never goes
     both ways (a monotone test).
@@ -199,13 +199,15 @@ def cycles_block(t, u, F, *, u_scale: float = 1e3, u_unit: str = "mm", f_scale: 
                              energy dissipated when the state at the cycle's end is the state at its start
 
     `dissipated` (per row, cumulative [J], e.g. the contacts' damage and crushing energy) gives dissipated_J, its
-    increment in the cycle; `stored` (per row [J], e.g. elastic + kinetic + gravity energy of the bodies) gives
-    stored_change_J. Then energy_J = stored_change_J + the energy the interfaces took (dissipated_J + friction +
-    the joints' elastic energy change) - the work of the other drivers and of the applied forces."""
+    increment in the cycle; `friction` (per row, cumulative [J], the contacts' frictional dissipation) gives
+    friction_J; `stored` (per row [J], e.g. elastic + kinetic + gravity energy of the bodies) gives
+    stored_change_J. Then energy_J = stored_change_J + the energy the interfaces took (dissipated_J + friction_J +
+    the joints' elastic energy change + the step rule's excess) - the work of the other drivers and of the applied
+    forces."""
     t, u, F = (np.asarray(x, dtype=float).ravel() for x in (t, u, F))
     ok = np.isfinite(t) & np.isfinite(u) & np.isfinite(F)
-    extra = {k: np.asarray(v, dtype=float).ravel()[ok] for k, v in (("dissipated", dissipated), ("stored", stored))
-             if v is not None}
+    extra = {k: np.asarray(v, dtype=float).ravel()[ok] for k, v in (("dissipated", dissipated), ("stored", stored),
+                                                                     ("friction", friction)) if v is not None}
     t, u, F = t[ok], u[ok], F[ok]
     if len(u) < 3:
         return None
@@ -230,6 +232,9 @@ def cycles_block(t, u, F, *, u_scale: float = 1e3, u_unit: str = "mm", f_scale: 
         if "dissipated" in extra:
             d = _segment(extra["dissipated"], a, b)
             r["dissipated_J"] = float(d[-1] - d[0])
+        if "friction" in extra:
+            f = _segment(extra["friction"], a, b)
+            r["friction_J"] = float(f[-1] - f[0])
         if "stored" in extra:
             e = _segment(extra["stored"], a, b)
             r["stored_change_J"] = float(e[-1] - e[0])

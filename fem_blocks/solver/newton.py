@@ -10,8 +10,11 @@ elastic bricks): its sweeps count grows with the size of the wall. Newton on the
 
 with ρ_N = 1/W_αα,NN and ρ_T = 1/W_αα,TT. F is piecewise linear in r; a generalized Jacobian is
 J = D + E W with 2×2 block-diagonal D, E chosen per contact by its case (open, stick, slip), so J has the
-block pattern of W. Each iteration solves J Δr = -F with a sparse LU (scipy SuperLU below 3000 unknowns,
-MUMPS above: linalg.lu_solve), then a backtracking line search on ½‖F‖² (Armijo). When the line search fails
+block pattern of W. Each iteration assembles J's blocks in W's pattern (_assemble_jacobian, numba) and solves
+J Δr = -F with linalg.BlockLU in 2D below 3000 unknowns (block LU, ordering and fill analysed once per block pattern,
+no pivoting between blocks, backward error checked; SuperLU when that check fails), else linalg.lu_solve (SuperLU,
+MUMPS above 3000 unknowns),
+then a backtracking line search on ½‖F‖² (Armijo). When the line search fails
 (Newton's direction is not a descent direction where the cases change), a few NLGS sweeps are taken from the
 current iterate and Newton resumes.
 
@@ -72,15 +75,16 @@ import scipy.sparse as sp
 from numba import njit
 
 from ..errors import InputError
-from ..laws import MIXED, P_CN, P_CT, P_IMPLEX, S_BETA, S_BROKEN, cap_stress, compression_stiffness, linear_part, \
-    mixed_damage_gradient, step_start, viscous_damage
-from ..linalg import BlockCSR, lu_solve, matvec_bcsr
+from ..laws import MIXED, P_CN, P_CSS, P_CT, P_IMPLEX, S_BETA, S_BROKEN, cap_stress, compression_stiffness, \
+    linear_part, mixed_damage_gradient, step_start, viscous_damage
+from ..linalg import LU_SMALL, BlockCSR, BlockLU, lu_solve, matvec_bcsr
 from . import nlgs
 from .problem import SolverResult
 
 
 COMPLIANT_ROWS = True  # coupled pass: compliant_rows for the compliant contacts (False: Alart–Curnier rows; bench)
 RETRY_AC_ROWS = True  # a failed compliant coupled pass is retried with the Alart–Curnier rows before the staggered one
+BLOCK_LU = True  # 2D Newton's linear solve: linalg.BlockLU below LU_SMALL unknowns (False: lu_solve only; bench)
 
 
 def _rho(W: BlockCSR):
@@ -94,9 +98,24 @@ def _rho(W: BlockCSR):
     return rn, rt
 
 
-def alart_curnier(r, u, mu, rn, rt, jacobian=False, cap=None):
+@njit(cache=True)
+def _ellcone_rows(sel, xN, xT, rN, rT, cap, css, mu):
+    """Π and ∂Π/∂x (nlgs.ellcone_proj2) of the contacts `sel` with an elliptic cap: (len(sel), 2), (len(sel), 2, 2)."""
+    Y = np.empty((sel.shape[0], 2))
+    JP = np.empty((sel.shape[0], 2, 2))
+    for k in range(sel.shape[0]):
+        a = sel[k]
+        y0, y1, j00, j01, j10, j11, reg = nlgs.ellcone_proj2(xN[a], xT[a], rN[a], rT[a], cap[a], css[a], mu[a])
+        Y[k, 0], Y[k, 1] = y0, y1
+        JP[k, 0, 0], JP[k, 0, 1], JP[k, 1, 0], JP[k, 1, 1] = j00, j01, j10, j11
+    return Y, JP
+
+
+def alart_curnier(r, u, mu, rn, rt, jacobian=False, cap=None, css=None):
     """F (2n,) and, if asked, the 2×2 blocks D, E (n, 2, 2) of J = D + E W (vectorised over contacts).
-    `cap` (n,): compressive cap on r_N (inf: none): F_N = r_N - P_[0, cap](x), friction bound μ P_[0, cap](x)."""
+    `cap` (n,): compressive cap on r_N (inf: none): F_N = r_N - P_[0, cap](x), friction bound μ P_[0, cap](x).
+    `css` (n,): the cap's shear term C_ss; where > 0 (elliptic cap) F = r - Π(r - R u), R = diag(ρ_N, ρ_T), Π the map
+    of nlgs.ellcone_proj2, D = I - ∂Π/∂x, E = (∂Π/∂x) R."""
     R = r.reshape(-1, 2)
     U = u.reshape(-1, 2)
     xN = R[:, 0] - rn * U[:, 0]
@@ -111,6 +130,10 @@ def alart_curnier(r, u, mu, rn, rt, jacobian=False, cap=None):
     s = np.sign(xT)
     FT = np.where(stick, rt * U[:, 1], np.where(slip, R[:, 1] - lim * s, R[:, 1]))
     F = np.column_stack([FN, FT]).ravel()
+    el = np.zeros(0, dtype=np.int64) if css is None or cap is None else np.nonzero((css > 0.0) & (cap < np.inf))[0]
+    if el.size:  # elliptic cap
+        Y, JP = _ellcone_rows(el, xN, xT, rn, rt, cap, css, mu)
+        F.reshape(-1, 2)[el] = R[el] - Y
     if not jacobian:
         return F
     n = len(mu)
@@ -124,6 +147,9 @@ def alart_curnier(r, u, mu, rn, rt, jacobian=False, cap=None):
     sl = slip & closed  # the friction bound depends on x_N below the cap only
     D[sl, 1, 0] = -(mu * s)[sl]
     E[sl, 1, 0] = (mu * s * rn)[sl]
+    if el.size:
+        D[el] = np.eye(2)[None] - JP
+        E[el] = JP * np.column_stack([rn[el], rt[el]])[:, None, :]
     return F, D, E
 
 
@@ -165,7 +191,7 @@ def alart_curnier_3d(r, u, mu, rn, rt, jacobian=False):
     return F, D, E
 
 
-def compliant_rows(Pt, v, ueffN, h, theta, cmp, capv, mue, rt, S, T, jacobian=False):
+def compliant_rows(Pt, v, ueffN, h, theta, cmp, capv, mue, rt, S, T, jacobian=False, css=None):
     """Rows of F for contacts with a compliant normal law (cmp > 0: elastic, mixed), where the compressive normal
     impulse is a function of the jump, not a complementarity: with u_N = u_eff,N + hθ v_N and k_c = 1/cmp = h²θ k A,
 
@@ -179,6 +205,8 @@ def compliant_rows(Pt, v, ueffN, h, theta, cmp, capv, mue, rt, S, T, jacobian=Fa
     P̃_N = P̃_c), without their case switch at x_N = P̃_N - ρ_N v'_N = 0, which does not coincide with the switch of
     the adhesive branch at u_N = 0 (docs/laws.md, "Integration in the global Newton"). Returns F (2n,) and, if
     asked, the 2×2 blocks D, E of J = D + E W directly in (P, v) (dP̃/dv = diag(S) + T).
+    Elliptic cap (`css` > 0): F = P̃ - Π(x), x = (k_c ⟨-u_N⟩₊/(hθ), P̃_T - ρ_T v_T), Π of nlgs.ellcone_proj2 with
+    R = diag(k_c, ρ_T) (x_N is P̃_N - k_c v'_N: on the ellipse v' = -λ (P̃_N, C_ss P̃_T)).
     Vectorised over all contacts; the caller uses the rows where cmp > 0."""
     P2 = Pt.reshape(-1, 2)
     V = v.reshape(-1, 2)
@@ -195,6 +223,10 @@ def compliant_rows(Pt, v, ueffN, h, theta, cmp, capv, mue, rt, S, T, jacobian=Fa
     sgn = np.sign(xT)
     FT = np.where(stick, rt * V[:, 1], P2[:, 1] - lim * sgn)
     F = np.column_stack([FN, FT]).ravel()
+    el = np.zeros(0, dtype=np.int64) if css is None else np.nonzero((css > 0.0) & (capv < np.inf) & (kc > 0.0))[0]
+    if el.size:  # elliptic cap
+        Y, JP = _ellcone_rows(el, Pc_raw, xT, kc, rt, capv, css, mue)
+        F.reshape(-1, 2)[el] = P2[el] - Y
     if not jacobian:
         return F
     n = len(cmp)
@@ -209,6 +241,20 @@ def compliant_rows(Pt, v, ueffN, h, theta, cmp, capv, mue, rt, S, T, jacobian=Fa
     D[sl, 1, 1] = 1.0
     E[sl, 1, 0] = T[sl, 1, 0] - (mue * sgn * dPc)[sl]
     E[sl, 1, 1] = S[sl, 1] + T[sl, 1, 1]
+    if el.size:  # dF = dP̃ - ∂Π/∂x dx, dx_N = dP_s/dv_N dv_N, dx_T = dP̃_T - ρ_T dv_T
+        a, b, c_, d = JP[:, 0, 0], JP[:, 0, 1], JP[:, 1, 0], JP[:, 1, 1]
+        dPs = np.where(comp & (uN < 0.0), -kc, 0.0)[el]
+        Se, Te, re = S[el], T[el], rt[el]
+        gT = Se[:, 1] + Te[:, 1, 1]  # dP̃_T/dv_T
+        D[el] = 0.0
+        E[el] = 0.0
+        D[el, 0, 0] = 1.0
+        D[el, 0, 1] = -b
+        D[el, 1, 1] = 1.0 - d
+        E[el, 0, 0] = Se[:, 0] + Te[:, 0, 0] - a * dPs - b * Te[:, 1, 0]
+        E[el, 0, 1] = Te[:, 0, 1] - b * (gT - re)
+        E[el, 1, 0] = Te[:, 1, 0] - c_ * dPs - d * Te[:, 1, 0]
+        E[el, 1, 1] = gT - d * (gT - re)
     return F, D, E
 
 
@@ -252,6 +298,40 @@ def _cohesive_terms(law, par, st, x, ueff, v, area, h, theta, S, c, mue, cmp, ca
                 cmp[a] = 1.0 / (h * h * theta * kc)
 
 
+@njit(cache=True)
+def _assemble_jacobian(indptr, blocks, diag_pos, D, E, eps, Jb):
+    """Blocks of J = D + E (W + ε I) in the block pattern of W (D, E block-diagonal, (n, d, d)):
+    J_αβ = E_α W_αβ (β ≠ α), J_αα = E_α W_αα + (D_α + ε E_α). The same operations in the same order as
+    einsum("kij,kjl->kil", E[rows], W.blocks) followed by J_αα += D_α + ε E_α (bitwise equal)."""
+    n = indptr.shape[0] - 1
+    d = blocks.shape[1]
+    for a in range(n):
+        for p in range(indptr[a], indptr[a + 1]):
+            for i in range(d):
+                for l in range(d):
+                    s = 0.0
+                    for j in range(d):
+                        s += E[a, i, j] * blocks[p, j, l]
+                    Jb[p, i, l] = s
+        p = diag_pos[a]
+        for i in range(d):
+            for l in range(d):
+                Jb[p, i, l] += D[a, i, l] + eps * E[a, i, l]
+
+
+def _direction(blu, W, Jb, F):
+    """Newton's direction Δr = -J⁻¹ F for J of the blocks Jb (pattern of W): the block LU with its symbolic
+    analysis done once per solve (linalg.BlockLU, no pivoting between blocks, backward error checked), else — or
+    when that check fails — a pivoting LU (linalg.lu_solve: SuperLU below LU_SMALL unknowns, MUMPS above).
+    None if J is singular."""
+    if blu is not None:
+        dr = blu.solve_checked(Jb, -F)
+        if dr is not None:
+            return dr
+    n, dim = W.n, W.dim
+    return lu_solve(sp.bsr_matrix((Jb, W.indices, W.indptr), shape=(dim * n, dim * n)), -F)
+
+
 def _newton(W: BlockCSR, q, mu, r, tol, max_iter, gs, max_sweeps_total, coh=None, memory=1, stall_window=0,
             fallback_sweeps=10, stall_sweeps=20, compliant=False, probe=None):
     """Core iteration (2D or 3D by W.dim). coh = (law, par, st, x, ueff, area, h, theta, inside) for interface laws
@@ -267,7 +347,6 @@ def _newton(W: BlockCSR, q, mu, r, tol, max_iter, gs, max_sweeps_total, coh=None
     n = W.n
     dim = W.dim
     Wsp = sp.bsr_matrix((W.blocks, W.indices, W.indptr), shape=(dim * n, dim * n))
-    rows = np.repeat(np.arange(n), np.diff(W.indptr))
     rn, rt = _rho(W)
     qnorm = float(np.linalg.norm(q)) or 1.0
     S = np.zeros((n, 2))
@@ -301,7 +380,8 @@ def _newton(W: BlockCSR, q, mu, r, tol, max_iter, gs, max_sweeps_total, coh=None
     def ac(r_, u_, jacobian=False):
         if dim == 3:
             return alart_curnier_3d(r_, u_, mue, rn, rt, jacobian=jacobian)
-        return alart_curnier(r_, u_, mue, rn, rt, jacobian=jacobian, cap=capv if coh is not None else None)
+        return alart_curnier(r_, u_, mue, rn, rt, jacobian=jacobian, cap=capv if coh is not None else None,
+                             css=coh[1][:, P_CSS] if coh is not None else None)
 
     def merits_of(F):
         """(½‖F‖², ½‖Σ⁻¹F‖²): the merit and, with interface laws, the merit of the rows divided by their gain σ."""
@@ -328,7 +408,8 @@ def _newton(W: BlockCSR, q, mu, r, tol, max_iter, gs, max_sweeps_total, coh=None
                 E += np.einsum("kij,kjl->kil", D, T)
         cm = cmp > 0.0  # coupled pass: compliant normal laws' rows as functions of the jump (compliant_rows)
         if inside and compliant and np.any(cm):
-            o2 = compliant_rows(Pt, u_, coh[4][:, 0], coh[6], coh[7], cmp, capv, mue, rt, S, T, jacobian)
+            o2 = compliant_rows(Pt, u_, coh[4][:, 0], coh[6], coh[7], cmp, capv, mue, rt, S, T, jacobian,
+                                css=coh[1][:, P_CSS])
             F2 = o2[0] if jacobian else o2
             F = F.copy()
             F.reshape(-1, 2)[cm] = F2.reshape(-1, 2)[cm]
@@ -365,6 +446,11 @@ def _newton(W: BlockCSR, q, mu, r, tol, max_iter, gs, max_sweeps_total, coh=None
     eps = 1e-6 * wdiag
     merits = []  # merits of the last iterates (non-monotone line search)
     best, last = res, 0  # stagnation watch: residual and iteration of the last halving (or restart)
+    # J's pattern is W's: its LU's ordering and fill are analysed once per pattern (2D, dim * n < LU_SMALL). 3D keeps
+    # lu_solve: BlockLU took 1.23 s against 0.57 s on FCLIB's KaplasTower (570 contacts; docs/benchmarks.md)
+    use_blu = BLOCK_LU and dim == 2 and dim * n < LU_SMALL and res > tol and max_iter > 0
+    blu = BlockLU.for_pattern(W.indptr, W.indices, dim) if use_blu else None
+    Jb = np.empty_like(W.blocks)
     while res > tol and n_it < max_iter and n_gs < max_sweeps_total:
         r0_it = r
         F, D, E = fun(r, u, jacobian=True)
@@ -372,29 +458,30 @@ def _newton(W: BlockCSR, q, mu, r, tol, max_iter, gs, max_sweeps_total, coh=None
         merits.append(f0)
         del merits[:-memory]
         fref = max(merits)
-        Jb = np.einsum("kij,kjl->kil", E[rows], W.blocks)
-        Jb[W.diag_pos] += D + eps * E
-        J = sp.bsr_matrix((Jb, W.indices, W.indptr), shape=(dim * n, dim * n))
+        _assemble_jacobian(W.indptr, W.blocks, W.diag_pos, D, E, float(eps), Jb)
         eps_it = eps
         n_it += 1
-        dr = lu_solve(J, -F)  # SuperLU on small systems, MUMPS on large ones; None if J is singular
+        dr = _direction(blu, W, Jb, F)  # None if J is singular
         ok = dr is not None
         accepted = False
         t = 1.0
         if ok:
             du = Wsp @ dr
+            scaled = []  # gain-scaled merits of the points tried (the second search tries the same t first)
             for _ in range(30):
                 r_t, u_t = r + t * dr, u + t * du
                 thr = (1.0 - 2e-4 * t) * f0 if memory == 1 else fref - 2e-4 * t * f0
-                if merit(r_t, u_t)[0] <= thr:
+                m0, m1 = merit(r_t, u_t)
+                if m0 <= thr:
                     accepted = True
                     break
+                scaled.append(m1)
                 t *= 0.5
             if not accepted and sig is not None:  # the same direction, Armijo on the gain-scaled merit
                 t = 1.0
-                for _ in range(30):
+                for k in range(30):
                     r_t, u_t = r + t * dr, u + t * du
-                    if merit(r_t, u_t)[1] <= (1.0 - 2e-4 * t) * f0s:
+                    if (scaled[k] if k < len(scaled) else merit(r_t, u_t)[1]) <= (1.0 - 2e-4 * t) * f0s:
                         accepted = True
                         break
                     t *= 0.5
@@ -414,6 +501,7 @@ def _newton(W: BlockCSR, q, mu, r, tol, max_iter, gs, max_sweeps_total, coh=None
             u = Wsp @ r + q
         res = residual(r, u)
         if probe is not None:
+            J = sp.bsr_matrix((Jb.copy(), W.indices, W.indptr), shape=(dim * n, dim * n))
             probe(dict(it=n_it, r=r0_it, F=F, J=J, t=t if accepted else 0.0, res=res, gs=n_gs, eps=eps_it / wdiag,
                        D=D, E=E, rn=rn, rt=rt, x=None if coh is None else coh[3].copy(),
                        Ffun=lambda r_: fun(r_, Wsp @ r_ + q), restore=lambda: residual(r, u)))

@@ -403,7 +403,131 @@ def fclib_residual(W, q, mu, r, dim: int = 2) -> tuple[float, float]:
 # P̃ = P + P_adh satisfies Signorini–Coulomb with the exact local operator
 #   v = W' P̃ + q',  W' = A⁻¹ W_αα,  q' = A⁻¹ (v_loc - h W_αα (K u_eff + f)),  A = I + h² θ W_αα K.
 from ..laws import compression_stiffness as _kcomp, internal_update as _internal_update, linear_part as _linear_part  # noqa: E402,E501
-from ..laws import cap_stress as _cap_stress  # noqa: E402
+from ..laws import cap_stress as _cap_stress, P_CSS as _P_CSS  # noqa: E402
+
+
+# ----------------------------------------------------------------------------- elliptic cap (C_ss > 0)
+# Admissible impulses at a capped contact (docs/laws.md, "Elliptic cap"): K = E ∩ C with the ellipse
+# E = {P_N² + C_ss |P_T|² <= P_c²} (P_c = h f_c(κ) A) and the Coulomb cone C = {|P_T| <= μ P_N}. Flow: Coulomb
+# (non-associated: no normal velocity from slip) inside E; associated on the ellipse, v' = -λ (P_N, C_ss P_T),
+# λ >= 0 (closure and a tangential slip); at the corner E ∩ ∂C (P_N = P_c/√(1 + C_ss μ²), |P_T| = μ P_N) both,
+# v'_N = -λ P_N, v_T = -λ C_ss P_T - γ sgn(P_T), λ, γ >= 0.
+@njit(cache=True, inline="always")
+def _ell_p2(m00, m01, m10, m11, b0, b1, css, lam):
+    """(M + λ G)⁻¹ b, G = diag(1, C_ss) (2×2)."""
+    a00 = m00 + lam
+    a11 = m11 + lam * css
+    det = a00 * a11 - m01 * m10
+    return (a11 * b0 - m01 * b1) / det, (a00 * b1 - m10 * b0) / det
+
+
+@njit(cache=True)
+def ell_solve2(m00, m01, m10, m11, b0, b1, css, Pc):
+    """Point of the ellipse P_N² + C_ss P_T² <= Pc² of the form P(λ) = (M + λ G)⁻¹ b, G = diag(1, C_ss), λ >= 0:
+    the projection of M⁻¹b onto the ellipse in the metric M (optimality M (P - M⁻¹b) = -λ G P). For M symmetric
+    positive definite φ(λ) = P(λ)ᵀ G P(λ) decreases strictly from φ(0) to 0 (M = L Lᵀ, z = Lᵀ P: φ = Σ g_i ẑ_i²/(1 +
+    λ g_i)² in the eigenbasis of L⁻¹ G L⁻ᵀ), so the root of φ(λ) = Pc² is bracketed by doubling and found by
+    bisection to the last bits (λ = 0 and P = M⁻¹b if that is inside). Returns (P_N, P_T, λ); P on the feasible side."""
+    p0, p1 = _ell_p2(m00, m01, m10, m11, b0, b1, css, 0.0)
+    c2 = Pc * Pc
+    if p0 * p0 + css * p1 * p1 <= c2:
+        return p0, p1, 0.0
+    lo = 0.0
+    hi = max(abs(m00) + abs(m11), 1e-300)
+    for _ in range(2100):
+        p0, p1 = _ell_p2(m00, m01, m10, m11, b0, b1, css, hi)
+        if p0 * p0 + css * p1 * p1 <= c2:
+            break
+        lo = hi
+        hi *= 2.0
+    for _ in range(200):
+        mid = 0.5 * (lo + hi)
+        if mid <= lo or mid >= hi:
+            break
+        x0, x1 = _ell_p2(m00, m01, m10, m11, b0, b1, css, mid)
+        if x0 * x0 + css * x1 * x1 <= c2:
+            hi, p0, p1 = mid, x0, x1
+        else:
+            lo = mid
+    return p0, p1, hi
+
+
+@njit(cache=True)
+def ellcone_proj2(x0, x1, r0, r1, Pc, css, mu):
+    """Π(x) of the Alart–Curnier function F = P - Π(P - R v') on the capped set K = E ∩ C (R = diag(r0, r1) > 0),
+    and its derivative J = ∂Π/∂x (a generalized Jacobian: piecewise smooth). Three regions:
+    1. y = the Coulomb AC map (y_N = x_N⁺, y_T = x_T clipped to [-μ y_N, μ y_N]) if y ∈ E;
+    2. else z = the projection of x onto E in the metric R⁻¹, z = (I + λ R G)⁻¹ x (ell_solve2), if z ∈ C:
+       J = B - (B R G z)(zᵀ G B)/(zᵀ G B R G z), B = (I + λ R G)⁻¹ (implicit function of zᵀ G z = Pc²);
+    3. else the corner (P_c/√(1 + C_ss μ²))(1, μ sgn x_T), J = 0.
+    F = 0 exactly at the solutions of the law (docs/laws.md, "Elliptic cap"). Returns (y0, y1, J00, J01, J10, J11,
+    region)."""
+    y0 = max(x0, 0.0)
+    lim = mu * y0
+    y1 = min(max(x1, -lim), lim)
+    if y0 * y0 + css * y1 * y1 <= Pc * Pc:
+        if x0 <= 0.0:
+            return y0, y1, 0.0, 0.0, 0.0, 0.0, 1
+        if abs(x1) <= lim:
+            return y0, y1, 1.0, 0.0, 0.0, 1.0, 1
+        return y0, y1, 1.0, 0.0, mu * (1.0 if x1 > 0.0 else -1.0), 0.0, 1
+    z0, z1, lam = ell_solve2(1.0 / r0, 0.0, 0.0, 1.0 / r1, x0 / r0, x1 / r1, css, Pc)
+    if z0 > 0.0 and abs(z1) <= mu * z0:
+        b0 = 1.0 / (1.0 + lam * r0)
+        b1 = 1.0 / (1.0 + lam * r1 * css)
+        a0 = b0 * r0 * z0          # B R G z
+        a1 = b1 * r1 * css * z1
+        c0 = z0 * b0               # zᵀ G B
+        c1 = css * z1 * b1
+        den = c0 * r0 * z0 + c1 * r1 * css * z1  # zᵀ G B R G z
+        if den > 0.0:
+            return z0, z1, b0 - a0 * c0 / den, -a0 * c1 / den, -a1 * c0 / den, b1 - a1 * c1 / den, 2
+        return z0, z1, b0, 0.0, 0.0, b1, 2
+    pc = Pc / np.sqrt(1.0 + css * mu * mu)
+    return pc, mu * pc * (1.0 if x1 > 0.0 else -1.0), 0.0, 0.0, 0.0, 0.0, 3
+
+
+@njit(cache=True)
+def _ell_res2(p0, p1, m00, m01, m10, m11, q0, q1, mu, Pc, css):
+    """‖P - Π(P - v')‖ (ρ = 1) of a candidate P of the local elliptic-cap problem, v' = M P + q."""
+    v0 = m00 * p0 + m01 * p1 + q0
+    v1 = m10 * p0 + m11 * p1 + q1
+    y0, y1, j0, j1, j2, j3, reg = ellcone_proj2(p0 - v0, p1 - v1, 1.0, 1.0, Pc, css, mu)
+    return np.sqrt((p0 - y0) ** 2 + (p1 - y1) ** 2)
+
+
+@njit(cache=True)
+def _cap_ell(pn, pt, m00, m01, m10, m11, q0, q1, mu, capP, css):
+    """Elliptic cap (C_ss > 0) of the 2D local problem v' = M P + q (M: the contact's operator W' with the compliance
+    on M_NN), (pn, pt) the Signorini–Coulomb solution. Exact by its cases: (pn, pt) if inside the ellipse E; else the
+    ellipse face, the M-metric projection of the stick point -M⁻¹q onto E (ell_solve2: v' = M(P - P*) = -λ G P) if it
+    lies in the cone; else the corner whose multipliers λ = -v'_N/P_N and γ = -s(v_T + λ C_ss P_T) are >= 0; if no
+    case is consistent (never met in the tests), the candidate with the least residual ‖P - Π(P - v')‖."""
+    if pn * pn + css * pt * pt <= capP * capP:
+        return pn, pt
+    z0, z1, lam = ell_solve2(m00, m01, m10, m11, -q0, -q1, css, capP)
+    if z0 > 0.0 and abs(z1) <= mu * z0:
+        return z0, z1
+    pc = capP / np.sqrt(1.0 + css * mu * mu)
+    s = 1.0 if z1 > 0.0 else -1.0
+    for k in range(2):
+        sk = s if k == 0 else -s
+        c1 = sk * mu * pc
+        v0 = m00 * pc + m01 * c1 + q0
+        v1 = m10 * pc + m11 * c1 + q1
+        lam = -v0 / pc
+        if lam >= 0.0 and -sk * (v1 + lam * css * c1) >= 0.0:
+            return pc, c1
+    best0, best1 = pc, s * mu * pc
+    best = _ell_res2(best0, best1, m00, m01, m10, m11, q0, q1, mu, capP, css)
+    for k in range(2):
+        c0, c1 = (pc, -s * mu * pc) if k == 0 else (z0, z1)
+        if k == 1 and not z0 > 0.0:
+            continue
+        e = _ell_res2(c0, c1, m00, m01, m10, m11, q0, q1, mu, capP, css)
+        if e < best:
+            best, best0, best1 = e, c0, c1
+    return best0, best1
 
 
 @njit(cache=True)
@@ -456,7 +580,11 @@ def _local_cohesive(w00, w01, w10, w11, v0, v1, law, par, st, x, ue0, ue1, area,
             if kc > 0.0:
                 cmp = 1.0 / (h * h * theta * kc)  # compliant Signorini: v_N + cmp P_N >= 0
         pn, pt, case = local_2d(m00 + cmp, m01, m10, m11, q0, q1, mue)
-        pn, pt = _cap(pn, pt, m10, m11, q1, mue, h * _cap_stress(par, st) * area)
+        capP = h * _cap_stress(par, st) * area
+        if par[_P_CSS] > 0.0 and capP > 0.0:
+            pn, pt = _cap_ell(pn, pt, m00 + cmp, m01, m10, m11, q0, q1, mue, capP, par[_P_CSS])
+        else:
+            pn, pt = _cap(pn, pt, m10, m11, q1, mue, capP)
         vn = m00 * pn + m01 * pt + q0
         vtt = m10 * pn + m11 * pt + q1
         uN = ue0 + h * theta * vn
@@ -503,7 +631,11 @@ def _sweep_cohesive(indptr, indices, blocks, diag_pos, q, mu, r, order, omega, l
         w00, w01, w10, w11 = blocks[d, 0, 0], blocks[d, 0, 1], blocks[d, 1, 0], blocks[d, 1, 1]
         if law[a] == 0:
             rn, rt, case = local_2d(w00, w01, w10, w11, v0, v1, mu[a])
-            rn, rt = _cap(rn, rt, w10, w11, v1, mu[a], h * _cap_stress(par[a], st[a]) * area[a])
+            capP = h * _cap_stress(par[a], st[a]) * area[a]
+            if par[a, _P_CSS] > 0.0 and capP > 0.0:
+                rn, rt = _cap_ell(rn, rt, w00, w01, w10, w11, v0, v1, mu[a], capP, par[a, _P_CSS])
+            else:
+                rn, rt = _cap(rn, rt, w10, w11, v1, mu[a], capP)
         else:
             rn, rt = _local_cohesive(w00, w01, w10, w11, v0, v1, law[a], par[a], st[a], trial[a], ueff[a, 0],
                                      ueff[a, 1], area[a], h, theta)
@@ -594,6 +726,103 @@ def _cap3(w, d, pn, p1, p2, q1, q2, mu, capP):
 
 
 @njit(cache=True)
+def ellcone_proj3(x0, x1, x2, Pc, css, mu):
+    """3D Π(x) (ρ = 1) on K = {P_N² + C_ss ‖P_T‖² <= Pc², ‖P_T‖ <= μ P_N}: the Coulomb AC map if inside the ellipse,
+    else the Euclidean projection onto the ellipsoid (isotropic in the tangent plane: the 2D projection of
+    (x_N, ‖x_T‖), direction of x_T kept) if in the cone, else the corner circle P_N = Pc/√(1 + C_ss μ²),
+    P_T = μ P_N x_T/‖x_T‖ (as ellcone_proj2)."""
+    nt = np.sqrt(x1 * x1 + x2 * x2)
+    y0 = max(x0, 0.0)
+    lim = mu * y0
+    f = 1.0 if nt <= lim else lim / nt
+    if y0 * y0 + css * (f * nt) ** 2 <= Pc * Pc:
+        return y0, f * x1, f * x2
+    z0, zt, lam = ell_solve2(1.0, 0.0, 0.0, 1.0, x0, nt, css, Pc)
+    if not (z0 > 0.0 and zt <= mu * z0):
+        z0 = Pc / np.sqrt(1.0 + css * mu * mu)
+        zt = mu * z0
+    g = zt / nt if nt > 0.0 else 0.0
+    return z0, g * x1, g * x2
+
+
+@njit(cache=True)
+def _ell_p3(w, d, cmp, b0, b1, b2, css, lam):
+    """(M' + λ G)⁻¹ b, M' = w[d] + cmp e_N e_Nᵀ, G = diag(1, C_ss, C_ss) (Cramer's rule)."""
+    a00 = w[d, 0, 0] + cmp + lam
+    a01 = w[d, 0, 1]
+    a02 = w[d, 0, 2]
+    a10 = w[d, 1, 0]
+    a11 = w[d, 1, 1] + lam * css
+    a12 = w[d, 1, 2]
+    a20 = w[d, 2, 0]
+    a21 = w[d, 2, 1]
+    a22 = w[d, 2, 2] + lam * css
+    c00 = a11 * a22 - a12 * a21
+    c01 = a12 * a20 - a10 * a22
+    c02 = a10 * a21 - a11 * a20
+    det = a00 * c00 + a01 * c01 + a02 * c02
+    x0 = (c00 * b0 + (a02 * a21 - a01 * a22) * b1 + (a01 * a12 - a02 * a11) * b2) / det
+    x1 = (c01 * b0 + (a00 * a22 - a02 * a20) * b1 + (a02 * a10 - a00 * a12) * b2) / det
+    x2 = (c02 * b0 + (a01 * a20 - a00 * a21) * b1 + (a00 * a11 - a01 * a10) * b2) / det
+    return x0, x1, x2
+
+
+@njit(cache=True)
+def ell_solve3(w, d, cmp, b0, b1, b2, css, Pc):
+    """3D ell_solve2: P(λ) = (M' + λ G)⁻¹ b on the ellipsoid P_N² + C_ss ‖P_T‖² = Pc² (λ >= 0, bisection; λ = 0 if
+    M'⁻¹b is inside), the M'-metric projection of M'⁻¹b onto it. Returns (P_N, P_T, P_S, λ)."""
+    p0, p1, p2 = _ell_p3(w, d, cmp, b0, b1, b2, css, 0.0)
+    c2 = Pc * Pc
+    if p0 * p0 + css * (p1 * p1 + p2 * p2) <= c2:
+        return p0, p1, p2, 0.0
+    lo = 0.0
+    hi = max(abs(w[d, 0, 0] + cmp) + abs(w[d, 1, 1]) + abs(w[d, 2, 2]), 1e-300)
+    for _ in range(2100):
+        p0, p1, p2 = _ell_p3(w, d, cmp, b0, b1, b2, css, hi)
+        if p0 * p0 + css * (p1 * p1 + p2 * p2) <= c2:
+            break
+        lo = hi
+        hi *= 2.0
+    for _ in range(200):
+        mid = 0.5 * (lo + hi)
+        if mid <= lo or mid >= hi:
+            break
+        x0, x1, x2 = _ell_p3(w, d, cmp, b0, b1, b2, css, mid)
+        if x0 * x0 + css * (x1 * x1 + x2 * x2) <= c2:
+            hi, p0, p1, p2 = mid, x0, x1, x2
+        else:
+            lo = mid
+    return p0, p1, p2, hi
+
+
+@njit(cache=True)
+def _cap3_ell(w, d, cmp, pn, p1, p2, q0, q1, q2, mu, capP, css):
+    """Elliptic cap (C_ss > 0) of the 3D local problem v' = M' P + q (M' = w[d] + cmp e_N e_Nᵀ), (pn, p1, p2) the
+    Signorini–Coulomb solution: kept if inside the ellipsoid; else the M'-metric projection of the stick point onto
+    it (ell_solve3) if in the cone; else the corner circle P_N = P_c/√(1 + C_ss μ²) with the tangential impulse of
+    the disk problem of radius μ P_N at that P_N (_cap3's sliding solve); of these two the one with the smaller
+    residual ‖P - Π(P - v')‖ when the corner is not consistent."""
+    if pn * pn + css * (p1 * p1 + p2 * p2) <= capP * capP:
+        return pn, p1, p2
+    z0, z1, z2, lam = ell_solve3(w, d, cmp, -q0, -q1, -q2, css, capP)
+    if z0 > 0.0 and np.sqrt(z1 * z1 + z2 * z2) <= mu * z0:
+        return z0, z1, z2
+    pc = capP / np.sqrt(1.0 + css * mu * mu)
+    c0, c1, c2 = _cap3(w, d, np.inf, 0.0, 0.0, q1, q2, mu, pc)
+    res = np.empty(2)
+    for k in range(2):
+        a0, a1, a2 = (c0, c1, c2) if k == 0 else (z0, z1, z2)
+        v0 = (w[d, 0, 0] + cmp) * a0 + w[d, 0, 1] * a1 + w[d, 0, 2] * a2 + q0
+        v1 = w[d, 1, 0] * a0 + w[d, 1, 1] * a1 + w[d, 1, 2] * a2 + q1
+        v2 = w[d, 2, 0] * a0 + w[d, 2, 1] * a1 + w[d, 2, 2] * a2 + q2
+        y0, y1, y2 = ellcone_proj3(a0 - v0, a1 - v1, a2 - v2, capP, css, mu)
+        res[k] = np.sqrt((a0 - y0) ** 2 + (a1 - y1) ** 2 + (a2 - y2) ** 2)
+    if res[1] < res[0] and z0 > 0.0:
+        return z0, z1, z2
+    return c0, c1, c2
+
+
+@njit(cache=True)
 def _local_cohesive3(blocks, dk, v0, v1, v2, law, par, st, x, ue, area, h, theta, o0, o1, o2, wl, J):
     """Exact 3D local solve with an adhesive law at a fixed internal variable x: A = I + h²θ W_αα K,
     W' = A⁻¹ W_αα, q' = A⁻¹(v_loc - h W_αα (K u_eff + f)); P̃ from local_3d on (W' [+ compliance on the normal
@@ -643,7 +872,11 @@ def _local_cohesive3(blocks, dk, v0, v1, v2, law, par, st, x, ue, area, h, theta
         s2 = o2 + h * kT * (ue[2] + h * theta * vc2)
         p0, p1, p2, case = local_3d(wl, 0, q0, q1, q2, mue, s0, s1, s2, J)
         wl[0, 0, 0] = w00
-        p0, p1, p2 = _cap3(wl, 0, p0, p1, p2, q1, q2, mue, h * _cap_stress(par, st) * area)
+        capP = h * _cap_stress(par, st) * area
+        if par[_P_CSS] > 0.0 and capP > 0.0:
+            p0, p1, p2 = _cap3_ell(wl, 0, cmp, p0, p1, p2, q0, q1, q2, mue, capP, par[_P_CSS])
+        else:
+            p0, p1, p2 = _cap3(wl, 0, p0, p1, p2, q1, q2, mue, capP)
         uN = ue[0] + h * theta * (wl[0, 0, 0] * p0 + wl[0, 0, 1] * p1 + wl[0, 0, 2] * p2 + q0)
         uT = ue[1] + h * theta * (wl[0, 1, 0] * p0 + wl[0, 1, 1] * p1 + wl[0, 1, 2] * p2 + q1)
         uS = ue[2] + h * theta * (wl[0, 2, 0] * p0 + wl[0, 2, 1] * p1 + wl[0, 2, 2] * p2 + q2)
@@ -676,7 +909,11 @@ def _sweep_cohesive3(indptr, indices, blocks, diag_pos, q, mu, r, order, omega, 
             d = 1
         if law[a] == 0:
             x0, x1, x2, case = local_3d(wa, d, v0, v1, v2, mu[a], o0, o1, o2, J)
-            x0, x1, x2 = _cap3(wa, d, x0, x1, x2, v1, v2, mu[a], h * _cap_stress(par[a], st[a]) * area[a])
+            capP = h * _cap_stress(par[a], st[a]) * area[a]
+            if par[a, _P_CSS] > 0.0 and capP > 0.0:
+                x0, x1, x2 = _cap3_ell(wa, d, 0.0, x0, x1, x2, v0, v1, v2, mu[a], capP, par[a, _P_CSS])
+            else:
+                x0, x1, x2 = _cap3(wa, d, x0, x1, x2, v1, v2, mu[a], capP)
         else:
             x0, x1, x2, case = _local_cohesive3(wa, d, v0, v1, v2, law[a], par[a], st[a], trial[a], ueff[a],
                                                 area[a], h, theta, o0, o1, o2, wl, J)
@@ -743,7 +980,9 @@ def _natural_map_cohesive3(indptr, indices, blocks, q, mu, r, law, par, st, tria
         p1 /= sig
         p2 /= sig
         capP = h * _cap_stress(par[a], st[a]) * area[a] / sig
-        if capP > 0.0:
+        if capP > 0.0 and par[a, _P_CSS] > 0.0:
+            y0, y1, y2 = ellcone_proj3(p0 - v0, p1 - v1, p2 - v2, capP, par[a, _P_CSS], m)
+        elif capP > 0.0:
             y0 = min(max(p0 - v0, 0.0), capP)
             x1 = p1 - v1
             x2 = p2 - v2
@@ -811,6 +1050,10 @@ def natural_map_cohesive(indptr, indices, blocks, q, mu, r, law, par, st, trial,
         p0 /= sig  # impulse components relative to their gain ∂P̃/∂P (docs/laws.md, "Residual")
         p1 /= sig
         capP = h * _cap_stress(par[a], st[a]) * area[a] / sig
+        if capP > 0.0 and par[a, _P_CSS] > 0.0:  # elliptic cap: Π of the Alart–Curnier function (ρ = 1)
+            y0, y1, j0, j1, j2, j3, reg = ellcone_proj2(p0 - v0, p1 - v1, 1.0, 1.0, capP, par[a, _P_CSS], m)
+            s += (p0 - y0) ** 2 + (p1 - y1) ** 2
+            continue
         if capP > 0.0:  # capped cone: Alart–Curnier residual (rho = 1), zero exactly at the solutions
             y0 = min(max(p0 - v0, 0.0), capP)
             lim = m * y0
