@@ -26,6 +26,9 @@ contact's tributary area A), with u = (u_N, u_T) the displacement jump since the
   m = (u_T/δ_II)²/λ² so that pure modes dissipate G_I and G_II. Dissipation Y ΔD with Y = ½(k_n⟨u_N⟩₊² + k_s u_T²).
   Optional viscous regularisation (`damage_viscosity` η > 0): Ḋ = (D_s(u) - D)/η with D_s the rate-independent value,
   backward Euler D = (D_n + (h/η) D_s)/(1 + h/η) (`viscous_damage`); η = 0 is the rate-independent law.
+  IMPL-EX (`damage_integration = "implex"`, mixed and fremond; Oliver, Huespe & Cante 2008): the step runs at the
+  internal variable extrapolated from the two last committed values, x̃ = x_n + h_{n+1}(x_n - x_{n-1})/h_n (rate in
+  S_HIST, `implex_extrapolate`), held fixed; commit_step commits the implicit value of the converged jump.
 
 Compressive cap (any law, optional `f_c` [Pa]): r̃_N <= f_c A (elastic–perfectly plastic crushing). At the cap
 the joint closes further; the closure u_p <= 0 (state S_UP) shifts the contact surface (Signorini on g - g0 - u_p,
@@ -60,9 +63,12 @@ LAW_NAMES = {"coulomb": COULOMB, "elastic": ELASTIC, "brittle": BRITTLE, "dugdal
              "fremond": FREMOND, "mixed": MIXED}
 # parameter columns (per unit area)
 P_MU, P_CN, P_CT, P_RC, P_SC, P_LC, P_W, P_B, P_P, P_MUR, P_MUKIND, P_FT, P_C, P_GI, P_GII, P_SOFT, P_FC, P_ETA, \
-    P_GFC, P_KP, P_FCI, P_CSS = range(22)
-NPAR = 22
-# state columns; 3D (u = (u_N, u_T, u_S)) appends the second tangential jump S_US, the 2D columns stay in place
+    P_GFC, P_KP, P_FCI, P_CSS, P_IMPLEX = range(23)
+NPAR = 23
+# state columns; 3D (u = (u_N, u_T, u_S)) appends the second tangential jump S_US, the 2D columns stay in place.
+# S_HIST: Dugdale's largest opening; mixed and fremond: the rate of the internal variable over the last committed
+# step, (x_n - x_{n-1})/h_n, for the IMPL-EX extrapolation (written by commit_step only with damage_integration =
+# "implex")
 S_BETA, S_UN, S_UT, S_DISS, S_HIST, S_BROKEN, S_UP = range(7)
 NSTATE = 7
 S_US = 7
@@ -90,8 +96,10 @@ def pack(law: str, values: dict) -> tuple[int, np.ndarray]:
         return (DUGDALE if values["variant"] == "dugdale" else BRITTLE), p
     if law == "fremond":
         p[P_MUKIND] = 1.0 if values["friction"] == "damage" else 0.0
+        p[P_IMPLEX] = 1.0 if values["damage_integration"] == "implex" else 0.0
         return FREMOND, p
     p[P_SOFT] = 0.0 if values["softening"] == "linear" else 1.0
+    p[P_IMPLEX] = 1.0 if values["damage_integration"] == "implex" else 0.0
     return MIXED, p
 
 
@@ -252,10 +260,10 @@ def mixed_damage_gradient(par, D0, uN, uT):
 
 
 @njit(cache=True)
-def internal_update(law, par, st, uN, uT, h):
+def implicit_update(law, par, st, uN, uT, h):
     """Internal variable implied by the jump (uN, uT), irreversible with respect to the committed state:
-    β (Frémond), intact flag 1/0 (brittle, Dugdale), damage D (mixed), 1 otherwise. The tangential jump
-    enters only through |uT| (isotropic laws): 3D passes uT = ‖u_T‖."""
+    β (Frémond), intact flag 1/0 (brittle, Dugdale), damage D (mixed), 1 otherwise (the implicit, backward-Euler
+    value of the law). The tangential jump enters only through |uT| (isotropic laws): 3D passes uT = ‖u_T‖."""
     if law == COULOMB or law == ELASTIC:
         return 1.0
     if st[S_BROKEN] > 0.0:
@@ -271,6 +279,46 @@ def internal_update(law, par, st, uN, uT, h):
         return _fremond_beta(par, st[S_BETA], par[P_CN] * un * un + par[P_CT] * uT * uT, h)
     D0 = st[S_BETA]
     return viscous_damage(par, D0, _mixed_damage(par, D0, uN, uT), 0.0, 0.0, h)[0]
+
+
+@njit(cache=True)
+def is_implex(law, par):
+    """True where the internal variable is integrated by IMPL-EX (`damage_integration = "implex"`: mixed, fremond)."""
+    return (law == MIXED or law == FREMOND) and par[P_IMPLEX] == 1.0
+
+
+@njit(cache=True)
+def implex_extrapolate(law, par, st, h):
+    """IMPL-EX (Oliver, Huespe & Cante 2008): the internal variable of the step, extrapolated from the two last
+    committed values, x̃_{n+1} = x_n + (h_{n+1}/h_n)(x_n - x_{n-1}) = x_n + h_{n+1} ẋ_n with ẋ_n = st[S_HIST] (the
+    rate of the last committed step), kept admissible: D̃ in [D_n, 1] (mixed), β̃ in [0, β_n] (Frémond). Held fixed
+    in the step (secant law, positive stiffness); commit_step then stores the implicit value."""
+    x = st[S_BETA]
+    if st[S_BROKEN] > 0.0:
+        return x
+    xt = x + h * st[S_HIST]
+    if law == MIXED:
+        return min(max(xt, x), 1.0)
+    return max(min(xt, x), 0.0)
+
+
+@njit(cache=True)
+def internal_update(law, par, st, uN, uT, h):
+    """Internal variable of the step for the jump (uN, uT): the implicit value (`implicit_update`), or with
+    IMPL-EX (`is_implex`) the extrapolated one, independent of the jump (`implex_extrapolate`)."""
+    if is_implex(law, par):
+        return implex_extrapolate(law, par, st, h)
+    return implicit_update(law, par, st, uN, uT, h)
+
+
+@njit(cache=True)
+def step_start(law, par, st, h):
+    """Internal variables the solvers start a step from: the committed x_n, or the IMPL-EX extrapolation."""
+    n = law.shape[0]
+    x = np.empty(n)
+    for a in range(n):
+        x[a] = implex_extrapolate(law[a], par[a], st[a], h) if is_implex(law[a], par[a]) else st[a, S_BETA]
+    return x
 
 
 @njit(cache=True)
@@ -406,10 +454,18 @@ def commit_step(law, par, st, trial, ueff, P, v, area, h, theta):
                     wfac = capv / Pt  # associated flow: work (P̃_N² + C_ss |P̃_T|²)|Δu_p|/(h P̃_N)
             elif Pt >= capv * (1 - 1e-9):
                 dup = min(0.0, h * theta * (v[d * a] + cmp * Pt))
+        x = trial[a]
+        implex = is_implex(law[a], par[a]) and st[a, S_BROKEN] == 0.0
+        if implex:  # IMPL-EX: the step ran at the extrapolated x̃; commit the implicit value from the converged jump
+            x0 = st[a, S_BETA]
+            uS = ueff[a, 2] + h * theta * v[d * a + 2] if d == 3 else 0.0
+            x = implicit_update(law[a], par[a], st[a], uN - dup, np.sqrt(uT * uT + uS * uS), h)
         if d == 2:
-            commit(law[a], par[a], st[a], trial[a], uN - dup, uT, area[a])
+            commit(law[a], par[a], st[a], x, uN - dup, uT, area[a])
         else:
-            commit3(law[a], par[a], st[a], trial[a], uN - dup, uT, ueff[a, 2] + h * theta * v[d * a + 2], area[a])
+            commit3(law[a], par[a], st[a], x, uN - dup, uT, ueff[a, 2] + h * theta * v[d * a + 2], area[a])
+        if implex:
+            st[a, S_HIST] = (x - x0) / h  # ẋ_{n+1}: the next step's extrapolation
         if dup != 0.0:
             st[a, S_UP] += dup
             if wfac == 1.0:

@@ -155,6 +155,9 @@ LAW_PARAMS: dict[str, LawParam] = {
     "damage_viscosity": LawParam("time", dict(mixed=0.0), "viscous regularisation of the damage (0: none)",
                                  expected="finite damage viscosity eta >= 0 [s] (0: rate-independent)",
                                  finite=True),
+    "damage_integration": LawParam(None, dict(mixed="implicit", fremond="implicit"),
+                                   "damage (D, β) of the step: implicit (solved with the step) or IMPL-EX "
+                                   "(extrapolated from the two last steps)", lo=None, choices=("implicit", "implex")),
     "f_c": LawParam("stress", dict(coulomb=0.0, elastic=0.0, brittle=0.0, fremond=0.0, mixed=0.0),
                     "compressive strength of the cap (omit: no cap)", lo_open=True,
                     expected="compressive strength f_c > 0 [Pa] (omit: no cap)"),
@@ -182,7 +185,8 @@ LAW_KEYS = {law: {k for k, p in LAW_PARAMS.items() if law in p.laws} for law in 
 _DUGDALE_ONLY, _ELASTIC_BRITTLE_ONLY = ("l_c",), ("c_N", "c_T", "s_c")
 _CHOICE_TEXT = dict(variant="'elastic' or 'dugdale'",
                     friction="'constant' (mu) or 'damage' (mu(beta) = (1 - beta) mu_r)",
-                    softening="'linear' or 'exponential'")
+                    softening="'linear' or 'exponential'",
+                    damage_integration="'implicit' or 'implex'")
 
 
 def validate_law_params(law: str, params: dict, name: str) -> dict:
@@ -246,7 +250,8 @@ def validate_law_params(law: str, params: dict, name: str) -> dict:
     elif law == "mixed":
         out["C_ss"] = 0.0
     if law == "mixed":
-        for k in ("k_n", "k_s", "f_t", "c", "G_I", "G_II", "tan_phi", "softening", "damage_viscosity"):
+        for k in ("k_n", "k_s", "f_t", "c", "G_I", "G_II", "tan_phi", "softening", "damage_viscosity",
+                  "damage_integration"):
             get(k)
         eI = out["f_t"] ** 2 / (2 * out["k_n"])
         eII = out["c"] ** 2 / (2 * out["k_s"])
@@ -275,7 +280,7 @@ def validate_law_params(law: str, params: dict, name: str) -> dict:
                                      "(c_N, c_T, r_c, s_c, mu)")
             get("c_N"), get("c_T"), get("s_c")
     elif law == "fremond":
-        for k in ("c_N", "c_T", "w", "b", "p"):
+        for k in ("c_N", "c_T", "w", "b", "p", "damage_integration"):
             get(k)
         if get("friction") == "damage":
             get("mu_r")

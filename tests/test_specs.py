@@ -47,7 +47,7 @@ def test_law_table_keys_per_law():
     """Catches a parameter accepted by a law it does not belong to (e.g. mu for mixed, l_c for elastic)."""
     assert LAW_KEYS["coulomb"] == {"mu", "f_c", "G_fc", "kappa_p", "f_ci"}
     assert LAW_KEYS["mixed"] == {"k_n", "k_s", "f_t", "c", "G_I", "G_II", "tan_phi", "softening", "f_c", "G_fc",
-                                 "kappa_p", "f_ci", "damage_viscosity", "C_ss"}
+                                 "kappa_p", "f_ci", "damage_viscosity", "damage_integration", "C_ss"}
     assert LAW_PARAMS["c_N"].laws["elastic"] is REQUIRED and LAW_PARAMS["c_T"].laws["brittle"] == 0.0
 
 

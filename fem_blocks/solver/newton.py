@@ -75,8 +75,8 @@ import scipy.sparse as sp
 from numba import njit
 
 from ..errors import InputError
-from ..laws import MIXED, P_CN, P_CSS, P_CT, S_BETA, S_BROKEN, cap_stress, compression_stiffness, linear_part, \
-    mixed_damage_gradient, viscous_damage
+from ..laws import MIXED, P_CN, P_CSS, P_CT, P_IMPLEX, S_BETA, S_BROKEN, cap_stress, compression_stiffness, \
+    linear_part, mixed_damage_gradient, step_start, viscous_damage
 from ..linalg import LU_SMALL, BlockCSR, BlockLU, lu_solve, matvec_bcsr
 from . import nlgs
 from .problem import SolverResult
@@ -272,7 +272,7 @@ def _cohesive_terms(law, par, st, x, ueff, v, area, h, theta, S, c, mue, cmp, ca
         tension = uN > 1e-15
         if inside:
             T[a, 0, 0] = T[a, 0, 1] = T[a, 1, 0] = T[a, 1, 1] = 0.0
-            if law[a] == MIXED and st[a, S_BROKEN] == 0.0:
+            if law[a] == MIXED and st[a, S_BROKEN] == 0.0 and par[a, P_IMPLEX] != 1.0:  # IMPL-EX: x fixed
                 uT = ueff[a, 1] + h * theta * v[2 * a + 1]
                 D, gN, gT = mixed_damage_gradient(par[a], st[a, S_BETA], uN, uT)
                 D, gN, gT = viscous_damage(par[a], st[a, S_BETA], D, gN, gT, h)  # identity if damage_viscosity = 0
@@ -564,7 +564,9 @@ def solve_cohesive_newton(W: BlockCSR, q, mu, law, par, st, ueff, area, h: float
     Mixed-mode damage (damage_inside = True, the default): D is not staggered but a function of the current jump,
     D(u) = max(D_committed, D(λ(u))) (monotone: never below the committed damage), inside the Alart–Curnier
     function, with the consistent tangent dP̃/dv = diag(S) + T (T: the damage term, laws.mixed_damage_gradient).
-    Newton then solves the coupled problem at once; the residual is the natural map at x = D(u). Other laws
+    Newton then solves the coupled problem at once; the residual is the natural map at x = D(u). IMPL-EX contacts
+    (`damage_integration = "implex"`) start from and keep the extrapolated x (laws.step_start) in every pass, the
+    coupled one included (there without a damage term T: a compliant-joint problem at fixed x). Other laws
     (Frémond β) and damage_inside = False: staggered — Newton at fixed x, then x updated from the converged jumps
     (Aitken-relaxed), until x stops changing. The coupled pass writes the rows of compliant contacts as functions
     of the jump (`compliant_rows`), takes no Gauss–Seidel sweeps after a failed line search (the regularisation
@@ -581,12 +583,15 @@ def solve_cohesive_newton(W: BlockCSR, q, mu, law, par, st, ueff, area, h: float
     law = np.ascontiguousarray(law, dtype=np.int64)
     par = np.ascontiguousarray(par, dtype=np.float64)
     st = np.ascontiguousarray(st, dtype=np.float64)
-    x = np.ascontiguousarray(st[:, S_BETA].copy())
+    x0 = step_start(law, par, st, float(h))  # committed x_n, or the IMPL-EX extrapolation (held in the step)
+    x = x0.copy()
     ueff = np.ascontiguousarray(ueff, dtype=np.float64)
     area = np.ascontiguousarray(area, dtype=np.float64)
     if W.n == 0:
         return SolverResult(r, q.copy(), 0, True, 0.0, 0.0, 0.0, "no contact", solver="Newton"), x
     from ..laws import FREMOND
+    # the coupled pass (compliant rows, stall restarts, Alart–Curnier retry) also serves IMPL-EX mixed contacts, whose
+    # x stays the extrapolated one in it (_cohesive_terms)
     inside = bool(damage_inside) and bool(np.any(law == MIXED))
     n = W.n
     scratch = (np.zeros((n, 2)), np.zeros((n, 2)), np.zeros(n), np.zeros(n), np.zeros(n), np.zeros((n, 2, 2)))
@@ -641,7 +646,7 @@ def solve_cohesive_newton(W: BlockCSR, q, mu, law, par, st, ueff, area, h: float
             # a second coupled pass with the Alart–Curnier rows, from the committed damage and the Gauss–Seidel start
             # (measured: the late softening steps where the compliant rows fail, docs/benchmarks.md)
             rows = "ac"
-            x[:] = st[:, S_BETA]
+            x[:] = x0
             r = r_start.copy()
             continue
         if inside and res > tol:
@@ -649,7 +654,7 @@ def solve_cohesive_newton(W: BlockCSR, q, mu, law, par, st, ueff, area, h: float
             # branch): the staggered iteration from the committed state instead, which selects the least
             # damaged solution
             inside, fell_back, res_prev, omega = False, True, None, 1.0
-            x[:] = st[:, S_BETA]
+            x[:] = x0
             r = r_start.copy()
             continue
         x_old = x.copy()

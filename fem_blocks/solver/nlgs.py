@@ -1125,8 +1125,10 @@ def solve_cohesive(W: BlockCSR, q, mu, law, par, st, ueff, area, h: float, theta
     st = np.ascontiguousarray(st, dtype=np.float64)
     if d == 3:
         _check_cohesive3(n, r, law, par, st, ueff, area)
-    from ..laws import S_BETA
-    trial = np.ascontiguousarray(st[:, S_BETA].copy() if x0 is None else np.array(x0, dtype=np.float64))
+    from ..laws import step_start  # committed x_n, or the IMPL-EX extrapolation (held in the step)
+    trial = np.ascontiguousarray(step_start(np.ascontiguousarray(law, dtype=np.int64),
+                                            np.ascontiguousarray(par, dtype=np.float64), st, float(h))
+                                 if x0 is None else np.array(x0, dtype=np.float64))
     ueff = np.ascontiguousarray(ueff, dtype=np.float64)
     area = np.ascontiguousarray(area, dtype=np.float64)
     if n == 0:
