@@ -81,6 +81,10 @@ from .problem import SolverResult
 
 COMPLIANT_ROWS = True  # coupled pass: compliant_rows for the compliant contacts (False: Alart–Curnier rows; bench)
 RETRY_AC_ROWS = True  # a failed compliant coupled pass is retried with the Alart–Curnier rows before the staggered one
+# the compliant coupled pass gives up (for the retry) when its residual exceeds GIVE_UP[0] times the residual after its
+# first iteration, or when GIVE_UP[1] iterations have not brought it below that value (None: never; measured on the
+# split-brick wall, docs/benchmarks.md "Split-brick steps: the compliant pass that gives up")
+GIVE_UP = (1e3, 40)
 
 
 def _rho(W: BlockCSR):
@@ -253,7 +257,7 @@ def _cohesive_terms(law, par, st, x, ueff, v, area, h, theta, S, c, mue, cmp, ca
 
 
 def _newton(W: BlockCSR, q, mu, r, tol, max_iter, gs, max_sweeps_total, coh=None, memory=1, stall_window=0,
-            fallback_sweeps=10, stall_sweeps=20, compliant=False, probe=None):
+            fallback_sweeps=10, stall_sweeps=20, compliant=False, probe=None, give_up=None):
     """Core iteration (2D or 3D by W.dim). coh = (law, par, st, x, ueff, area, h, theta, inside) for interface laws
     (2D only), else None: x fixed, except with inside = True, where the mixed-mode damage follows the jump
     (x_α = D(u), consistent tangent, see _cohesive_terms). `gs(r, k)` runs k Gauss–Seidel sweeps from r ->
@@ -261,6 +265,8 @@ def _newton(W: BlockCSR, q, mu, r, tol, max_iter, gs, max_sweeps_total, coh=None
     - 2e-4 t ½‖F(r)‖² (1: monotone Armijo).
     `stall_window` > 0: when that many iterations have not halved the residual, 20 Gauss–Seidel sweeps and a
     restart (ε and the merit memory reset), counted as a fallback.
+    `give_up` = (factor, window): stop (unconverged) when the residual exceeds factor times its value after the
+    first iteration, or when `window` iterations have not brought it below that value.
     `probe` (diagnostics, bench/bench_split_step.py): called once per iteration as probe(event) with a dict (the
     iterate, F, J, the step length, the residual after the step, and the function F(r) for finite differences).
     Returns (r, u, iterations, sweeps, fallbacks, change, residual)."""
@@ -417,6 +423,12 @@ def _newton(W: BlockCSR, q, mu, r, tol, max_iter, gs, max_sweeps_total, coh=None
             probe(dict(it=n_it, r=r0_it, F=F, J=J, t=t if accepted else 0.0, res=res, gs=n_gs, eps=eps_it / wdiag,
                        D=D, E=E, rn=rn, rt=rt, x=None if coh is None else coh[3].copy(),
                        Ffun=lambda r_: fun(r_, Wsp @ r_ + q), restore=lambda: residual(r, u)))
+        if give_up is not None:  # diverging, or no progress at all: leave it to the caller's next pass
+            if n_it == 1:
+                res_1, low = res, np.inf
+            low = min(low, res) if n_it > 1 else low
+            if res > tol and (res > give_up[0] * res_1 or (n_it >= give_up[1] and low >= res_1)):
+                break
         if stall_window:
             if res <= 0.5 * best:
                 best, last = res, n_it
@@ -547,7 +559,9 @@ def solve_cohesive_newton(W: BlockCSR, q, mu, law, par, st, ueff, area, h: float
         r, u, i1, g1, f1, change, res = _newton(W, q, mu, r, tol, min(max_iter, budget - n_it), gs,
                                                 max_sweeps_total - n_gs, coh, stall_window=10 if inside else 0,
                                                 fallback_sweeps=0 if inside else 10, stall_sweeps=0 if inside else 20,
-                                                compliant=rows == "compliant", probe=probe)
+                                                compliant=rows == "compliant", probe=probe,
+                                                give_up=GIVE_UP if inside and rows == "compliant" and RETRY_AC_ROWS
+                                                else None)
         n_it, n_gs, n_fb = n_it + i1, n_gs + g1, n_fb + f1
         if inside and res > tol and rows == "compliant" and RETRY_AC_ROWS:
             # a second coupled pass with the Alart–Curnier rows, from the committed damage and the Gauss–Seidel start
