@@ -49,7 +49,8 @@ staggered loop); Frémond's β is staggered (docs/laws.md, "Integration in the g
 the contacts with a compliant normal law (cmp > 0) use `compliant_rows` instead of the Alart–Curnier rows (the
 compressive impulse as a function of the jump: F_N = P̃_N - min(k_c⟨-u_N⟩₊/(hθ), cap), no ρ_N), and its fallbacks
 and stall restarts take no Gauss–Seidel sweeps (measured on split-brick walls: docs/benchmarks.md, "Split-brick
-steps: where the iterations go").
+steps: where the iterations go"); it gives up for the Alart–Curnier retry when it diverges or makes no progress
+(GIVE_UP; docs/benchmarks.md, "Split-brick steps: the compliant pass that gives up").
 Gain-scaled line search (docs/laws.md, "Residual of the transformed problem"): σ_α,i = 1 + S_α,i W_αα,ii is the
 gain of row i of F on the contact's own impulse (S = h²θ A k of the adhesive part at the start of the solve). When
 the Armijo search on ½‖F‖² fails, a second one on ½‖Σ⁻¹F‖² (rows divided by σ: measured on P rather than on
@@ -493,7 +494,8 @@ def solve_cohesive_newton(W: BlockCSR, q, mu, law, par, st, ueff, area, h: float
     (Aitken-relaxed), until x stops changing. The coupled pass writes the rows of compliant contacts as functions
     of the jump (`compliant_rows`), takes no Gauss–Seidel sweeps after a failed line search (the regularisation
     grows) and restarts (regularisation and merit memory reset) when 10 iterations have not halved its residual;
-    if it ends above the tolerance (`max_iter`), a second coupled pass with the Alart–Curnier rows
+    it gives up (GIVE_UP) when its residual exceeds 1 000 times its value after its first iteration or has not gone
+    below that value in 40 iterations; if it ends above the tolerance, a second coupled pass with the Alart–Curnier rows
     (RETRY_AC_ROWS), from the committed damage and the Gauss–Seidel start; if that one fails too, the
     staggered iteration takes over from the committed damage and the Gauss–Seidel start (message says so): it
     selects the least damaged solution where a large step makes the coupled iteration jump between branches of
