@@ -7,7 +7,8 @@
     python bench/bench_split_step.py capture DIR [--save 5,12,...|all] -- run CASE.toml --out OUT --quick [--resume]
 
     # re-solve saved problems with solve_cohesive_newton (this tree) and print one line per problem
-    # (--staggered: damage_inside = False; --ac-rows: the coupled pass with the Alart–Curnier rows)
+    # (--staggered: damage_inside = False; --ac-rows: the coupled pass with the Alart–Curnier rows; --no-give-up:
+    # the compliant coupled pass runs to max_iter, newton.GIVE_UP = None)
     python bench/bench_split_step.py solve DIR/call_0012.npz [...] [--staggered] [--ac-rows]
 
     # one problem, one line per Newton iteration: residual, step length, regularisation, share of ‖F‖² on the
@@ -155,6 +156,8 @@ def main(argv=None):
     s.add_argument("--staggered", action="store_true", help="damage_inside = False (staggered only)")
     s.add_argument("--ac-rows", action="store_true", help="coupled pass with the Alart-Curnier rows for compliant "
                    "contacts (newton.COMPLIANT_ROWS = False)")
+    s.add_argument("--no-give-up", action="store_true", help="the compliant coupled pass runs to max_iter "
+                   "(newton.GIVE_UP = None: the logic before 2026-11-26)")
     t = sub.add_parser("trace")
     t.add_argument("path")
     t.add_argument("--fd-every", type=int, default=0)
@@ -167,6 +170,8 @@ def main(argv=None):
         save = "all" if a.save == "all" else {int(v) for v in a.save.split(",") if v}
         return capture(a.dir, save, cli_args)
     newton.COMPLIANT_ROWS = not a.ac_rows
+    if a.no_give_up:
+        newton.GIVE_UP = None
     solve(a.paths, a.staggered)
     return 0
 

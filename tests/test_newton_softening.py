@@ -136,3 +136,60 @@ def test_coupled_jacobian_against_finite_differences():
     assert res.converged, res.message
     assert np.any((x > prob[5][:, S_BETA]) & (x < 1.0))  # damage grew during the step
     assert checked[0] >= 0.5 * checked[1] > 0
+
+
+def _crack_and_joint_problem(n=40, seed=1, scale=3e6):
+    """Half crack-like (k = 1e13 N/m³, the split bricks' dummy stiffness) and half joint-like (k = 1e11) mixed
+    contacts on an SPD W, viscous damage η = h/10, a cap on a third, committed damage on a quarter, loaded with
+    jumps of many δ_I: a step on which the compliant coupled pass makes no progress at all (measured: its residual
+    never drops below its value after the first iteration in 200 iterations; the Alart–Curnier pass converges)."""
+    rng = np.random.default_rng(seed)
+    A = rng.standard_normal((2 * n, 3 * n)) * (rng.random((2 * n, 3 * n)) < 0.1)
+    W = A @ A.T + np.diag(1 + rng.random(2 * n))
+    law = np.full(n, MIXED)
+    par = np.tile(_par(damage_viscosity=5e-4), (n, 1))
+    par[::2, laws.P_CN] = par[::2, laws.P_CT] = 1e11
+    par[::2, laws.P_FT], par[::2, laws.P_C] = 2e5, 3e5
+    par[::2, laws.P_GI], par[::2, laws.P_GII] = 10.0, 50.0
+    par[::3, laws.P_FC] = 2e6
+    st = laws.initial_state(law)
+    st[::4, S_BETA] = 0.4
+    q = rng.standard_normal(2 * n) * scale * (2e5 / 1e11) / (H * TH)
+    return to_block_csr(W, 2), q, np.full(n, PAR["tan_phi"]), law, par, st, np.zeros((n, 2)), \
+        np.full(n, AREA), H, TH
+
+
+def _iterations(res):
+    return int(res.message.split(":")[1].split("Newton")[0])
+
+
+def test_compliant_pass_gives_up_without_progress(monkeypatch):
+    """The compliant coupled pass that makes no progress gives up after GIVE_UP[1] iterations and the Alart–Curnier
+    pass converges: at most GIVE_UP[1] + 30 Newton iterations instead of > 200 (GIVE_UP = None, the previous
+    logic), no staggered fallback; the same r and D as the previous logic (to 1e-6 and 1e-9: its Alart–Curnier pass
+    starts from the same point); r equal to the independent staggered solve (damage_inside = False: Newton at fixed
+    damage, damage updated between solves) to 1e-6 and D within 0.05 (measured 0.031: D of the crack contacts,
+    δ_I = 2e-7 m, moves by O(1) per δ_I of jump, and two solutions within the tolerance 1e-9 differ by that much);
+    the returned damage is the law's value at the returned jumps and the natural map is below the tolerance."""
+    from fem_blocks.solver import nlgs
+    prob = _crack_and_joint_problem()
+    W, q, mu, law, par, st, ueff, area, h, th = prob
+    tol = 1e-9
+    res, x = newton.solve_cohesive_newton(*prob, tol=tol)
+    assert res.converged and "staggered" not in res.message, res.message
+    assert _iterations(res) <= newton.GIVE_UP[1] + 30, res.message
+    monkeypatch.setattr(newton, "GIVE_UP", None)
+    old, x_old = newton.solve_cohesive_newton(*prob, tol=tol)
+    assert old.converged and _iterations(old) > 200, old.message  # the compliant pass ran to max_iter
+    assert np.linalg.norm(old.r - res.r) <= 1e-6 * np.linalg.norm(res.r)
+    assert np.abs(x_old - x).max() <= 1e-9
+    ref, x_ref = newton.solve_cohesive_newton(*prob, tol=tol, damage_inside=False)
+    assert ref.converged, ref.message
+    assert np.linalg.norm(ref.r - res.r) <= 1e-6 * np.linalg.norm(ref.r)
+    assert np.abs(x_ref - x).max() <= 0.05
+    assert np.any((x > st[:, S_BETA]) & (x < 1.0))  # damage grew during the step
+    xs = st[:, S_BETA].copy()
+    nlgs._update_internal(law, par, st, ueff, res.u, h, th, xs)
+    assert np.array_equal(xs, x)
+    assert nlgs.natural_map_cohesive(W.indptr, W.indices, W.blocks, q, mu, res.r, law, par, st, x, ueff, area, h,
+                                     th) <= tol * np.linalg.norm(q)

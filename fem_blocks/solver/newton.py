@@ -52,7 +52,8 @@ staggered loop); Frémond's β is staggered (docs/laws.md, "Integration in the g
 the contacts with a compliant normal law (cmp > 0) use `compliant_rows` instead of the Alart–Curnier rows (the
 compressive impulse as a function of the jump: F_N = P̃_N - min(k_c⟨-u_N⟩₊/(hθ), cap), no ρ_N), and its fallbacks
 and stall restarts take no Gauss–Seidel sweeps (measured on split-brick walls: docs/benchmarks.md, "Split-brick
-steps: where the iterations go").
+steps: where the iterations go"); it gives up for the Alart–Curnier retry when it diverges or makes no progress
+(GIVE_UP; docs/benchmarks.md, "Split-brick steps: the compliant pass that gives up").
 Gain-scaled line search (docs/laws.md, "Residual of the transformed problem"): σ_α,i = 1 + S_α,i W_αα,ii is the
 gain of row i of F on the contact's own impulse (S = h²θ A k of the adhesive part at the start of the solve). When
 the Armijo search on ½‖F‖² fails, a second one on ½‖Σ⁻¹F‖² (rows divided by σ: measured on P rather than on
@@ -85,6 +86,10 @@ from .problem import SolverResult
 COMPLIANT_ROWS = True  # coupled pass: compliant_rows for the compliant contacts (False: Alart–Curnier rows; bench)
 RETRY_AC_ROWS = True  # a failed compliant coupled pass is retried with the Alart–Curnier rows before the staggered one
 BLOCK_LU = True  # 2D Newton's linear solve: linalg.BlockLU below LU_SMALL unknowns (False: lu_solve only; bench)
+# the compliant coupled pass gives up (for the retry) when its residual exceeds GIVE_UP[0] times the residual after its
+# first iteration, or when GIVE_UP[1] iterations have not brought it below that value (None: never; measured on the
+# split-brick wall, docs/benchmarks.md "Split-brick steps: the compliant pass that gives up")
+GIVE_UP = (1e3, 40)
 
 
 def _rho(W: BlockCSR):
@@ -333,7 +338,7 @@ def _direction(blu, W, Jb, F):
 
 
 def _newton(W: BlockCSR, q, mu, r, tol, max_iter, gs, max_sweeps_total, coh=None, memory=1, stall_window=0,
-            fallback_sweeps=10, stall_sweeps=20, compliant=False, probe=None):
+            fallback_sweeps=10, stall_sweeps=20, compliant=False, probe=None, give_up=None):
     """Core iteration (2D or 3D by W.dim). coh = (law, par, st, x, ueff, area, h, theta, inside) for interface laws
     (2D only), else None: x fixed, except with inside = True, where the mixed-mode damage follows the jump
     (x_α = D(u), consistent tangent, see _cohesive_terms). `gs(r, k)` runs k Gauss–Seidel sweeps from r ->
@@ -341,6 +346,8 @@ def _newton(W: BlockCSR, q, mu, r, tol, max_iter, gs, max_sweeps_total, coh=None
     - 2e-4 t ½‖F(r)‖² (1: monotone Armijo).
     `stall_window` > 0: when that many iterations have not halved the residual, 20 Gauss–Seidel sweeps and a
     restart (ε and the merit memory reset), counted as a fallback.
+    `give_up` = (factor, window): stop (unconverged) when the residual exceeds factor times its value after the
+    first iteration, or when `window` iterations have not brought it below that value.
     `probe` (diagnostics, bench/bench_split_step.py): called once per iteration as probe(event) with a dict (the
     iterate, F, J, the step length, the residual after the step, and the function F(r) for finite differences).
     Returns (r, u, iterations, sweeps, fallbacks, change, residual)."""
@@ -505,6 +512,12 @@ def _newton(W: BlockCSR, q, mu, r, tol, max_iter, gs, max_sweeps_total, coh=None
             probe(dict(it=n_it, r=r0_it, F=F, J=J, t=t if accepted else 0.0, res=res, gs=n_gs, eps=eps_it / wdiag,
                        D=D, E=E, rn=rn, rt=rt, x=None if coh is None else coh[3].copy(),
                        Ffun=lambda r_: fun(r_, Wsp @ r_ + q), restore=lambda: residual(r, u)))
+        if give_up is not None:  # diverging, or no progress at all: leave it to the caller's next pass
+            if n_it == 1:
+                res_1, low = res, np.inf
+            low = min(low, res) if n_it > 1 else low
+            if res > tol and (res > give_up[0] * res_1 or (n_it >= give_up[1] and low >= res_1)):
+                break
         if stall_window:
             if res <= 0.5 * best:
                 best, last = res, n_it
@@ -571,7 +584,8 @@ def solve_cohesive_newton(W: BlockCSR, q, mu, law, par, st, ueff, area, h: float
     (Aitken-relaxed), until x stops changing. The coupled pass writes the rows of compliant contacts as functions
     of the jump (`compliant_rows`), takes no Gauss–Seidel sweeps after a failed line search (the regularisation
     grows) and restarts (regularisation and merit memory reset) when 10 iterations have not halved its residual;
-    if it ends above the tolerance (`max_iter`), a second coupled pass with the Alart–Curnier rows
+    it gives up (GIVE_UP) when its residual exceeds 1 000 times its value after its first iteration or has not gone
+    below that value in 40 iterations; if it ends above the tolerance, a second coupled pass with the Alart–Curnier rows
     (RETRY_AC_ROWS), from the committed damage and the Gauss–Seidel start; if that one fails too, the
     staggered iteration takes over from the committed damage and the Gauss–Seidel start (message says so): it
     selects the least damaged solution where a large step makes the coupled iteration jump between branches of
@@ -640,7 +654,9 @@ def solve_cohesive_newton(W: BlockCSR, q, mu, law, par, st, ueff, area, h: float
         r, u, i1, g1, f1, change, res = _newton(W, q, mu, r, tol, min(max_iter, budget - n_it), gs,
                                                 max_sweeps_total - n_gs, coh, stall_window=10 if inside else 0,
                                                 fallback_sweeps=0 if inside else 10, stall_sweeps=0 if inside else 20,
-                                                compliant=rows == "compliant", probe=probe)
+                                                compliant=rows == "compliant", probe=probe,
+                                                give_up=GIVE_UP if inside and rows == "compliant" and RETRY_AC_ROWS
+                                                else None)
         n_it, n_gs, n_fb = n_it + i1, n_gs + g1, n_fb + f1
         if inside and res > tol and rows == "compliant" and RETRY_AC_ROWS:
             # a second coupled pass with the Alart–Curnier rows, from the committed damage and the Gauss–Seidel start
