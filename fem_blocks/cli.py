@@ -18,7 +18,7 @@ from . import __version__
 from .errors import ConvergenceError, InputError
 
 DEMO_DIR = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "demos")
-DEFAULT_DEMO = "shear_wall_fc_p030"  # `make demo`; the micro-model wall is "shear_wall_p030" (the switch: this line)
+DEFAULT_DEMO = "shear_wall_p030"  # `make demo`: the micro-model wall (docs/validation.md); the thesis' model is "shear_wall_fc_p030"
 
 
 def list_demos() -> dict[str, str]:
