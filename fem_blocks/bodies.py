@@ -381,10 +381,12 @@ class _PlacedBlock:
     def rotation(self):
         """Rotation of the block since its placement (global): 2D the angle [rad] (counter-clockwise, unwrapped:
         the frame angle + the best-fit small rotation of q); 3D the rotation vector (3,) of R exp([θ_q]x) R0ᵀ (θ_q
-        the best-fit small rotation of q, body frame; |rotation| <= π)."""
+        the best-fit small rotation of q, body frame; |rotation| <= π), without a frame R0 θ_q."""
         th = self._small_rotation()
         if self.gdim == 2:
             return (0.0 if self._phi is None else float(self._phi[0])) + float(th[0])
+        if not self.framed:
+            return self.R0 @ th  # linear kinematics: the best-fit small rotation, global
         return rotation_vector(self.R @ rotation3d(th) @ self.R0.T)
 
     def external_load(self, t: float, g: np.ndarray) -> np.ndarray:

@@ -437,6 +437,29 @@ class Simulation:
             pot -= float(np.dot(self._rigid_gravity_force(b), b.q))
         return kin, ela, pot
 
+    def rotations(self) -> np.ndarray:
+        """Rotation of every body since its placement, batched per group (`body.rotation()` of each deformable body,
+        up to rounding; 3D framed bodies call it, one log map each): 2D (nb,) angles [rad] (framed: unwrapped frame angle + the best-fit small rotation of
+        q; rigid: q[2]); 3D (nb, 3) rotation vectors (deformable: of R exp([θ_q]x) R0ᵀ; rigid: of the orientation)."""
+        from .bodies import rotation_vector
+        d = self.dim
+        out = np.zeros(len(self.bodies)) if d == 2 else np.zeros((len(self.bodies), 3))
+        for gr in self.groups:
+            mp = gr.type.mass_properties
+            k = len(gr.members)
+            Q = gr.Q.T.reshape(k, -1, d)
+            if d == 2:
+                th = np.einsum("n,kn->k", mp.m, mp.r0[:, 0] * Q[..., 1] - mp.r0[:, 1] * Q[..., 0]) / mp.I0
+                out[gr.members] = th + (gr.phi if gr.framed else 0.0)
+            else:
+                th = np.einsum("ij,kj->ki", mp.I0inv, np.einsum("n,kni->ki", mp.m, np.cross(mp.r0[None], Q)))
+                for j, b in enumerate(gr.members):
+                    out[b] = self.bodies[b].rotation() if gr.framed else self.bodies[b].R0 @ th[j]
+        for i in self.rigid:
+            b = self.bodies[i]
+            out[i] = b.q[2] if d == 2 else rotation_vector(b.orientation)
+        return out
+
     def max_velocity(self) -> float:
         v, d = 0.0, self.dim
         for gr in self.groups:

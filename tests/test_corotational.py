@@ -365,3 +365,30 @@ def test_checkpoint_resume_with_frames_is_bitwise(dim, q4, hex8):
         assert np.array_equal(getattr(b, name), getattr(b2, name)), name
     assert np.array_equal(np.asarray(b.rotation()), np.asarray(b2.rotation()))
     assert sim.energies() == sim2.energies()
+
+
+def test_rotation_of_unframed_bodies_is_the_best_fit_small_rotation(q4, hex8):
+    """Without a frame, body.rotation() is the best-fit small rotation of q (shared API): q = the infinitesimal
+    rotation field θ × (X - X̄) plus a translation gives back θ (2D 1e-14, 3D the global vector R0 θ_type, 1e-14), and
+    Simulation.rotations() gives the same numbers (1e-14) for framed and unframed bodies. Catches: the mass centre
+    not removed (a translation read as a rotation), the type frame left unrotated in 3D."""
+    b = DeformableBody(q4, angle=0.7)
+    X = q4.mesh.points
+    b.q[:] = (1e-3 * np.column_stack([-(X[:, 1] - 0.05), X[:, 0] - 0.1]) + [2e-3, -1e-3]).ravel()
+    assert abs(b.rotation() - 1e-3) <= 1e-14
+    R0 = rotation3d([0.2, 0.4, -0.3])
+    b3 = DeformableBody3D(hex8, R=R0)
+    Y = hex8.mesh.points - 0.1
+    th = np.array([1e-3, -2e-3, 5e-4])
+    b3.q[:] = (np.cross(th, Y) + [1e-3, 0.0, 2e-3]).ravel()
+    assert np.linalg.norm(b3.rotation() - R0 @ th) <= 1e-14
+    sim = Simulation([b], h=1e-4, gravity=(0.0, 0.0))
+    assert abs(sim.rotations()[0] - b.rotation()) <= 1e-14
+    sim3 = Simulation([b3], h=1e-4, gravity=(0.0, 0.0, 0.0))
+    assert np.linalg.norm(sim3.rotations()[0] - b3.rotation()) <= 1e-14
+    bf = DeformableBody(q4, angle=0.7)
+    bf.u[:] = spin_field(q4, 10.0)
+    simf = Simulation([bf], h=1e-4, gravity=(0.0, 0.0), corotational=True)
+    for _ in range(100):
+        simf.step()
+    assert abs(simf.rotations()[0] - bf.rotation()) <= 1e-14 and abs(bf.rotation() - 0.1) <= 1e-6
