@@ -57,6 +57,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from . import corotational
 from .bodies import DeformableBody, DeformableBody3D, RigidBody, RigidBody3D, check_step
 from .errors import InputError
 
@@ -80,9 +81,12 @@ class StepInfo:
 
 
 class _Group:
-    """Deformable bodies sharing one StepOperator; state stored as (ndof, k) arrays (type frame)."""
+    """Deformable bodies sharing one StepOperator; state stored as (ndof, k) arrays (type frame, or the body frame
+    of a co-rotational group). A framed group (co-rotational kinematics, docs/method.md §7) also holds the frames
+    R (k, d, d), position (k, d) and, 2D, the unwrapped angles phi (k,) since placement, R = R0 rot(phi); the
+    bodies' R, position (and angle) are views into them."""
 
-    def __init__(self, op, btype, members, bodies):
+    def __init__(self, op, btype, members, bodies, framed: bool = False):
         self.op, self.type, self.members = op, btype, np.asarray(members, dtype=np.int64)
         k = len(members)
         self.Q = np.zeros((btype.ndof, k))
@@ -93,6 +97,17 @@ class _Group:
             body.q, body.u = self.Q[:, j], self.U[:, j]  # views: bodies see the group state
         self.clamped = op.clamped
         self.traction_bodies = [j for j, b in enumerate(members) if bodies[b].tractions]
+        self.framed = bool(framed)
+        if self.framed:
+            mb = [bodies[b] for b in members]
+            self.R = np.stack([b.R for b in mb])
+            self.pos = np.stack([b.position for b in mb])
+            self.R0 = np.stack([b.R0 for b in mb])
+            self.pos0 = np.stack([b.position0 for b in mb])
+            d = self.R.shape[1]
+            self.phi = (np.array([0.0 if b._phi is None else float(b._phi[0]) for b in mb]) if d == 2 else None)
+            for j, body in enumerate(mb):
+                body.attach_frame(self.R[j], self.pos[j], self.phi[j:j + 1] if d == 2 else None)
 
 
 class Simulation:
@@ -102,11 +117,14 @@ class Simulation:
     theta in [0.5, 1], gravity vector (default (0, -9.81) in 2D, (0, 0, -9.81) in 3D), velocity_reset
     (quasi-static), contact: an optional object with `solve(sim, t0, t1)` that returns a
     contact.result.ContactResult (contact/step.py ContactStep); `step` applies its velocity corrections and keeps
-    it as `last_contact`.
+    it as `last_contact`. corotational: every unclamped deformable body carries a frame (finite rotation plus small
+    deformation, docs/method.md §7); None = automatic: True when the contact step's geometry is "updated"
+    (`contact.opts.geometry`), else False. Clamped bodies keep the linear kinematics.
     """
 
     def __init__(self, bodies, h: float, theta: float = 0.5, gravity=None,
-                 velocity_reset: bool = False, contact=None, t0: float = 0.0, static: bool = False):
+                 velocity_reset: bool = False, contact=None, t0: float = 0.0, static: bool = False,
+                 corotational: bool | None = None):
         check_step(h, theta)
         if not bodies:
             raise InputError("bodies: expected at least one body")
@@ -133,6 +151,13 @@ class Simulation:
         self.last_contact = None  # ContactResult of the last step (contact/result.py), read by writers and checks
         self.deformable = [i for i, b in enumerate(self.bodies) if b.kind == 0]
         self.rigid = [i for i, b in enumerate(self.bodies) if b.kind == 1]
+        geometry = getattr(getattr(contact, "opts", None), "geometry", None)
+        if corotational is None:
+            corotational = geometry == "updated"
+        elif corotational and contact is not None and geometry != "updated":
+            raise InputError(f"corotational kinematics with contact.geometry = {geometry!r}: expected 'updated' (a "
+                             "frozen contact geometry is the small-rotation reference configuration)")
+        self.corotational = bool(corotational)
         self.h, self.theta, self.static = None, None, False
         self.set_step(h, theta, static)
 
@@ -170,13 +195,19 @@ class Simulation:
         ops = {}
         for i in self.deformable:
             b = self.bodies[i]
+            b.detach_frame()  # the new groups take copies of the frames (and of q, u)
             op = b.type.step_operator(self.h, self.theta, b.clamped, static)
             groups.setdefault(id(op), []).append(i)
             ops[id(op)] = (op, b.type)
-        self.groups = [_Group(ops[k][0], ops[k][1], members, self.bodies) for k, members in groups.items()]
+        self.groups = [_Group(ops[k][0], ops[k][1], members, self.bodies,
+                              framed=self.corotational and not ops[k][0].clamped.any())
+                       for k, members in groups.items()]
         for gr in self.groups:
-            gr.Fg = np.column_stack([self.bodies[b].type.gravity_load(self.bodies[b].R.T @ self.g)
-                                     for b in gr.members])
+            if gr.framed:
+                self._frame_gravity(gr)
+            else:
+                gr.Fg = np.column_stack([self.bodies[b].type.gravity_load(self.bodies[b].R.T @ self.g)
+                                         for b in gr.members])
         if self.contact is not None:
             self.contact.on_step_change(self)
 
@@ -189,17 +220,40 @@ class Simulation:
                 F[:, j] += tr.history(t) * body.type.traction_load(tr.tag, body.R.T @ np.asarray(tr.value, float))
         return F
 
+    # -------------------------------------------------------------- co-rotational frames (docs/method.md §7)
+    def _frame_gravity(self, gr: _Group):
+        """Gravity of a framed group in its body frames: F_g = G (Rᵀ g) per body (G: MassProperties.G)."""
+        gr.Fg = gr.type.mass_properties.G @ np.einsum("kji,j->ik", gr.R, self.g)
+
+    def _frame_start(self, gr: _Group):
+        """Start of the step of a framed group (corotational.start): centroids, relative positions, I(r), v̄_i, ω_i,
+        gravity in the frames of step i; keeps gr.Ueff = u_i - h ω_i × (u_i - v̄_i)."""
+        gr.Ueff = corotational.start(gr, self.h)
+        self._frame_gravity(gr)
+
+    def _frame_update(self, gr: _Group, Unew: np.ndarray):
+        """End of the step of a framed group (corotational.update, docs/method.md §7): frames turned by
+        Δφ = h((1-θ)ω_i + θω_{i+1}), q, u re-based in the new frames."""
+        corotational.update(gr, Unew, self.h, self.theta)
+
     # -------------------------------------------------------------- one step
     def free_velocities(self, t0: float, t1: float):
-        """Free velocity of every body (no contact impulse) over [t0, t1]; stores it on the groups."""
+        """Free velocity of every body (no contact impulse) over [t0, t1]; stores it on the groups. Framed groups
+        (co-rotational) add the inertial term of their turning frames, -h M (ω_i × (u_i - v̄_i)) (docs/method.md
+        §7)."""
         h, th = self.h, self.theta
         for gr in self.groups:
             if self.velocity_reset:
                 gr.U[:] = 0.0
             bt = gr.type
+            if gr.framed:
+                self._frame_start(gr)
             gr.Ftheta = (1 - th) * self._group_load(gr, t0) + th * self._group_load(gr, t1)
             KQ = bt.K @ gr.Q
-            rhs = (-h * KQ + h * gr.Ftheta) if self.static else (bt.M @ gr.U - h * KQ + h * gr.Ftheta)
+            if gr.framed:
+                rhs = bt.M @ gr.Ueff - h * KQ + h * gr.Ftheta
+            else:
+                rhs = (-h * KQ + h * gr.Ftheta) if self.static else (bt.M @ gr.U - h * KQ + h * gr.Ftheta)
             if th != 1.0:
                 rhs -= h * h * th * (1 - th) * (bt.K @ gr.U)
             if bt.C.nnz and th != 1.0 and not self.static:
@@ -266,8 +320,11 @@ class Simulation:
             if not self.static:
                 winert += float(np.sum(dQ * (gr.type.M @ (Unew - gr.U)))) / h
             work += float(np.sum(gr.Ftheta * dQ) - np.sum(gr.Fg * dQ))
-            gr.Q += dQ
-            gr.U[:] = Unew
+            if gr.framed:
+                self._frame_update(gr, Unew)
+            else:
+                gr.Q += dQ
+                gr.U[:] = Unew
         drv_moves = []
         for k, i in enumerate(self.rigid):
             b = self.bodies[i]
@@ -322,6 +379,11 @@ class Simulation:
         for i, b in enumerate(self.bodies):
             d[f"sim.body{i}.q"] = np.array(b.q)
             d[f"sim.body{i}.u"] = np.array(b.u)
+            if b.kind == 0 and b.framed:  # co-rotational frame (and, 2D, its unwrapped angle)
+                d[f"sim.body{i}.R"] = np.array(b.R)
+                d[f"sim.body{i}.position"] = np.array(b.position)
+                if self.dim == 2:
+                    d[f"sim.body{i}.phi"] = np.array(b._phi)
             if b.kind == 1:
                 d[f"sim.body{i}.reaction"] = np.array(b.reaction)
                 if self.dim == 3:
@@ -336,8 +398,9 @@ class Simulation:
         `last_contact`."""
         for i, b in enumerate(self.bodies):
             rigid = ("reaction",) + (("orientation",) if self.dim == 3 else ()) if b.kind == 1 else ()
-            for name in ("q", "u") + rigid:
-                key = f"sim.body{i}.{name}"
+            frame = (("R", "position") + (("_phi",) if self.dim == 2 else ())) if b.kind == 0 and b.framed else ()
+            for name in ("q", "u") + rigid + frame:
+                key = f"sim.body{i}.{name.lstrip('_')}"
                 if key not in d or np.shape(d[key]) != np.shape(getattr(b, name)):
                     raise InputError(f"checkpoint: {key}: missing or of another shape than body {i} of this model "
                                      f"(expected {np.shape(getattr(b, name))})")
@@ -357,12 +420,45 @@ class Simulation:
         for gr in self.groups:
             kin += 0.0 if self.static else 0.5 * float(np.sum(gr.U * (gr.type.M @ gr.U)))
             ela += 0.5 * float(np.sum(gr.Q * (gr.type.K @ gr.Q)))
-            pot -= float(np.sum(gr.Fg * gr.Q))
+            if gr.framed:  # -Σ m_a g·(x_a - x_a,ref), global: -g·(R Σ m (X + q) + m p - R0 Σ m X - m p0)
+                mp = gr.type.mass_properties
+                k = len(gr.members)
+                n, dd = mp.r0.shape
+                sY = np.einsum("n,kni->ki", mp.m, gr.type.mesh.points[None] + gr.Q.T.reshape(k, n, dd))
+                sX = mp.mass * mp.Xbar
+                dx = (np.einsum("kij,kj->ki", gr.R, sY) + mp.mass * gr.pos
+                      - np.einsum("kij,j->ki", gr.R0, sX) - mp.mass * gr.pos0)
+                pot -= float(np.sum(dx @ self.g))
+            else:
+                pot -= float(np.sum(gr.Fg * gr.Q))
         for i in self.rigid:
             b = self.bodies[i]
             kin += 0.0 if self.static else 0.5 * float(np.dot(b.u, self._rigid_mass_times(b, b.u)))
             pot -= float(np.dot(self._rigid_gravity_force(b), b.q))
         return kin, ela, pot
+
+    def rotations(self) -> np.ndarray:
+        """Rotation of every body since its placement, batched per group (`body.rotation()` of each deformable body,
+        up to rounding; 3D framed bodies call it, one log map each): 2D (nb,) angles [rad] (framed: unwrapped frame angle + the best-fit small rotation of
+        q; rigid: q[2]); 3D (nb, 3) rotation vectors (deformable: of R exp([θ_q]x) R0ᵀ; rigid: of the orientation)."""
+        from .bodies import rotation_vector
+        d = self.dim
+        out = np.zeros(len(self.bodies)) if d == 2 else np.zeros((len(self.bodies), 3))
+        for gr in self.groups:
+            mp = gr.type.mass_properties
+            k = len(gr.members)
+            Q = gr.Q.T.reshape(k, -1, d)
+            if d == 2:
+                th = np.einsum("n,kn->k", mp.m, mp.r0[:, 0] * Q[..., 1] - mp.r0[:, 1] * Q[..., 0]) / mp.I0
+                out[gr.members] = th + (gr.phi if gr.framed else 0.0)
+            else:
+                th = np.einsum("ij,kj->ki", mp.I0inv, np.einsum("n,kni->ki", mp.m, np.cross(mp.r0[None], Q)))
+                for j, b in enumerate(gr.members):
+                    out[b] = self.bodies[b].rotation() if gr.framed else self.bodies[b].R0 @ th[j]
+        for i in self.rigid:
+            b = self.bodies[i]
+            out[i] = b.q[2] if d == 2 else rotation_vector(b.orientation)
+        return out
 
     def max_velocity(self) -> float:
         v, d = 0.0, self.dim

@@ -120,6 +120,31 @@ MUTATIONS = [
     Mutation("gap_sign_2d", "2D gap (x_c − x_a)·n → (x_a − x_c)·n (detection)", "fem_blocks/contact/detection_2d.py",
              "g = (px - ax) * nax + (py - ay) * nay", "g = (ax - px) * nax + (ay - py) * nay",
              ("tests/test_detection_delassus.py", "tests/test_contact.py")),
+    # co-rotational kinematics (issue 22)
+    Mutation("corot_inertial_sign", "inertial term of the turning frame −h ω × (u − v̄) → +h ω × (u − v̄) (2D)",
+             "fem_blocks/corotational.py",
+             "            Ueff[2 * a, j] = U[2 * a, j] + h * om * uy\n"
+             "            Ueff[2 * a + 1, j] = U[2 * a + 1, j] - h * om * ux",
+             "            Ueff[2 * a, j] = U[2 * a, j] - h * om * uy\n"
+             "            Ueff[2 * a + 1, j] = U[2 * a + 1, j] + h * om * ux",
+             ("tests/test_corotational.py",)),
+    Mutation("corot_translation_turns", "re-basing: v̄ kept in frame components instead of fixed in space (2D)",
+             "fem_blocks/corotational.py",
+             "        tx = cd * vx + sd * vy  # exp(-[Δφ]x) v̄_{i+1}\n        ty = -sd * vx + cd * vy",
+             "        tx = vx  # exp(-[Δφ]x) v̄_{i+1}\n        ty = vy",
+             ("tests/test_corotational.py",)),
+    Mutation("corot_gravity_frame", "gravity of a framed group in the placement frame R0 instead of the current R",
+             "fem_blocks/dynamics.py",
+             'gr.Fg = gr.type.mass_properties.G @ np.einsum("kji,j->ik", gr.R, self.g)',
+             'gr.Fg = gr.type.mass_properties.G @ np.einsum("kji,j->ik", gr.R0, self.g)',
+             ("tests/test_corotational.py",)),
+    Mutation("corot_frame_side_3d", "3D frame update R exp([Δφ]x) → exp([Δφ]x) R", "fem_blocks/corotational.py",
+             "        Rn = R[j] @ Rd\n", "        Rn = Rd @ R[j]\n",
+             ("tests/test_corotational.py",)),
+    Mutation("corot_checkpoint_frame", "checkpoint exports the placement R0 instead of the frame R",
+             "fem_blocks/dynamics.py",
+             'd[f"sim.body{i}.R"] = np.array(b.R)', 'd[f"sim.body{i}.R"] = np.array(b.R0)',
+             ("tests/test_corotational.py",)),
 ]
 
 IGNORE = shutil.ignore_patterns(".git", "__pycache__", ".venv", "*.pyc", ".pytest_cache", "out", "*.egg-info")
