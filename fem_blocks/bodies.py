@@ -202,6 +202,24 @@ class BlockType:
         scale = max(1.0, float(np.abs(X).max()))
         return P.shape[0] >= P.shape[1] and np.linalg.matrix_rank(P / scale, tol=1e-10) == P.shape[1]
 
+    def rotation_weights(self) -> np.ndarray:
+        """A (k, ndof) with θ = A q the mass-weighted least-squares small rotation of a displacement field q (type
+        frame) about the mass centre c = Σ m_a X_a / Σ m_a (m_a the row sums of M): θ = (Φᵀ M Φ)⁻¹ Φᵀ M q, Φ the
+        rotation modes e × (X − c) (2D: e = e_z, k = 1; 3D: e_x, e_y, e_z, k = 3). With a lumped M:
+        2D θ = Σ m_a r_a × q_a / Σ m_a |r_a|², 3D θ = I⁻¹ Σ m_a r_a × q_a (r_a = X_a − c). Built once."""
+        A = getattr(self, "_rot_weights", None)
+        if A is None:
+            X = self.mesh.points
+            d = X.shape[1]
+            m = np.asarray(self.M.sum(axis=1)).ravel()[::d]  # nodal masses (row sums of the x rows)
+            r = X - (m @ X) / m.sum()
+            axes = [np.array([0.0, 0.0, 1.0])] if d == 2 else list(np.eye(3))
+            rp = np.column_stack([r, np.zeros(len(r))]) if d == 2 else r
+            Phi = np.column_stack([np.cross(a, rp)[:, :d].ravel() for a in axes])  # (ndof, k), dof d*i + c
+            MPhi = self.M @ Phi
+            A = self._rot_weights = np.linalg.solve(Phi.T @ MPhi, MPhi.T)
+        return A
+
     @property
     def stress_operator(self) -> sp.csr_matrix:
         """S: cell-centroid stresses σ = D B q in the type frame from q (built once), Voigt order: 2D (3 nc x 2n)
@@ -283,6 +301,13 @@ class _PlacedBlock:
 
     def displacement_global(self) -> np.ndarray:
         return self.q.reshape(-1, self.gdim) @ self.R.T
+
+    def rotation(self):
+        """Rotation of the block since its placement: here (linear kinematics, no body frame) the best-fit small
+        rotation of its displacement field (BlockType.rotation_weights): 2D an angle [rad], counter-clockwise;
+        3D a rotation vector (3,) in the global frame (R θ_type)."""
+        th = self.type.rotation_weights() @ self.q
+        return float(th[0]) if self.gdim == 2 else self.R @ th
 
     def velocity_global(self) -> np.ndarray:
         return self.u.reshape(-1, self.gdim) @ self.R.T
