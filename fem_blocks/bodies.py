@@ -27,7 +27,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .errors import InputError, check_range
-from .geometry import rotation3d  # noqa: F401 (re-exported)
+from .geometry import rotation3d  # noqa: F401 (re-exported; rotation of body frames)
 
 
 # ----------------------------------------------------------------------------- load histories
@@ -102,6 +102,42 @@ def check_step(h: float, theta: float):
 def rotation(angle: float) -> np.ndarray:
     c, s = np.cos(angle), np.sin(angle)
     return np.array([[c, -s], [s, c]])
+
+
+def rotation_vector(R: np.ndarray) -> np.ndarray:
+    """Inverse of rotation3d: the rotation vector w (|w| <= π) with exp([w]x) = R (R a 3x3 rotation)."""
+    R = np.asarray(R, dtype=float)
+    a = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])  # 2 sin(th) k
+    c = np.clip(0.5 * (np.trace(R) - 1.0), -1.0, 1.0)
+    s = 0.5 * np.linalg.norm(a)
+    th = np.arctan2(s, c)
+    if s > 1e-6:
+        return th / (2.0 * s) * a
+    if c > 0:  # th small: w = a/2 (1 + th²/6)
+        return 0.5 * a * (1.0 + th * th / 6.0)
+    # th near π: R + 1 = 2 k kᵀ + O(π - th); the largest column gives k
+    B = 0.5 * (R + np.eye(3))
+    j = int(np.argmax(np.diag(B)))
+    k = B[:, j] / np.sqrt(max(B[j, j], 1e-300))
+    if np.dot(k, a) < 0:
+        k = -k
+    return th * k / np.linalg.norm(k)
+
+
+@dataclass(frozen=True)
+class MassProperties:
+    """Rigid-body quantities of a block type from its nodal masses m_a (diagonal of the lumped M, or row sums of
+    the consistent M; M = M_s ⊗ I_d): total mass, centre X̄ = Σ m_a X_a / m, r0 = X - X̄ (n, d), the second moment
+    I0 (2D Σ m_a |r0_a|², 3D Σ m_a (|r0_a|² 1 - r0_a r0_aᵀ) and its inverse), and the gravity columns G (ndof, d):
+    the nodal load of a unit body acceleration e_c, G[:, c] = M (1 ⊗ e_c), so that gravity_load(g) = G g."""
+
+    m: np.ndarray
+    mass: float
+    Xbar: np.ndarray
+    r0: np.ndarray
+    I0: object
+    I0inv: object
+    G: np.ndarray
 
 
 # ----------------------------------------------------------------------------- block types
@@ -221,6 +257,27 @@ class BlockType:
         return A
 
     @property
+    def mass_properties(self) -> MassProperties:
+        """MassProperties of the type (computed once)."""
+        mp = getattr(self, "_mass_props", None)
+        if mp is None:
+            X = self.mesh.points
+            n, d = X.shape
+            G = np.column_stack([self.M @ np.tile(np.eye(d)[c], n) for c in range(d)])
+            m = G[0::d, 0].copy()  # row sums of the x rows = nodal masses
+            mass = float(m.sum())
+            Xbar = m @ X / mass
+            r0 = X - Xbar
+            if d == 2:
+                I0 = float(np.dot(m, np.einsum("ni,ni->n", r0, r0)))
+                I0inv = 1.0 / I0
+            else:
+                I0 = np.einsum("n,ni,ni->", m, r0, r0) * np.eye(3) - np.einsum("n,ni,nj->ij", m, r0, r0)
+                I0inv = np.linalg.inv(I0)
+            mp = self._mass_props = MassProperties(m, mass, Xbar, r0, I0, I0inv, G)
+        return mp
+
+    @property
     def stress_operator(self) -> sp.csr_matrix:
         """S: cell-centroid stresses σ = D B q in the type frame from q (built once), Voigt order: 2D (3 nc x 2n)
         (sxx, syy, sxy) in the material's plane stress or strain; 3D (6 nc x 3n) (sxx, syy, szz, syz, sxz, sxy)."""
@@ -291,15 +348,38 @@ class _PlacedBlock:
     def _check_traction(self, tr):
         """Dimension-specific check of a traction's value (none in 2D)."""
 
+    def _init_frame(self):
+        """The placement (R0, position0) and the current frame (R, position): equal, and fixed, until a
+        co-rotational Simulation attaches a frame (dynamics.Simulation: views into its group arrays)."""
+        self.R0 = self.R.copy()
+        self.position0 = self.position.copy()
+        self.framed = False  # True: R, position follow the block (co-rotational kinematics, docs/method.md §7)
+        self._phi = None     # 2D: (1,) view of the unwrapped frame angle since placement [rad]
+
+    def attach_frame(self, R, position, phi=None):
+        """Co-rotational kinematics: R (d, d) and position (d,) become views owned by the time stepper (and, 2D,
+        phi (1,) the unwrapped angle of the frame since placement)."""
+        self.R, self.position, self._phi, self.framed = R, position, phi, True
+
+    def detach_frame(self):
+        """Back to copies of the current frame (the time stepper rebuilds its arrays: Simulation.set_step)."""
+        if self.framed:
+            self.R, self.position = self.R.copy(), self.position.copy()
+            self._phi = None if self._phi is None else self._phi.copy()
+
     @property
     def reference_points(self) -> np.ndarray:
-        """Global node positions of the undeformed instance: x = R X + c."""
-        return self.type.mesh.points @ self.R.T + self.position
+        """Global node positions of the undeformed instance at its placement: x = R0 X + c0."""
+        return self.type.mesh.points @ self.R0.T + self.position0
 
     def current_points(self) -> np.ndarray:
+        """x = R (X + q) + position (current frame)."""
         return (self.type.mesh.points + self.q.reshape(-1, self.gdim)) @ self.R.T + self.position
 
     def displacement_global(self) -> np.ndarray:
+        """Current - reference node positions (global); without a frame R q (R = R0)."""
+        if self.framed:
+            return self.current_points() - self.reference_points
         return self.q.reshape(-1, self.gdim) @ self.R.T
 
     def rotation(self):
@@ -310,7 +390,27 @@ class _PlacedBlock:
         return float(th[0]) if self.gdim == 2 else self.R @ th
 
     def velocity_global(self) -> np.ndarray:
+        """R u: u holds the absolute nodal velocities in frame components."""
         return self.u.reshape(-1, self.gdim) @ self.R.T
+
+    def _small_rotation(self) -> np.ndarray:
+        """Best-fit small rotation of q about the mass centre, in the body frame: 2D (1,) Σ m r × q / Σ m |r|²,
+        3D I⁻¹ Σ m r × q (r = X - X̄, lumped nodal masses m_a: BlockType.mass_properties)."""
+        mp = self.type.mass_properties
+        Q = self.q.reshape(-1, self.gdim)
+        if self.gdim == 2:
+            r = mp.r0
+            return np.array([np.dot(mp.m, r[:, 0] * Q[:, 1] - r[:, 1] * Q[:, 0]) / mp.I0])
+        return mp.I0inv @ (mp.m @ np.cross(mp.r0, Q))
+
+    def rotation(self):
+        """Rotation of the block since its placement (global): 2D the angle [rad] (counter-clockwise, unwrapped:
+        the frame angle + the best-fit small rotation of q); 3D the rotation vector (3,) of R exp([θ_q]x) R0ᵀ (θ_q
+        the best-fit small rotation of q, body frame; |rotation| <= π)."""
+        th = self._small_rotation()
+        if self.gdim == 2:
+            return (0.0 if self._phi is None else float(self._phi[0])) + float(th[0])
+        return rotation_vector(self.R @ rotation3d(th) @ self.R0.T)
 
     def external_load(self, t: float, g: np.ndarray) -> np.ndarray:
         """F(t) in the type frame: gravity + tractions."""
@@ -331,6 +431,7 @@ class DeformableBody(_PlacedBlock):
         self.position = np.asarray(position, dtype=float).reshape(2)
         self.angle = float(angle)
         self.R = rotation(self.angle)
+        self._init_frame()
         self._init_tractions(tractions)
         self.clamped = self._clamped_dofs(clamps)
         # state (type frame); replaced by views into group arrays by the time stepper
@@ -628,6 +729,7 @@ class DeformableBody3D(_PlacedBlock):
         self.type, self.name = block_type, name
         self.position = np.asarray(position, dtype=float).reshape(3)
         self.R = np.eye(3) if R is None else check_rotation3d(R, f"{name}.rotation")
+        self._init_frame()
         self._init_tractions(tractions)
         self.clamped = self._clamped_dofs(clamps)
         self.q = np.zeros(block_type.ndof)
