@@ -124,6 +124,11 @@ def rotation_vector(R: np.ndarray) -> np.ndarray:
     return th * k / np.linalg.norm(k)
 
 
+_EPS3 = np.zeros((3, 3, 3))  # Levi-Civita symbol
+_EPS3[0, 1, 2] = _EPS3[1, 2, 0] = _EPS3[2, 0, 1] = 1.0
+_EPS3[0, 2, 1] = _EPS3[2, 1, 0] = _EPS3[1, 0, 2] = -1.0
+
+
 @dataclass(frozen=True)
 class MassProperties:
     """Rigid-body quantities of a block type from its nodal masses m_a (diagonal of the lumped M, or row sums of
@@ -239,21 +244,19 @@ class BlockType:
         return P.shape[0] >= P.shape[1] and np.linalg.matrix_rank(P / scale, tol=1e-10) == P.shape[1]
 
     def rotation_weights(self) -> np.ndarray:
-        """A (k, ndof) with θ = A q the mass-weighted least-squares small rotation of a displacement field q (type
-        frame) about the mass centre c = Σ m_a X_a / Σ m_a (m_a the row sums of M): θ = (Φᵀ M Φ)⁻¹ Φᵀ M q, Φ the
-        rotation modes e × (X − c) (2D: e = e_z, k = 1; 3D: e_x, e_y, e_z, k = 3). With a lumped M:
-        2D θ = Σ m_a r_a × q_a / Σ m_a |r_a|², 3D θ = I⁻¹ Σ m_a r_a × q_a (r_a = X_a − c). Built once."""
+        """A (k, ndof), θ_q = A q: the best-fit small rotation of q (_PlacedBlock._small_rotation, body frame) as one
+        linear map, so that all instances of a type are done by one product A @ Q (runner._RotationWatch): 2D
+        (k = 1) θ = Σ m_a r_a × q_a / Σ m_a |r_a|², 3D (k = 3) θ = I0⁻¹ Σ m_a r_a × q_a (mass_properties). Built once."""
         A = getattr(self, "_rot_weights", None)
         if A is None:
-            X = self.mesh.points
-            d = X.shape[1]
-            m = np.asarray(self.M.sum(axis=1)).ravel()[::d]  # nodal masses (row sums of the x rows)
-            r = X - (m @ X) / m.sum()
-            axes = [np.array([0.0, 0.0, 1.0])] if d == 2 else list(np.eye(3))
-            rp = np.column_stack([r, np.zeros(len(r))]) if d == 2 else r
-            Phi = np.column_stack([np.cross(a, rp)[:, :d].ravel() for a in axes])  # (ndof, k), dof d*i + c
-            MPhi = self.M @ Phi
-            A = self._rot_weights = np.linalg.solve(Phi.T @ MPhi, MPhi.T)
+            mp = self.mass_properties
+            r, d = mp.r0, mp.r0.shape[1]
+            if d == 2:
+                A = (np.column_stack([-mp.m * r[:, 1], mp.m * r[:, 0]]).ravel() / mp.I0)[None, :]
+            else:  # (r × q)_i = ε_ijk r_j q_k: the block of node a maps q_a to m_a [r_a]x q_a
+                cross = np.einsum("ijk,aj->aik", _EPS3, r)  # (n, 3, 3)
+                A = mp.I0inv @ (mp.m[:, None, None] * cross).transpose(1, 0, 2).reshape(3, -1)
+            self._rot_weights = A
         return A
 
     @property
@@ -381,13 +384,6 @@ class _PlacedBlock:
         if self.framed:
             return self.current_points() - self.reference_points
         return self.q.reshape(-1, self.gdim) @ self.R.T
-
-    def rotation(self):
-        """Rotation of the block since its placement: here (linear kinematics, no body frame) the best-fit small
-        rotation of its displacement field (BlockType.rotation_weights): 2D an angle [rad], counter-clockwise;
-        3D a rotation vector (3,) in the global frame (R θ_type)."""
-        th = self.type.rotation_weights() @ self.q
-        return float(th[0]) if self.gdim == 2 else self.R @ th
 
     def velocity_global(self) -> np.ndarray:
         """R u: u holds the absolute nodal velocities in frame components."""

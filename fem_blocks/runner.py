@@ -410,12 +410,13 @@ class _RotationWatch:
     answer: the run warns once, naming the block, the time and the angle (summary.json "warnings" and "rotation",
     stderr, the CLI's last lines), and records the largest rotation reached.
 
-    Check, every step: |θ| of each block, θ = BlockType.rotation_weights() q (body.rotation() of a block without
-    frame), one (k x ndof) @ (ndof x n_instances) product per block type."""
+    Check, every step, on the blocks without a frame (all of them in a linear-kinematics run; in a co-rotational run
+    the clamped ones, `_Group.framed` false): |θ| of each block, θ = BlockType.rotation_weights() q (body.rotation()
+    of a block without frame), one (k x ndof) @ (ndof x n_instances) product per block type."""
 
     def __init__(self, sim: Simulation, names, state: dict | None = None, bound: float = SMALL_ROTATION):
         self.names, self.bound = names, bound
-        self.active = not getattr(sim, "corotational", False) and bool(sim.groups)
+        self.active = any(not getattr(g, "framed", False) for g in sim.groups)
         self.state = state if state is not None else dict(bound=bound, max_rad=0.0, max_block=None, max_time=None,
                                                           blocks_beyond=[], first=None)
 
@@ -426,6 +427,8 @@ class _RotationWatch:
         st = self.state
         beyond = set(st["blocks_beyond"])
         for gr in sim.groups:
+            if getattr(gr, "framed", False):
+                continue
             th = gr.type.rotation_weights() @ gr.Q  # (1 or 3, n_instances), type frame (|θ| is frame-free)
             mag = np.abs(th[0]) if th.shape[0] == 1 else np.sqrt((th * th).sum(axis=0))
             j = int(np.argmax(mag))
@@ -444,8 +447,8 @@ class _RotationWatch:
             return None
         return (f"block {f['block']!r} rotated by {f['rad']:.4g} rad at t = {f['time']:.6g} s (step {f['step']}), "
                 f"beyond the small-rotation bound {self.bound:g} rad of linear kinematics: its shape grows by about "
-                f"θ²/2 and the frozen contact frames are off by θ; use [contact] geometry = \"updated\" for large "
-                f"rotations (summary.json \"rotation\": the largest rotation and every block beyond the bound)")
+                f"θ²/2 and the frozen contact frames are off by θ; use [contact] geometry = \"updated\" (co-rotational "
+                f"blocks; clamped blocks keep linear kinematics) for large rotations (summary.json \"rotation\": the largest rotation and every block beyond the bound)")
 
 
 def _snapshot(sim: Simulation, model: Model, run: dict) -> dict:

@@ -152,3 +152,20 @@ def test_rotation_columns_3d_names():
     assert ids == [0, 1]
     cols = history_columns(model, ids)
     assert cols[-6:] == ["a.rotx", "a.roty", "a.rotz", "b.rotx", "b.roty", "b.rotz"]
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_rotation_weights_are_the_small_rotation_of_the_bodies(dim):
+    """BlockType.rotation_weights() (one product per block type, the runner's warning) is body.rotation()'s best-fit
+    small rotation (_PlacedBlock._small_rotation) as a linear map: equal to 1e-13 for random fields q (catches the
+    two definitions drifting apart, e.g. a sign or a component order)."""
+    rng = np.random.default_rng(3)
+    if dim == 2:
+        b = DeformableBody(BlockType(mesh_rectangle(0.3, 0.1, 0.04), MAT), (1.0, 2.0), angle=0.4)
+    else:
+        b = DeformableBody3D(BlockType3D(mesh_box(0.3, 0.2, 0.1, divisions=(3, 2, 1)), MAT), (1.0, 2.0, 3.0),
+                             rotation3d(np.array([0.3, -0.5, 0.7])))
+    for _ in range(3):
+        b.q[:] = rng.standard_normal(b.q.size) * 1e-3
+        th = b._small_rotation()
+        np.testing.assert_allclose(b.type.rotation_weights() @ b.q, th, rtol=0, atol=1e-13 * np.abs(th).max())
