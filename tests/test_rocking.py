@@ -15,8 +15,9 @@ In the code the tilt is θ = θ0 − φ, φ the block's counter-clockwise rotati
 rigid body's q[2] (history column NAME.urz), the deformable body's body.rotation() (NAME.rot).
 
 Tolerances (the issue's): the rotation within 1 % of θ0 at every step up to the first impact, and the impact
-time within 1 % of the reference's (and of t*). Observed (rigid block, h = 2e-4 s, θ = 1/2): 3.4e-4 θ0 and
-1.8e-4 (docs/validation.md)."""
+time within 1 % of the reference's (and of t*). Observed (h = 5e-4 s, θ = 1/2, 388 steps; docs/validation.md):
+rigid block 8.5e-4 θ0 and 4.8e-4, deformable block 1.2e-3 θ0 and 5.1e-4 (h = 2e-4 s: 3.4e-4 θ0 / 1.9e-4 and
+1.2e-3 θ0 / 5.4e-4)."""
 import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
@@ -33,7 +34,7 @@ ALPHA = np.arctan(B / H)
 R_HALF = 0.5 * np.hypot(B, H)
 P = np.sqrt(3 * G / (4 * R_HALF))
 THETA0 = 0.5 * ALPHA  # 0.161 rad (9.2°)
-STEP = 2e-4
+STEP = 5e-4
 
 
 def reference(theta0):
@@ -123,21 +124,18 @@ def test_reference_is_the_slender_closed_form_for_small_angles():
 def test_rigid_block_rocks_as_housner():
     """Rigid block (the harness: rigid bodies already rotate): θ(t) within 1 % of θ0 of the rigid solution up to
     the first impact; impact time within 1 % of the reference's and of t*; the pivot corner stays on the floor
-    (μ = 2) within 1e-5 m before the impact (observed 1.5e-6 m horizontally, 1e-8 m vertically: the drift of the
-    velocity-level contact condition over the rotation, not sliding)."""
+    (μ = 2) within 1e-5 m before the impact (observed with h = 2e-4 s: 1.5e-6 m horizontally, 1e-8 m vertically:
+    the drift of the velocity-level contact condition over the rotation, not sliding)."""
     ts, th, _, pivot = rock("rigid")
-    err, dt = check_against_rigid_solution(ts, th)
-    assert err < 1e-3 and abs(dt) < 1e-3  # observed 3.4e-4 and 1.8e-4: a margin of 3, not 30
+    check_against_rigid_solution(ts, th)
     assert np.abs(pivot[th >= 0]).max() < 1e-5
 
 
-@pytest.mark.xfail(strict=True, reason="needs the co-rotational kinematics of deformable blocks (branch c-core, "
-                                       "issue #22): with linear kinematics a block turned by 0.16 rad grows by "
-                                       "θ²/2 = 1.3 %")
 def test_deformable_block_rocks_as_housner_and_keeps_its_shape():
-    """Stiff deformable block (E = 1e10, Q4 2 x 6, consistent mass), updated geometry (co-rotational): the same
-    rotation and impact-time checks as the rigid block, and every boundary edge keeps its length within 1e-4
-    over the run (elastic strains ~1e-6; linear kinematics: 1.3e-2 at 0.16 rad)."""
+    """Stiff deformable block (E = 1e10, Q4 2 x 6, consistent mass), updated geometry, so co-rotational kinematics
+    (Simulation's automatic choice): the same rotation and impact-time checks as the rigid block, and every
+    boundary edge keeps its length within 1e-5 over the run (observed 3.6e-6: elastic; with linear kinematics a
+    block turned by 0.16 rad grows by θ²/2 = 1.3e-2)."""
     ts, th, stretch, _ = rock("deformable")
     check_against_rigid_solution(ts, th)
-    assert stretch < 1e-4
+    assert stretch < 1e-5
