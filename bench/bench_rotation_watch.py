@@ -32,8 +32,8 @@ def main(sizes):
         for _ in range(k):
             watch.check(sim)
         ms = (time.perf_counter() - t0) / k * 1e3
-        print(f"{n} bricks: {len(sim.bodies)} bodies, {ndof} dofs, {len(sim.groups)} block types: {ms:.3f} ms per check",
-              flush=True)
+        print(f"{n} bricks: {len(sim.bodies)} bodies, {ndof} dofs, {len(sim.groups)} block types: "
+              f"{ms:.3f} ms per check", flush=True)
 
 
 if __name__ == "__main__":

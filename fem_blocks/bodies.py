@@ -245,8 +245,9 @@ class BlockType:
 
     def rotation_weights(self) -> np.ndarray:
         """A (k, ndof), θ_q = A q: the best-fit small rotation of q (_PlacedBlock._small_rotation, body frame) as one
-        linear map, so that all instances of a type are done by one product A @ Q (runner._RotationWatch): 2D
-        (k = 1) θ = Σ m_a r_a × q_a / Σ m_a |r_a|², 3D (k = 3) θ = I0⁻¹ Σ m_a r_a × q_a (mass_properties). Built once."""
+        linear map, so that all instances of a type are done by one product A Q (runner._RotationWatch): 2D
+        (k = 1) θ = Σ m_a r_a × q_a / Σ m_a |r_a|², 3D (k = 3) θ = I0⁻¹ Σ m_a r_a × q_a (mass_properties).
+        Built once."""
         A = getattr(self, "_rot_weights", None)
         if A is None:
             mp = self.mass_properties

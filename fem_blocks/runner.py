@@ -451,7 +451,8 @@ class _RotationWatch:
         return (f"block {f['block']!r} rotated by {f['rad']:.4g} rad at t = {f['time']:.6g} s (step {f['step']}), "
                 f"beyond the small-rotation bound {self.bound:g} rad of linear kinematics: its shape grows by about "
                 f"θ²/2 and the frozen contact frames are off by θ; use [contact] geometry = \"updated\" (co-rotational "
-                f"blocks; clamped blocks keep linear kinematics) for large rotations (summary.json \"rotation\": the largest rotation and every block beyond the bound)")
+                f"blocks; clamped blocks keep linear kinematics) for large rotations (summary.json \"rotation\": the "
+                f"largest rotation and every block beyond the bound)")
 
 
 def _snapshot(sim: Simulation, model: Model, run: dict) -> dict:

@@ -144,9 +144,9 @@ def test_rotation_columns_3d_names():
     """3D: one column per component of the rotation vector, named NAME.rotx/roty/rotz, for the blocks of a group."""
     from types import SimpleNamespace
     from fem_blocks.runner import history_columns, rotation_bodies
-    model = SimpleNamespace(names=["a", "b", "base"], groups=["g", "g", "rigid"], dofs=("x", "y", "z", "rx", "ry", "rz"),
-                            bodies=[SimpleNamespace(kind=0), SimpleNamespace(kind=0), SimpleNamespace(kind=1)],
-                            contact=None)
+    model = SimpleNamespace(names=["a", "b", "base"], groups=["g", "g", "rigid"],
+                            dofs=("x", "y", "z", "rx", "ry", "rz"), contact=None,
+                            bodies=[SimpleNamespace(kind=0), SimpleNamespace(kind=0), SimpleNamespace(kind=1)])
     case = SimpleNamespace(output=dict(rotations=["b", "g"]), source="c.toml")
     ids = rotation_bodies(case, model)
     assert ids == [0, 1]
