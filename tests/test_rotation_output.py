@@ -169,3 +169,20 @@ def test_rotation_weights_are_the_small_rotation_of_the_bodies(dim):
         b.q[:] = rng.standard_normal(b.q.size) * 1e-3
         th = b._small_rotation()
         np.testing.assert_allclose(b.type.rotation_weights() @ b.q, th, rtol=0, atol=1e-13 * np.abs(th).max())
+
+
+def test_resumed_run_keeps_the_rotation_record_and_does_not_warn_again(tmp_path, capsys):
+    """The watch's record is part of the checkpoint (run.json): the run turned to 0.012 rad, resumed (--force) with a
+    second stage holding the table, reports the same first crossing in its summary, once, and prints no new
+    warning line while it steps (catches a record lost on resume: the warning would be repeated at the first step
+    of the resumed run, with its time)."""
+    s1, _, err1 = _turn(tmp_path, 0.012, capsys)
+    assert err1.count("small-rotation bound") == 1
+    p = tmp_path / "turned.toml"
+    p.write_text(CASE.replace("ANGLE", "0.012") + "[[stages]]\nduration = 0.01\nh = 0.002\ntheta = 1.0\n")
+    s2 = run_case(load_case(str(p)), str(tmp_path / "out"), progress=False, resume=True, force=True)
+    err2 = capsys.readouterr().err
+    assert s2["steps"] == s1["steps"] + 5
+    assert "small-rotation bound" not in err2
+    assert s2["rotation"]["first"] == s1["rotation"]["first"]
+    assert sum("small-rotation bound" in w for w in s2["warnings"]) == 1
