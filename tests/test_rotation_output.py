@@ -186,3 +186,24 @@ def test_resumed_run_keeps_the_rotation_record_and_does_not_warn_again(tmp_path,
     assert "small-rotation bound" not in err2
     assert s2["rotation"]["first"] == s1["rotation"]["first"]
     assert sum("small-rotation bound" in w for w in s2["warnings"]) == 1
+
+
+def test_rotation_columns_of_a_3d_run(tmp_path):
+    """A 3D case (tests/test_case3d.STACK: two blocks settling on a floor under gravity) with `rotations =
+    ["blocks"]`: history.csv has b0.rotx/roty/rotz and b1.rotx/roty/rotz, finite and small (settlement: < 1e-3 rad),
+    and the watch's largest |θ| over the run is at least the norm of every row's rotation vector (the same
+    best-fit rotation: the norm of body.rotation() is |θ| for a block without frame)."""
+    import sys
+    sys.path.insert(0, os.path.dirname(__file__))
+    from test_case3d import STACK
+    from fem_blocks.output.history import read_history
+    p = tmp_path / "s.toml"
+    p.write_text(STACK.replace("[contact]\n", "[output]\nparaview = false\nrotations = [\"blocks\"]\n[contact]\n", 1))
+    s = run_case(load_case(str(p)), str(tmp_path / "out"), progress=False)
+    h = read_history(str(tmp_path / "out" / "history.csv"))
+    cols = [f"{b}.rot{c}" for b in ("b0", "b1") for c in "xyz"]
+    assert all(c in h for c in cols)
+    rot = np.array([h[c] for c in cols]).T.reshape(-1, 2, 3)  # (rows, block, xyz)
+    norm = np.linalg.norm(rot, axis=2)
+    assert np.all(np.isfinite(rot)) and norm.max() < 1e-3 and norm.max() > 0
+    assert s["rotation"]["max_rad"] == pytest.approx(norm.max(), rel=1e-9)
