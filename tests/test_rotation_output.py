@@ -207,3 +207,18 @@ def test_rotation_columns_of_a_3d_run(tmp_path):
     norm = np.linalg.norm(rot, axis=2)
     assert np.all(np.isfinite(rot)) and norm.max() < 1e-3 and norm.max() > 0
     assert s["rotation"]["max_rad"] == pytest.approx(norm.max(), rel=1e-9)
+
+
+def test_check_rejects_an_unknown_rotation_name(tmp_path):
+    """`fem-blocks check` matches `[output] rotations` to the built blocks as a run does (a name missing in the
+    model is the same one-line error)."""
+    from fem_blocks.check import check_case
+    from fem_blocks.errors import InputError
+    p = tmp_path / "c.toml"
+    p.write_text(CASE.replace("ANGLE", "0.005").replace('rotations = ["bricks"]', 'rotations = ["table"]'))
+    with pytest.raises(InputError, match=r"c\.toml: output\.rotations: 'table': expected the name of a deformable "
+                                         r"block or of a group of blocks \('bricks', \.\.\.\); a rigid body's rotation "
+                                         r"is already the history column NAME\.urz"):
+        check_case(str(p))
+    p.write_text(CASE.replace("ANGLE", "0.005"))
+    check_case(str(p))
