@@ -9,6 +9,11 @@ Velocities and impulses are exchanged in the *W numbering*: deformable body = it
 `d*bnode_index + c` in the type frame, rigid body = (vx, vy, omega) in 2D, (v, ω) (6 dofs) in 3D at its
 centre of mass. `U_offset[b]` locates body b in flat vectors.
 
+Frames: a deformable body's W numbering and G blocks use its frame R (type/body frame -> global). In a co-rotational
+simulation (dynamics.py, docs/method.md §7) the frame of a framed group turns every step: the scene holds views of
+the group's frames (R, position: current positions) and its placements (R0, position0: reference positions), and
+`refresh_frames` copies the current R into `rot` (the G blocks of the step use the frame of its start).
+
 All per-step gathers/scatters are batched per group of bodies sharing a step operator.
 """
 from __future__ import annotations
@@ -96,28 +101,42 @@ class ContactScene:
         """Per simulation group: index matrices into bx and into the flat W-numbered vectors."""
         sim = self.sim
         self.groups = []
+        self.ref_frames = []  # per group: (R0 (k, d, d), position0 (k, d)) of the placements
         for gr in sim.groups:
             bt = gr.type
             nbd = self.dim * bt.boundary_nodes.size
             members = gr.members
             uidx = self.U_offset[members][:, None] + np.arange(nbd)[None, :]  # (k, nbd)
             xidx = self.bx_start[members][:, None] + np.arange(bt.boundary_nodes.size)[None, :]
-            R = np.stack([sim.bodies[b].R for b in members])
-            C = np.stack([sim.bodies[b].position for b in members])
+            if getattr(gr, "framed", False):  # live views of the frames (co-rotational), placements for reference
+                R, C, R0, C0 = gr.R, gr.pos, gr.R0, gr.pos0
+            else:
+                R = np.stack([sim.bodies[b].R for b in members])
+                C = np.stack([sim.bodies[b].position for b in members])
+                R0, C0 = R, C
             self.groups.append((gr, uidx, xidx, R, C))
+            self.ref_frames.append((R0, C0))
+        self.framed = [gr.members for gr in sim.groups if getattr(gr, "framed", False)]
         self.rigid = np.array(sim.rigid, dtype=np.int64)
         self.rigid_W = {}  # rigid W used in the last Delassus assembly (3D: depends on the orientation)
 
     # ------------------------------------------------------------------ geometry
+    def refresh_frames(self):
+        """rot of the bodies of framed (co-rotational) groups := their current frames R (the start of the step)."""
+        for gr, uidx, xidx, R, C in self.groups:
+            if getattr(gr, "framed", False):
+                self.rot[gr.members] = R
+
     def positions(self, reference: bool = False) -> np.ndarray:
-        """bx (nbn, d): global positions of all boundary nodes (current or reference)."""
+        """bx (nbn, d): global positions of all boundary nodes (current, or reference: the placements)."""
         d = self.dim
         bx = np.zeros((int(self.bx_start[-1]), d))
-        for gr, uidx, xidx, R, C in self.groups:
+        for (gr, uidx, xidx, R, C), (R0, C0) in zip(self.groups, self.ref_frames):
             bt = gr.type
             X = bt.mesh.points[bt.boundary_nodes]  # (nbn_t, 2)
             k = len(gr.members)
             if reference:
+                R, C = R0, C0
                 P = np.broadcast_to(X, (k,) + X.shape)
             else:
                 Q = gr.Q[bt.boundary_dofs, :].T.reshape(k, -1, d)

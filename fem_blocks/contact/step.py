@@ -173,6 +173,8 @@ class ContactStep:
     def _geometry(self, sim, first: bool):
         s = self.scene
         updated = self.opts.geometry == "updated"
+        if updated:
+            s.refresh_frames()  # co-rotational bodies: G in the frames of the step's start (docs/method.md §7)
         redetect = first or (updated and self.steps % self.opts.redetect_every == 0)
         if redetect:
             ref = first and not updated

@@ -1,7 +1,9 @@
 """ParaView output of the bodies: one merged unstructured grid per frame, in a .pvd series.
 
 Points are the *reference* positions of every deformable node and rigid vertex; the point field
-`displacement` (current - reference) lets ParaView's "Warp By Vector" show the deformed state.
+`displacement` (current - reference) lets ParaView's "Warp By Vector" show the deformed state. Co-rotational
+bodies (docs/method.md §7): displacement = R (X + q) + c - (R0 X + c0), velocity R u, stress R σ(q) Rᵀ with the
+current frame R (q holds the small deformation only).
 Point data: displacement, velocity (global frame). Cell data: Cauchy stress (sxx, syy, sxy),
 von Mises stress (deformable cells; 0 on rigid polygons), body id, body kind (0 deformable,
 1 rigid). Fields are computed per block type with batched array operations (no per-node loop).
@@ -45,7 +47,15 @@ def _type_fields(bodies, members, offs, block_type, disp, vel, stress: bool):
     Qc = np.column_stack([bodies[b].q for b in members])  # (d n, k), type frame
     U = np.stack([bodies[b].u for b in members]).reshape(k, n, d)
     idx = (np.asarray(offs)[:, None] + np.arange(n)[None, :]).ravel()
-    disp[idx] = _rotate_vectors(Qc.T.reshape(k, n, d), R).reshape(-1, d)
+    D = _rotate_vectors(Qc.T.reshape(k, n, d), R)
+    f = np.array([getattr(bodies[b], "framed", False) for b in members], dtype=bool)
+    if f.any():  # co-rotational bodies: current R (X + q) + c - reference (R0 X + c0)
+        X = block_type.mesh.points
+        R0 = np.stack([bodies[b].R0 for b in members])[f]
+        C = np.stack([bodies[b].position - bodies[b].position0 for b in members])[f]
+        D[f] = (_rotate_vectors(X[None] + Qc.T.reshape(k, n, d)[f], R[f])
+                - _rotate_vectors(np.broadcast_to(X, (int(f.sum()), n, d)), R0) + C[:, None, :])
+    disp[idx] = D.reshape(-1, d)
     vel[idx] = _rotate_vectors(U, R).reshape(-1, d)
     if not stress:
         return None
