@@ -131,13 +131,11 @@ def test_rigid_block_tips_on_a_turning_table_at_tan_alpha_b_over_h():
     assert np.abs(psi[ts < 0.99 * T_C]).max() < 1e-4
 
 
-@pytest.mark.xfail(strict=True, reason="needs the contact scene of co-rotational blocks (c-core, issue #22): with the "
-                                       "co-rotational kinematics alone (commit 0d2f834) a deformable block on a moving "
-                                       "rigid body is thrown off it (table raised 2 mm at 0.05 m/s: the block 38 mm "
-                                       "above it); linear kinematics keeps it on the table")
 def test_deformable_block_tips_at_tan_alpha_b_over_h_and_keeps_its_shape():
     """Stiff deformable block (E = 1e10, Q4 2 x 6, consistent mass), updated geometry, so co-rotational kinematics:
-    the same checks as the rigid block, and every boundary edge within 1e-5 of its length all along."""
+    the same checks as the rigid block, and every boundary edge within 1e-5 of its length all along (observed: tan
+    0.14 % above b/h, ψ within 7.8e-4 rad, edges 3.1e-6, |ψ| ≤ 6e-6 rad before 0.99 t_c)."""
     ts, psi, stretch = tip("deformable")
     check_tipping(ts, psi)
     assert stretch < 1e-5
+    assert np.abs(psi[ts < 0.99 * T_C]).max() < 1e-4
