@@ -57,6 +57,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from . import corotational
 from .bodies import DeformableBody, DeformableBody3D, RigidBody, RigidBody3D, check_step
 from .errors import InputError
 
@@ -77,32 +78,6 @@ class StepInfo:
     @property
     def total_energy(self) -> float:
         return self.kinetic + self.elastic + self.gravity_potential
-
-
-def _cross(w: np.ndarray, V: np.ndarray) -> np.ndarray:
-    """ω × v per body and node: w (k,) in 2D (ω J v, J = [[0, -1], [1, 0]]) or (k, 3) in 3D, V (k, n, d)."""
-    if V.shape[-1] == 2:
-        return w[:, None, None] * np.stack([-V[..., 1], V[..., 0]], axis=-1)
-    return np.cross(w[:, None, :], V)
-
-
-def _rot2(phi: np.ndarray) -> np.ndarray:
-    """(k, 2, 2) rotation matrices of the angles phi (k,)."""
-    c, s = np.cos(phi), np.sin(phi)
-    return np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], -2)
-
-
-def _rot3(w: np.ndarray) -> np.ndarray:
-    """(k, 3, 3) exp([w]x) of rotation vectors w (k, 3) (Rodrigues; the series below |w| = 1e-8)."""
-    th = np.linalg.norm(w, axis=1)
-    small = th < 1e-8
-    ths = np.where(small, 1.0, th)
-    a = np.where(small, 1.0 - th ** 2 / 6.0, np.sin(ths) / ths)
-    b = np.where(small, 0.5 - th ** 2 / 24.0, (1.0 - np.cos(ths)) / ths ** 2)
-    Kx = np.zeros((len(w), 3, 3))
-    Kx[:, 0, 1], Kx[:, 0, 2], Kx[:, 1, 2] = -w[:, 2], w[:, 1], -w[:, 0]
-    Kx[:, 1, 0], Kx[:, 2, 0], Kx[:, 2, 1] = w[:, 2], -w[:, 1], w[:, 0]
-    return np.eye(3)[None] + a[:, None, None] * Kx + b[:, None, None] * (Kx @ Kx)
 
 
 class _Group:
@@ -250,62 +225,16 @@ class Simulation:
         """Gravity of a framed group in its body frames: F_g = G (Rᵀ g) per body (G: MassProperties.G)."""
         gr.Fg = gr.type.mass_properties.G @ np.einsum("kji,j->ik", gr.R, self.g)
 
-    def _frame_state(self, gr: _Group, U: np.ndarray):
-        """Rigid part of the velocity field U (ndof, k) of a framed group about the centroids of step i (gr.c,
-        gr.r): nodal velocities V (k, n, d), mean velocity v̄ (k, d) and angular velocity ω (2D (k,)
-        Σ m r × u / Σ m |r|², 3D (k, 3) I(r)⁻¹ Σ m r × u)."""
-        mp = gr.type.mass_properties
-        k, n, d = gr.r.shape
-        V = U.T.reshape(k, n, d)
-        vbar = np.einsum("n,kni->ki", mp.m, V) / mp.mass
-        if d == 2:
-            w = np.einsum("n,kn->k", mp.m, gr.r[..., 0] * V[..., 1] - gr.r[..., 1] * V[..., 0]) / gr.Ir
-        else:
-            w = np.linalg.solve(gr.Ir, np.einsum("n,kni->ki", mp.m, np.cross(gr.r, V))[..., None])[..., 0]
-        return V, vbar, w
-
     def _frame_start(self, gr: _Group):
-        """Start of the step: centroids c (k, d) and relative positions r = y - c (k, n, d), y = X + q (body frame),
-        the second moments I(r), gravity in the frames of step i, v̄_i and ω_i."""
-        mp = gr.type.mass_properties
-        k = len(gr.members)
-        n, d = mp.r0.shape
-        Y = gr.type.mesh.points[None] + gr.Q.T.reshape(k, n, d)
-        gr.c = np.einsum("n,kni->ki", mp.m, Y) / mp.mass
-        gr.r = Y - gr.c[:, None, :]
-        if d == 2:
-            gr.Ir = np.einsum("n,kni,kni->k", mp.m, gr.r, gr.r)
-        else:
-            S = np.einsum("n,kni,knj->kij", mp.m, gr.r, gr.r)
-            gr.Ir = np.trace(S, axis1=1, axis2=2)[:, None, None] * np.eye(3)[None] - S
+        """Start of the step of a framed group (corotational.start): centroids, relative positions, I(r), v̄_i, ω_i,
+        gravity in the frames of step i; keeps gr.Ueff = u_i - h ω_i × (u_i - v̄_i)."""
+        gr.Ueff = corotational.start(gr, self.h)
         self._frame_gravity(gr)
-        gr.V0, gr.vbar0, gr.w0 = self._frame_state(gr, gr.U)
 
     def _frame_update(self, gr: _Group, Unew: np.ndarray):
-        """End of the step of a framed group (docs/method.md §7): Δφ = h((1-θ)ω_i + θω_{i+1}), R_{i+1} = R_i
-        exp([Δφ]x), relative positions r + h((1-θ)D_i + θD_{i+1}) (D = u - v̄ - ω × r) in the new frame, centroid
-        moved by R_i Δc, Δc = h((1-θ)v̄_i + θv̄_{i+1}), velocities u_{i+1} - v̄_{i+1} + exp(-[Δφ]x) v̄_{i+1}."""
-        h, th = self.h, self.theta
-        k, n, d = gr.r.shape
-        V1, vbar1, w1 = self._frame_state(gr, Unew)
-        D0 = gr.V0 - gr.vbar0[:, None, :] - _cross(gr.w0, gr.r)
-        D1 = V1 - vbar1[:, None, :] - _cross(w1, gr.r)
-        rn = gr.r + h * ((1 - th) * D0 + th * D1)
-        dphi = h * ((1 - th) * gr.w0 + th * w1)
-        dc = h * ((1 - th) * gr.vbar0 + th * vbar1)
-        Cg = np.einsum("kij,kj->ki", gr.R, gr.c + dc) + gr.pos  # global centroid at t_{i+1}
-        if d == 2:
-            gr.phi += dphi
-            Rd = _rot2(dphi)
-            gr.R[...] = gr.R0 @ _rot2(gr.phi)
-        else:
-            Rd = _rot3(dphi)
-            Rn = gr.R @ Rd
-            gr.R[...] = 1.5 * Rn - 0.5 * Rn @ np.swapaxes(Rn, 1, 2) @ Rn  # one Newton-Schulz step: orthonormal
-        gr.pos[...] = Cg - np.einsum("kij,kj->ki", gr.R, gr.c)
-        gr.Q[...] = (gr.c[:, None, :] + rn - gr.type.mesh.points[None]).reshape(k, -1).T
-        Vn = V1 - vbar1[:, None, :] + np.einsum("kji,kj->ki", Rd, vbar1)[:, None, :]
-        gr.U[...] = Vn.reshape(k, -1).T
+        """End of the step of a framed group (corotational.update, docs/method.md §7): frames turned by
+        Δφ = h((1-θ)ω_i + θω_{i+1}), q, u re-based in the new frames."""
+        corotational.update(gr, Unew, self.h, self.theta)
 
     # -------------------------------------------------------------- one step
     def free_velocities(self, t0: float, t1: float):
@@ -322,9 +251,7 @@ class Simulation:
             gr.Ftheta = (1 - th) * self._group_load(gr, t0) + th * self._group_load(gr, t1)
             KQ = bt.K @ gr.Q
             if gr.framed:
-                k = len(gr.members)
-                Wr = _cross(gr.w0, gr.V0 - gr.vbar0[:, None, :]).reshape(k, -1).T
-                rhs = bt.M @ (gr.U - h * Wr) - h * KQ + h * gr.Ftheta
+                rhs = bt.M @ gr.Ueff - h * KQ + h * gr.Ftheta
             else:
                 rhs = (-h * KQ + h * gr.Ftheta) if self.static else (bt.M @ gr.U - h * KQ + h * gr.Ftheta)
             if th != 1.0:

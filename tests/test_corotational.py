@@ -326,7 +326,7 @@ def test_free_block_3d_spins_through_2pi_rigidly(case, hex8, box):
             worst["edge"] = max(worst["edge"], np.max(np.abs(lengths(b.current_points(), E) / L0 - 1)))
             worst["L"] = max(worst["L"], np.linalg.norm(L - La) / np.linalg.norm(La))
             worst["E"] = max(worst["E"], abs(sum(sim.energies()) / e0 - 1))
-            worst["w"] = max(worst["w"], np.linalg.norm(b.R @ gr.w0[0] - w) / 10.0)
+            worst["w"] = max(worst["w"], np.linalg.norm(b.R @ gr.w0[0] - w) / 10.0)  # ω_i of the last step
     assert worst["edge"] <= 1e-6
     assert worst["L"] <= eps1 and worst["E"] <= eps1 and worst["w"] <= eps1
     assert np.linalg.norm(centroid_momentum(b, m)[0] - c0) <= 1e-12
