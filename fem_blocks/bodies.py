@@ -124,6 +124,11 @@ def rotation_vector(R: np.ndarray) -> np.ndarray:
     return th * k / np.linalg.norm(k)
 
 
+_EPS3 = np.zeros((3, 3, 3))  # Levi-Civita symbol
+_EPS3[0, 1, 2] = _EPS3[1, 2, 0] = _EPS3[2, 0, 1] = 1.0
+_EPS3[0, 2, 1] = _EPS3[2, 1, 0] = _EPS3[1, 0, 2] = -1.0
+
+
 @dataclass(frozen=True)
 class MassProperties:
     """Rigid-body quantities of a block type from its nodal masses m_a (diagonal of the lumped M, or row sums of
@@ -237,6 +242,23 @@ class BlockType:
         P = np.column_stack([m.ravel() for m in modes])[clamped]  # dof d*i + c
         scale = max(1.0, float(np.abs(X).max()))
         return P.shape[0] >= P.shape[1] and np.linalg.matrix_rank(P / scale, tol=1e-10) == P.shape[1]
+
+    def rotation_weights(self) -> np.ndarray:
+        """A (k, ndof), θ_q = A q: the best-fit small rotation of q (_PlacedBlock._small_rotation, body frame) as one
+        linear map, so that all instances of a type are done by one product A Q (runner._RotationWatch): 2D
+        (k = 1) θ = Σ m_a r_a × q_a / Σ m_a |r_a|², 3D (k = 3) θ = I0⁻¹ Σ m_a r_a × q_a (mass_properties).
+        Built once."""
+        A = getattr(self, "_rot_weights", None)
+        if A is None:
+            mp = self.mass_properties
+            r, d = mp.r0, mp.r0.shape[1]
+            if d == 2:
+                A = (np.column_stack([-mp.m * r[:, 1], mp.m * r[:, 0]]).ravel() / mp.I0)[None, :]
+            else:  # (r × q)_i = ε_ijk r_j q_k: the block of node a maps q_a to m_a [r_a]x q_a
+                cross = np.einsum("ijk,aj->aik", _EPS3, r)  # (n, 3, 3)
+                A = mp.I0inv @ (mp.m[:, None, None] * cross).transpose(1, 0, 2).reshape(3, -1)
+            self._rot_weights = A
+        return A
 
     @property
     def mass_properties(self) -> MassProperties:

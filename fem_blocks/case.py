@@ -1088,6 +1088,10 @@ def _parse_output(root: Table, D: int) -> dict:
                                    displacement=cv.string("displacement", "x", choices=dofs_of(D)))
             cv.done()
         output.update(read_fields(out, OutputSpec, ("crack_pattern",)))
+        rot = out.raw("rotations", [])  # names matched to the built bodies by the runner (runner.rotation_bodies)
+        if not (isinstance(rot, list) and all(isinstance(x, str) and x for x in rot)):
+            raise out.error("rotations", f"= {rot!r}: expected a list of block or group names, e.g. [\"bricks\"]")
+        output["rotations"] = list(dict.fromkeys(rot))
         out.done()
     return output
 

@@ -529,6 +529,9 @@ class OutputSpec:
     checkpoint_every: int = spec(0, doc="checkpoint every N steps (0: at the end of each stage only)", lo=0)
     crack_pattern: bool = spec(True, doc="write crack_pattern.png")
     curve: dict | None = spec(None, doc="[output.curve] body, force, displacement: force-displacement figure")
+    rotations: tuple = spec((), doc="deformable blocks (names or group names) whose rotation is written to history.csv: "
+                               "NAME.rot [rad, counter-clockwise] in 2D, NAME.rotx/roty/rotz [rad, rotation vector] "
+                               "in 3D")
 
 
 # ----------------------------------------------------------------------------- [[reference]]

@@ -145,6 +145,23 @@ MUTATIONS = [
              "fem_blocks/dynamics.py",
              'd[f"sim.body{i}.R"] = np.array(b.R)', 'd[f"sim.body{i}.R"] = np.array(b.R0)',
              ("tests/test_corotational.py",)),
+    # rotating blocks: output, small-rotation warning, acceptance tests (issue 22)
+    Mutation("rotation_weights_sign", "best-fit small rotation Σ m r × q → Σ m q × r (2D rotation weights)",
+             "fem_blocks/bodies.py",
+             "A = (np.column_stack([-mp.m * r[:, 1], mp.m * r[:, 0]]).ravel() / mp.I0)[None, :]",
+             "A = (np.column_stack([mp.m * r[:, 1], -mp.m * r[:, 0]]).ravel() / mp.I0)[None, :]",
+             ("tests/test_rotation_output.py",)),
+    Mutation("small_rotation_bound", "small-rotation warning past 2 x 0.01 rad instead of 0.01", "fem_blocks/runner.py",
+             'if st["first"] is not None or st["max_rad"] <= self.bound:',
+             'if st["first"] is not None or st["max_rad"] <= 2 * self.bound:',
+             ("tests/test_rotation_output.py",)),
+    Mutation("rotation_record_resume", "small-rotation record not checkpointed (run.json)", "fem_blocks/runner.py",
+             'rotation=run.get("rotation")))),', '))),',
+             ("tests/test_rotation_output.py",)),
+    Mutation("corotational_auto_off", "updated geometry no longer makes deformable blocks co-rotational",
+             "fem_blocks/dynamics.py",
+             'corotational = geometry == "updated"', "corotational = False",
+             ("tests/test_rocking.py", "tests/test_tilting_table.py")),
 ]
 
 IGNORE = shutil.ignore_patterns(".git", "__pycache__", ".venv", "*.pyc", ".pytest_cache", "out", "*.egg-info")
