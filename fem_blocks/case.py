@@ -294,8 +294,9 @@ class Table:
                 continue
             ok = [n for n, (qq, _) in UNIT_NAMES.items() if qq == q]
             if u not in UNIT_NAMES or UNIT_NAMES[u][0] != q:
-                raise t.error(key, f"= {u!r}: expected a unit of {q or 'this quantity'} ({', '.join(map(repr, ok))})"
-                              if ok else f"= {u!r}: this history takes no unit (drop {key})")
+                if q == "dimensionless":
+                    raise t.error(key, f"= {u!r}: this history is a dimensionless factor: expected no {key} (or '1')")
+                raise t.error(key, f"= {u!r}: expected a unit of {q} ({', '.join(map(repr, ok))})")
             units[key] = UNIT_NAMES[u][1]
         scale = t.number("scale", 1.0)
         t.done()
