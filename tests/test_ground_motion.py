@@ -290,3 +290,31 @@ rz = {kind = "displacement", history = {times = [0.1, 1.1], values = [0.0, 0.523
         R = np.array([[np.cos(f), -np.sin(f)], [np.sin(f), np.cos(f)]])
         assert np.abs(c0 + [x, y] + R @ (p - c0) - p).max() < 1e-12
     assert phi[-1] == pytest.approx(math.radians(30.0), rel=1e-13)
+
+
+def test_pivot_in_a_3d_case_and_check_report():
+    base = {
+        "dimension": 3, "gravity": [0.0, 0.0, -9.81],
+        "rigid_bodies": [{"name": "table", "size": [1.0, 1.0, 0.1],
+                          "drivers": {"rx": {"kind": "velocity", "history": 0.0},
+                                      "ry": {"kind": "displacement", "history": {"times": [0, 1], "values": [0, 0.3]},
+                                             "pivot": [1.0, 0.0, 0.1]},
+                                      "rz": {"kind": "velocity", "history": 0.0}}}],
+        "stages": [{"name": "s", "duration": 0.01, "h": 0.005}],
+    }
+    case = parse_case(copy.deepcopy(base), "t3.toml")
+    assert case.rigid_bodies[0].drivers["ry"].pivot == (1.0, 0.0, 0.1)
+    body = build_model(case).bodies[0]
+    assert body.driven.all() and body.mass == 0.0
+    bad = copy.deepcopy(base)
+    del bad["rigid_bodies"][0]["drivers"]["rz"]
+    with pytest.raises(InputError, match=r"rigid_bodies\[0\]\.drivers\.ry\.pivot: expected every rotation dof driven"):
+        parse_case(bad, "t3.toml")
+
+
+def test_check_reports_the_record_and_its_end(capsys):
+    from fem_blocks.check import check_case
+    from fem_blocks.cli import list_demos
+    lines, _ = check_case(list_demos()["rocking_block"])
+    rec = [ln for ln in lines if "drivers.base.x: acceleration" in ln]
+    assert len(rec) == 1 and "ricker_pulse.csv" in rec[0] and "at its end the driven velocity is" in rec[0]
