@@ -1068,7 +1068,7 @@ def _has_pivot(drivers: dict) -> bool:
 def _read_driver(d: Table, dof: str, D: int) -> DriverSpec:
     """One driver table {kind, history[, baseline][, pivot]} of dof `dof` -> DriverSpec (docs/case-files.md:
     acceleration records and their baseline correction, rotation about a pivot)."""
-    from .bodies import baseline_linear
+    from .records import baseline_linear
     rot = dof[0] == "r"
     kind = d.string("kind", required=True, choices=DRIVER_KINDS)
     if kind == "acceleration" and rot:

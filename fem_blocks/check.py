@@ -128,7 +128,7 @@ def _report(case: Case, model, per_interface: dict) -> list[str]:
             if isinstance(h, dict) and "file" in h:
                 what += f", from {h['file']}"
             if kind == "acceleration" and isinstance(h, dict) and len(h["times"]) > 1:
-                from .bodies import record_velocity_knots
+                from .records import record_velocity_knots
                 T, A = np.asarray(h["times"]), np.asarray(h["values"])
                 v = record_velocity_knots(T, A)
                 d = float(np.sum(np.diff(T) * 0.5 * (v[:-1] + v[1:])))
