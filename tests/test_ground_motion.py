@@ -71,7 +71,7 @@ def _sine(A=1.5, T=0.8, N=200):
 def test_linear_baseline_closed_form_coefficients():
     t, a = _sine()
     T, dt = t[-1], t[1] - t[0]
-    # the raw record's final velocity and displacement, trapezoid twice by a loop (not bodies.record_velocity_knots)
+    # the raw record's final velocity and displacement, trapezoid twice by a loop (not records.record_velocity_knots)
     v = d = 0.0
     for k in range(len(t) - 1):
         v1 = v + dt * (a[k] + a[k + 1]) / 2
