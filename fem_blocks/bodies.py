@@ -28,6 +28,7 @@ import scipy.sparse as sp
 
 from .errors import InputError, check_range
 from .geometry import rotation3d  # noqa: F401 (re-exported; rotation of body frames)
+from .records import baseline_linear, record_velocity, record_velocity_knots  # noqa: F401 (re-exported)
 
 
 # ----------------------------------------------------------------------------- load histories
@@ -59,11 +60,13 @@ class History:
 
 
 def as_history(value, name: str) -> History:
+    """A History from a number, a {times, values} dict (case.py adds "file", the CSV file it came from, for the
+    case fingerprint) or a History."""
     if isinstance(value, History):
         return value
     if isinstance(value, (int, float, np.floating, np.integer)):
         return History.constant(float(value), name)
-    if isinstance(value, dict) and set(value) == {"times", "values"}:
+    if isinstance(value, dict) and {"times", "values"} <= set(value) <= {"times", "values", "file"}:
         return History(value["times"], value["values"], name)
     raise InputError(f"{name}: expected a number or {{times = [...], values = [...]}}, got {value!r}")
 
@@ -473,18 +476,33 @@ class DeformableBody(_PlacedBlock):
                 mask[2 * nodes + comp] = True
         return mask
 
-class Driver:
-    """Prescribed motion of one rigid dof: kind 'velocity' or 'displacement', with a History."""
+DRIVER_KINDS = ("velocity", "displacement", "acceleration")
 
-    def __init__(self, kind: str, history, name: str = "driver"):
-        if kind not in ("velocity", "displacement"):
-            raise InputError(f"{name}.kind = {kind!r}: expected 'velocity' or 'displacement'")
+
+class Driver:
+    """Prescribed motion of one rigid dof: kind 'velocity', 'displacement' or 'acceleration' (translation dofs: an
+    acceleration record integrated exactly to the driver velocity, `record_velocity`), with a History. `pivot`
+    (rotation dofs only): the body turns about the material point at `pivot` (global coordinates, taken where it is
+    when the driver is attached); its translation dofs are then driven too (_DrivenDofs.drive)."""
+
+    def __init__(self, kind: str, history, name: str = "driver", pivot=None):
+        if kind not in DRIVER_KINDS:
+            raise InputError(f"{name}.kind = {kind!r}: expected 'velocity', 'displacement' or 'acceleration'")
         self.kind, self.history, self.name = kind, as_history(history, f"{name}.history"), name
+        self.pivot = None if pivot is None else np.asarray(pivot, dtype=float).ravel()
+        if self.pivot is not None and not np.all(np.isfinite(self.pivot)):
+            raise InputError(f"{name}.pivot: expected finite coordinates [m]")
+        self._knots = None
+        if kind == "acceleration" and self.history.times.size > 1:
+            self._knots = record_velocity_knots(self.history.times, self.history.values)
 
     def step_velocity(self, t0: float, t1: float) -> float:
-        """Velocity imposed over [t0, t1] and at t1 (displacement: (d(t1) - d(t0)) / h)."""
+        """Velocity imposed over [t0, t1] and at t1 (displacement: (d(t1) - d(t0)) / h; acceleration: the exact
+        integral of the record, v(t1) = v(t0) + ∫_{t0}^{t1} a dt)."""
         if self.kind == "velocity":
             return self.history(t1)
+        if self.kind == "acceleration":
+            return record_velocity(self.history.times, self.history.values, t1, self._knots)
         return (self.history(t1) - self.history(t0)) / (t1 - t0)
 
 
@@ -508,9 +526,30 @@ class _DrivenDofs:
     """Drivers and applied forces of a rigid body's dofs (shared by RigidBody and RigidBody3D). The class gives
     `dof_names` (one name per dof), `_dof(k)` (name or index -> index) and `_massless(i)`; `_init_loads` sets
     `drivers` {dof: Driver} and `forces` {dof: History}. A dof is driven (prescribed velocity) or free with the
-    applied force Σ forces[i](t), never both."""
+    applied force Σ forces[i](t), never both.
+
+    Pivot (docs/case-files.md "Rotation about a pivot"): a rotation driver with `pivot = p` also drives the
+    translation dofs so that the body turns about the material point P at p. With r0 = Rot^T (c - p) taken when the
+    driver is attached (Rot the body's rotation, c its centre of mass), the centre is c(Rot) = p + Rot r0. Over a
+    step the rotation dofs get their drivers' velocity ω_{i+1}; the translation velocity at the step end is
+    v_{i+1} = ω_{i+1} × (c_{i+1} - p), c_{i+1} = p + Rot_{i+1} r0 with Rot_{i+1} the end-of-step rotation the step
+    will reach (2D: φ_{i+1} = d(t_{i+1}) for a displacement driver, φ_i + h((1-θ)ω_i + θω_{i+1}) for a velocity
+    driver; 3D: exp([h((1-θ)ω_i + θω_{i+1})]x) Rot_i); after the step the centre is set to p + Rot_{i+1} r0
+    (`hold_pivot`), so P stays at p to rounding whatever the rotation (as a displacement driver sets its dof to
+    d(t_{i+1}))."""
 
     dof_names: tuple = ()
+    pivot = None        # (d,) global pivot, or None
+    pivot_arm = None    # r0 = Rot^T (c - p) at attachment
+
+    @property
+    def _nt(self) -> int:
+        """Number of translation dofs (2 in 2D, 3 in 3D)."""
+        return 2 if len(self.dof_names) == 3 else 3
+
+    def _rot(self) -> np.ndarray:
+        """The body's current rotation matrix."""
+        return rotation(self.q[2]) if len(self.dof_names) == 3 else self.orientation
 
     def _init_loads(self, drivers, forces):
         name = self.name
@@ -524,32 +563,116 @@ class _DrivenDofs:
             if i in self.drivers:
                 raise InputError(f"{name}.forces.{k}: dof {k!r} is driven; a driven dof cannot also carry a force")
             self.forces[i] = as_history(f, f"{name}.forces.{k}")
+        self._check_drivers()
+
+    def _check_drivers(self):
+        """Driver kinds per dof (acceleration: translations only) and the pivot rules (rotation dofs only, one
+        pivot point, no own driver or force on a translation dof, 3D: every rotation dof driven); attaches the
+        pivot (pivot_arm) when there is one."""
+        nt, name = self._nt, self.name
+        pivots = []
+        for i, d in self.drivers.items():
+            if d.kind == "acceleration" and i >= nt:
+                raise InputError(f"{name}.drivers.{self.dof_names[i]}.kind = 'acceleration': expected a translation "
+                                 f"dof ({', '.join(self.dof_names[:nt])})")
+            if d.pivot is not None:
+                if i < nt:
+                    raise InputError(f"{name}.drivers.{self.dof_names[i]}.pivot: expected on a rotation dof")
+                if d.pivot.shape != (nt,):
+                    raise InputError(f"{name}.drivers.{self.dof_names[i]}.pivot: expected {nt} coordinates [m]")
+                pivots.append((i, d.pivot))
+        if not pivots:
+            self.pivot = self.pivot_arm = None
+            return
+        i0, p = pivots[0]
+        for i, q in pivots[1:]:
+            if not np.array_equal(p, q):
+                raise InputError(f"{name}.drivers.{self.dof_names[i]}.pivot: expected the same pivot as "
+                                 f"{self.dof_names[i0]} ({list(p)}): a body turns about one point")
+        for i in range(nt):
+            if i in self.drivers or i in self.forces:
+                what = "driver" if i in self.drivers else "force"
+                raise InputError(f"{name}.drivers.{self.dof_names[i0]}.pivot: the body's dof {self.dof_names[i]!r} "
+                                 f"has its own {what}; expected no driver or force on {', '.join(self.dof_names[:nt])}"
+                                 f" with a pivot (the pivot drives them)")
+        missing = [self.dof_names[i] for i in range(nt, len(self.dof_names)) if i not in self.drivers]
+        if missing:
+            raise InputError(f"{name}.drivers.{self.dof_names[i0]}.pivot: expected every rotation dof driven with a "
+                             f"pivot (free: {', '.join(missing)})")
+        self.pivot = p.copy()
+        self.pivot_arm = self._rot().T @ (self.center - p)
 
     def set_driver(self, dof, driver: "Driver | None"):
-        """Drive a dof (removing any applied force on it) or free it (driver None) — e.g. between load stages."""
+        """Drive a dof (removing any applied force on it) or free it (driver None) — e.g. between load stages.
+        Freeing a rotation dof whose driver has a pivot frees the translation dofs it drove."""
         i = self._dof(dof)
+        had_pivot = self.pivot is not None
         if driver is None:
             self.drivers.pop(i, None)
-            if self._massless(i):
-                raise InputError(f"{self.name}: dof {self.dof_names[i]!r} cannot be freed: the body has no mass "
-                                 f"(give rho or mass)")
+            freed = [i] + (list(range(self._nt)) if had_pivot and i >= self._nt else [])
+            for j in freed:
+                if self._massless(j):
+                    raise InputError(f"{self.name}: dof {self.dof_names[j]!r} cannot be freed: the body has no mass "
+                                     f"(give rho or mass)")
         else:
+            if driver.pivot is not None:  # the pivot takes the translation dofs over
+                for j in range(self._nt):
+                    self.drivers.pop(j, None)
+                    self.forces.pop(j, None)
             self.drivers[i] = driver
             self.forces.pop(i, None)
+        self._check_drivers()
 
     def set_force(self, dof, history):
         """Apply a force history on a free dof (a driven dof is freed first)."""
         i = self._dof(dof)
+        if self.pivot is not None and i < self._nt:
+            raise InputError(f"{self.name}.forces.{self.dof_names[i]}: the dof is driven by a pivot; expected no "
+                             f"force on it")
         if i in self.drivers:
             self.set_driver(dof, None)
         self.forces[i] = as_history(history, f"{self.name}.forces.{self.dof_names[i]}")
 
     @property
     def driven(self) -> np.ndarray:
-        """(ndof,) bool, True on the driven dofs."""
+        """(ndof,) bool, True on the driven dofs (with a pivot: the translation dofs too)."""
         m = np.zeros(len(self.dof_names), dtype=bool)
         m[list(self.drivers)] = True
+        if self.pivot is not None:
+            m[:self._nt] = True
         return m
+
+    def drive(self, uf: np.ndarray, t0: float, t1: float, h: float, theta: float) -> None:
+        """Set the driven entries of the end-of-step velocity `uf` (in place): each driver's step velocity, then,
+        with a pivot, the translation velocity ω_{i+1} × (c_{i+1} - p) (class docstring)."""
+        for k, drv in self.drivers.items():
+            uf[k] = drv.step_velocity(t0, t1)
+        if self.pivot is None:
+            return
+        nt = self._nt
+        w = uf[nt:]
+        if nt == 2:
+            drv = self.drivers[2]
+            phi1 = drv.history(t1) if drv.kind == "displacement" else \
+                self.q[2] + h * ((1 - theta) * self.u[2] + theta * w[0])
+            arm = rotation(phi1) @ self.pivot_arm
+            uf[:2] = w[0] * np.array([-arm[1], arm[0]])
+        else:
+            arm = rotation3d(h * ((1 - theta) * self.u[3:] + theta * w)) @ self.orientation @ self.pivot_arm
+            uf[:3] = np.cross(w, arm)
+
+    def hold_pivot(self) -> None:
+        """After a step's move: the centre of mass at p + Rot r0, so the pivot's material point is at p (no-op
+        without a pivot)."""
+        if self.pivot is not None:
+            self.q[:self._nt] = self.pivot + self._rot() @ self.pivot_arm - self.center0
+
+    def n_driven(self, drivers) -> int:
+        """How many dofs `drivers` (dof -> Driver or (kind, history[, ...])) drive, the translations of a pivot
+        included."""
+        piv = any(isinstance(d, Driver) and d.pivot is not None for d in (drivers or {}).values())
+        dofs = {self._dof(k) for k in (drivers or {})}
+        return len(dofs | (set(range(self._nt)) if piv else set()))
 
 
 DOF_NAMES = ("x", "y", "rz")
@@ -575,7 +698,7 @@ class RigidBody(_DrivenDofs):
             A, c, J = polygon_properties(V)
         self.name = name
         check_range(f"{name}.thickness", thickness, 0.0, lo_open=True, expected="thickness > 0 [m]")
-        n_driven = len(drivers or {})
+        n_driven = self.n_driven(drivers)
         if mass is None and rho is None and n_driven == 3:
             mass, inertia = 0.0, 0.0  # fully driven: its motion is prescribed, its inertia plays no role
         elif mass is None:
@@ -593,9 +716,9 @@ class RigidBody(_DrivenDofs):
         self.center0 = c
         self.vertices_rel = V - c  # reference vertices relative to the centre of mass
         self.thickness = thickness
-        self._init_loads(drivers, forces)
         self.q = np.zeros(3)  # (dx, dy, phi) of the centre of mass
         self.u = np.zeros(3)
+        self._init_loads(drivers, forces)
         self.reaction = np.zeros(3)  # force/moment applied by the drivers, last step
         self.reaction_inertia = np.zeros(3)  # inertial part of the reaction, last step (dynamics.py module docstring)
 
@@ -803,7 +926,7 @@ class RigidBody3D(_DrivenDofs):
                                np.arange(6, dtype=np.int64), {}, name)
             faces = HEX_FACES.copy()
         V, c, S = solid_properties(mesh)
-        n_driven = len(drivers or {})
+        n_driven = self.n_driven(drivers)
         if mass is None and rho is None and n_driven == 6:
             mass, I0 = 0.0, np.zeros((3, 3))  # fully driven: its inertia plays no role
         elif mass is None:
@@ -824,9 +947,9 @@ class RigidBody3D(_DrivenDofs):
         self.points_rel = mesh.points - c  # surface/vertex points relative to the centre of mass
         self.boundary_faces = np.asarray(faces, dtype=np.int64)
         self.orientation = np.eye(3)
-        self._init_loads(drivers, forces)
         self.q = np.zeros(6)  # displacement of the centre of mass, accumulated rotation vector increments
         self.u = np.zeros(6)
+        self._init_loads(drivers, forces)
         self.reaction = np.zeros(6)
         self.reaction_inertia = np.zeros(6)  # inertial part of the reaction, last step (dynamics.py module docstring)
 

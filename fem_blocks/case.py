@@ -24,8 +24,9 @@ import numpy as np
 from . import casefile
 from .errors import InputError
 from .geometry import box_corners, check_hex_corners, rotation3d
-from .specs import (LAW_PARAMS, NONCONV, ChecksSpec, ContactOptions, InterfaceSpec, MaterialSpec,  # noqa: F401
-                    OutputSpec, ReferenceSpec, StageSpec, controls_at, default_of, schema_fields, toml_key)
+from .specs import (DRIVER_KINDS, LAW_PARAMS, NONCONV, ChecksSpec, ContactOptions, DriverSpec,  # noqa: F401
+                    InterfaceSpec, MaterialSpec, OutputSpec, ReferenceSpec, StageSpec, controls_at, default_of,
+                    schema_fields, toml_key)
 
 NUMBER = (int, float)
 
@@ -40,6 +41,43 @@ UNIT_SYSTEMS = {
     # mm, N, MPa, s -> mass unit tonne (N s^2/mm), density t/mm^3, moment N mm
     "mm-N-MPa": dict(length=1e-3, force=1.0, stress=1e6, density=1e12, time=1.0, mass=1e3, moment=1e-3),
 }
+
+
+_SI, _MM = UNIT_SYSTEMS["SI"], UNIT_SYSTEMS["mm-N-MPa"]
+STANDARD_GRAVITY = 9.80665  # [m/s^2] g_n, exact by definition (3rd CGPM, 1901): the unit "g" of acceleration records
+# Unit names of a CSV history's `time_unit` / `value_unit`: name -> (quantity, factor to SI). The factors are those
+# of UNIT_SYSTEMS (one home: "mm" is the length unit of "mm-N-MPa", "N mm" its moment unit...).
+UNIT_NAMES = {
+    "s": ("time", _SI["time"]), "ms": ("time", 1e-3 * _SI["time"]),
+    "m": ("length", _SI["length"]), "mm": ("length", _MM["length"]),
+    "m/s": ("velocity", _SI["length"] / _SI["time"]), "mm/s": ("velocity", _MM["length"] / _MM["time"]),
+    "m/s2": ("acceleration", _SI["length"] / _SI["time"] ** 2),
+    "mm/s2": ("acceleration", _MM["length"] / _MM["time"] ** 2), "g": ("acceleration", STANDARD_GRAVITY),
+    "rad": ("angle", 1.0), "deg": ("angle", math.pi / 180.0),
+    "rad/s": ("angular velocity", 1.0 / _SI["time"]), "deg/s": ("angular velocity", math.pi / 180.0 / _SI["time"]),
+    "N": ("force", _SI["force"]), "kN": ("force", 1e3 * _SI["force"]),
+    "N m": ("moment", _SI["moment"]), "N mm": ("moment", _MM["moment"]), "kN m": ("moment", 1e3 * _SI["moment"]),
+    "1": ("dimensionless", 1.0),
+}
+
+
+def history_files(obj, out: set | None = None) -> set:
+    """The CSV files of every history read from a file ({times, values, file}) anywhere in a case (its specs,
+    stages, generators): what `fingerprint` adds to the case's digest."""
+    out = set() if out is None else out
+    if isinstance(obj, dict):
+        if "file" in obj and "times" in obj and isinstance(obj["file"], str):
+            out.add(obj["file"])
+        for v in obj.values():
+            history_files(v, out)
+    elif isinstance(obj, (list, tuple)):
+        for v in obj:
+            if isinstance(v, (dict, list, tuple)) or dataclasses.is_dataclass(v):
+                history_files(v, out)
+    elif dataclasses.is_dataclass(obj) and not isinstance(obj, type):
+        for f in dataclasses.fields(obj):
+            history_files(getattr(obj, f.name), out)
+    return out
 
 
 class Table:
@@ -168,10 +206,14 @@ class Table:
                 raise self.error(k, f"not used in dimension {D} (a key of dimension {d} case files); "
                                     f"see docs/case-files.md, 'dimension'")
 
-    def history(self, k: str, dim: str | None, default=None, required=False, protocol: bool = False):
+    def history(self, k: str, dim: str | None, default=None, required=False, protocol: bool = False,
+                quantity: str | None = None):
         """A number or {times = [...], values = [...]} (times strictly increasing); with `protocol` (a displacement
         driver) also a cyclic protocol {protocol = "cyclic", ...} (specs.CyclicProtocol), returned expanded
-        (cyclic_history): every caller gets a number or {times, values}."""
+        (cyclic_history); or a CSV file {file = ..., time, value, time_unit, value_unit, scale} (`_history_csv`,
+        returned as {times, values, file}): every caller gets a number or {times, values}. `quantity`: what the
+        values are ("length", "velocity", "acceleration", "force", "moment", "angle", "angular velocity",
+        "dimensionless"; default from `dim`), the kind a CSV file's `value_unit` must have."""
         self.used.add(k)
         if k not in self.data:
             if required:
@@ -187,6 +229,9 @@ class Table:
                                                   "driver with kind = \"displacement\" (here: a number or "
                                                   "{times = [...], values = [...]})")
             return self._protocol(k, dim)
+        if isinstance(v, dict) and "file" in v:
+            q = quantity or {None: "dimensionless", "length": "length", "force": "force", "moment": "moment"}.get(dim)
+            return self._history_csv(k, dim, q)
         if isinstance(v, dict):
             t = Table(v, self.key(k), self.source, self.units)
             times = t.raw("times")
@@ -201,6 +246,80 @@ class Table:
             tf = self.units["time"]
             return {"times": [float(x) * tf for x in times], "values": [float(x) * f for x in values]}
         raise self.error(k, f"expected a number or {{times = [...], values = [...]}}, got {v!r}")
+
+    def _history_csv(self, k: str, dim: str | None, quantity: str | None) -> dict:
+        """`history = {file = "record.csv", time = "t", value = "a", time_unit = "s", value_unit = "m/s2",
+        scale = 1.0}` -> {times, values, file} in SI (docs/case-files.md "Histories from CSV files"). The file is
+        relative to the case file; cells separated by commas (else semicolons, else blanks); blank lines and lines
+        starting with '#' skipped; a first row holding a non-number is the header; `time`, `value`: column names
+        (need the header) or 0-based indices (default 0 and 1); units: UNIT_NAMES (default: the case's units);
+        value = scale x cell x unit. Errors name the file, the line and the column."""
+        t = Table(self.data[k], self.key(k), self.source, self.units)
+        f = t.string("file", required=True)
+        base = os.path.dirname(os.path.abspath(self.source)) if os.path.exists(self.source) else os.getcwd()
+        full = f if os.path.isabs(f) else os.path.join(base, f)
+        if not os.path.isfile(full):
+            raise t.error("file", f"= {f!r}: file not found (expected a CSV file, relative to the case file)")
+        try:
+            with open(full, encoding="utf-8") as fh:
+                text = fh.read()
+        except (OSError, UnicodeDecodeError) as e:
+            raise t.error("file", f"= {f!r}: unreadable ({type(e).__name__}): expected a text CSV file") from None
+        rows = []
+        for n, line in enumerate(text.splitlines(), 1):
+            s_ = line.strip()
+            if s_ and not s_.startswith("#"):
+                sep = "," if "," in s_ else (";" if ";" in s_ else None)
+                rows.append((n, [c.strip().strip('"').strip() for c in s_.split(sep)]))
+        header = rows.pop(0)[1] if rows and not all(_is_number(c) for c in rows[0][1]) else None
+        idx = []
+        for key, dflt in (("time", 0), ("value", 1)):
+            t.used.add(key)
+            c = t.data.get(key, dflt)
+            if isinstance(c, bool) or not isinstance(c, (int, str)) or (isinstance(c, int) and c < 0):
+                raise t.error(key, f"= {c!r}: expected a column name (string) or a 0-based column index")
+            if isinstance(c, str):
+                if header is None:
+                    raise t.error(key, f"= {c!r}: {f!r} has no header line naming its columns (give a 0-based "
+                                       f"index instead)")
+                if c not in header:
+                    raise t.error(key, f"= {c!r}: no column {c!r} in {f!r} (its columns: {header})")
+                c = header.index(c)
+            idx.append(c)
+        units = {}
+        for key, q, dflt in (("time_unit", "time", self.units["time"]), ("value_unit", quantity, None)):
+            u = t.string(key)
+            if u is None:
+                units[key] = dflt
+                continue
+            ok = [n for n, (qq, _) in UNIT_NAMES.items() if qq == q]
+            if u not in UNIT_NAMES or UNIT_NAMES[u][0] != q:
+                if q == "dimensionless":
+                    raise t.error(key, f"= {u!r}: this history is a dimensionless factor: expected no {key} (or '1')")
+                raise t.error(key, f"= {u!r}: expected a unit of {q} ({', '.join(map(repr, ok))})")
+            units[key] = UNIT_NAMES[u][1]
+        scale = t.number("scale", 1.0)
+        t.done()
+        vf = (units["value_unit"] if units["value_unit"] is not None else (self.units[dim] if dim else 1.0)) * scale
+        times, values = [], []
+        for n, cells in rows:
+            for key, j in zip(("time", "value"), idx):
+                if len(cells) <= j:
+                    raise t.error("file", f"= {f!r}, line {n}: expected at least {j + 1} columns (column {j}, the "
+                                          f"{key}), got {len(cells)}")
+                c = cells[j]
+                if not (_is_number(c) and math.isfinite(float(c))):
+                    raise t.error("file", f"= {f!r}, line {n}, column {j} ({key}): expected a finite number, "
+                                          f"got {c!r}")
+            tt, vv = float(cells[idx[0]]) * units["time_unit"], float(cells[idx[1]]) * vf
+            if times and tt <= times[-1]:
+                raise t.error("file", f"= {f!r}, line {n}, column {idx[0]} (time): expected strictly increasing "
+                                      f"times, got {cells[idx[0]]} after {times[-1] / units['time_unit']:g}")
+            times.append(tt)
+            values.append(vv)
+        if not times:
+            raise t.error("file", f"= {f!r}: expected at least one data row (time, value)")
+        return {"times": times, "values": values, "file": os.path.abspath(full)}
 
     def _protocol(self, k: str, dim: str | None) -> dict:
         """The cyclic protocol table at key `k` (fields of specs.CyclicProtocol; amplitudes and rate in the unit
@@ -372,6 +491,8 @@ class BlockSpec:
     tractions: list = field(default_factory=list)
     parent: int = -1  # split_bricks: the two halves of one brick share a parent id (crack interface)
     R: Any = None     # 3D: rotation matrix (x = R X + position); None in 2D (angle)
+    initial_velocity: tuple | None = None  # [m/s] of the mass centre (global)
+    initial_spin: Any = None               # [rad/s]: 2D a float, 3D (wx, wy, wz)
 
 
 @dataclass
@@ -385,6 +506,8 @@ class RigidSpec:
     drivers: dict
     forces: dict
     group: str = "rigid"
+    initial_velocity: tuple | None = None  # [m/s] of the centre of mass (global), free translation dofs
+    initial_spin: Any = None               # [rad/s]: 2D a float, 3D (wx, wy, wz), free rotation dofs
 
 
 # ----------------------------------------------------------------------------- generated geometry (expand.py)
@@ -624,8 +747,8 @@ def _warn_extent(warnings: list, t, key, points, units: str):
 
 
 def fingerprint(case: Case) -> str:
-    """SHA-256 of what determines a run: the case file's bytes, the mesh files it names, the variant (--quick)
-    and the base files it extends (none: a file without `extends` keeps its digest). A resumed run compares it
+    """SHA-256 of what determines a run: the case file's bytes, the mesh files it names, the CSV files of its
+    histories (history_files), the variant (--quick) and the base files it extends (none: a file without `extends` keeps its digest). A resumed run compares it
     with the checkpoint's."""
     h = hashlib.sha256()
     for path in [case.source] + sorted({bt.file for bt in case.block_types.values() if bt.file}):
@@ -639,6 +762,13 @@ def fingerprint(case: Case) -> str:
         try:
             with open(path, "rb") as f:
                 h.update(b"base" + f.read())
+        except OSError:
+            h.update(b"<unreadable>")
+    for path in sorted(history_files(case)):  # CSV files of histories (drivers, forces, tractions)
+        h.update(b"history" + os.path.abspath(path).encode())
+        try:
+            with open(path, "rb") as f:
+                h.update(f.read())
         except OSError:
             h.update(b"<unreadable>")
     h.update(case.variant.encode())
@@ -809,6 +939,11 @@ def _parse_blocks(root: Table, D: int, block_types: dict, names: set) -> list:
                                             value=c.vector("value", D, dim="stress", required=True),
                                             history=c.history("history", None, default=1.0)))
             c.done()
+        b.initial_velocity, b.initial_spin = _initial_motion(t, D)
+        if b.clamps and (b.initial_velocity is not None or b.initial_spin is not None):
+            k = "initial_velocity" if b.initial_velocity is not None else "initial_spin"
+            raise t.error(k, "a clamped block cannot start moving: expected no non-zero initial velocity or spin on "
+                             "a block with [[blocks.clamps]]")
         t.done()
         blocks.append(b)
     return blocks
@@ -831,6 +966,15 @@ def _parse_rigid_bodies(root: Table, D: int, U: dict, units: str, names: set, wa
         r = _parse_rigid(t, U, rname, verts, D)
         if r.rho is not None:
             _warn_implausible(warnings, t, "rho", r.rho, "rho", units)
+        r.initial_velocity, r.initial_spin = _initial_motion(t, D)
+        driven = set(r.drivers) | (set(dofs_of(D)[:D]) if _has_pivot(r.drivers) else set())
+        for key, vals, dofs in (("initial_velocity", r.initial_velocity, dofs_of(D)[:D]),
+                                ("initial_spin", r.initial_spin, dofs_of(D)[D:])):
+            if vals is not None:
+                bad = [d for d, v in zip(dofs, np.atleast_1d(vals)) if v != 0.0 and d in driven]
+                if bad:
+                    raise t.error(key, f"dof {bad[0]!r} is driven: expected a zero initial velocity on driven dofs "
+                                       "(the driver sets it)")
         r.group = t.string("group", "rigid")
         rigid.append(r)
         t.done()
@@ -896,14 +1040,84 @@ def _stage_drivers(t: Table, D: int) -> dict:
                     bt_.used.add(dof)
                     drivers[body][dof] = None
                     continue
-                d = bt_.table(dof)
-                kind = d.string("kind", required=True, choices=("velocity", "displacement"))
-                drivers[body][dof] = (kind, d.history("history", None if dof[0] == "r" else "length", required=True,
-                                                      protocol=kind == "displacement"))
-                d.done()
+                drivers[body][dof] = _read_driver(bt_.table(dof), dof, D)
+            if _has_pivot(drivers[body]):
+                _check_pivot(bt_, drivers[body], {}, D)
             bt_.done()
         dtab.done()
     return drivers
+
+
+def _initial_motion(t: Table, D: int):
+    """`initial_velocity` = [vx, vy(, vz)] [m/s] and `initial_spin` = ω [rad/s] (2D a number, 3D [ωx, ωy, ωz]) of a
+    block or rigid body -> (velocity tuple | None, spin | None); all-zero values read as None (at rest)."""
+    v = t.vector("initial_velocity", D, dim="length")
+    if D == 2:
+        w = t.number("initial_spin")
+        w = None if not w else w
+    else:
+        w = t.vector("initial_spin", 3)
+        w = None if w is None or not any(w) else w
+    return (None if v is None or not any(v) else v), w
+
+
+def _has_pivot(drivers: dict) -> bool:
+    return any(getattr(d, "pivot", None) is not None for d in drivers.values())
+
+
+def _read_driver(d: Table, dof: str, D: int) -> DriverSpec:
+    """One driver table {kind, history[, baseline][, pivot]} of dof `dof` -> DriverSpec (docs/case-files.md:
+    acceleration records and their baseline correction, rotation about a pivot)."""
+    from .records import baseline_linear
+    rot = dof[0] == "r"
+    kind = d.string("kind", required=True, choices=DRIVER_KINDS)
+    if kind == "acceleration" and rot:
+        raise d.error("kind", f"= 'acceleration' on the rotation dof {dof!r}: expected a translation dof "
+                              f"({', '.join(dofs_of(D)[:D])}); an acceleration record drives a translation")
+    quantity = {"displacement": "angle" if rot else "length", "velocity": "angular velocity" if rot else "velocity",
+                "acceleration": "acceleration"}[kind]
+    hist = d.history("history", None if rot else "length", required=True, protocol=kind == "displacement",
+                     quantity=quantity)
+    baseline = d.string("baseline", None, choices=("none", "linear"))
+    if baseline is not None and kind != "acceleration":
+        raise d.error("baseline", f"= {baseline!r}: a baseline correction applies to an acceleration record; expected "
+                                  f"it only with kind = \"acceleration\"")
+    if baseline == "linear":
+        if not isinstance(hist, dict) or len(hist["times"]) < 2:
+            raise d.error("baseline", "= 'linear': expected a record of at least 2 samples (a {times, values} or "
+                                      "CSV history), not a single value")
+        vals, _, _ = baseline_linear(hist["times"], hist["values"])
+        hist = dict(hist, values=[float(x) for x in vals])
+    pivot = None
+    if d.has("pivot"):
+        if not rot:
+            raise d.error("pivot", f"given on the translation dof {dof!r}: expected a pivot on a rotation dof "
+                                   f"({', '.join(dofs_of(D)[D:])})")
+        pivot = d.vector("pivot", D, dim="length")
+    d.done()
+    return DriverSpec(kind, hist, pivot)
+
+
+def _check_pivot(t: Table, drivers: dict, forces: dict, D: int, where: str = ""):
+    """A driver table with a pivot: no own driver or force on the translation dofs; 3D: every rotation dof driven,
+    one pivot point."""
+    piv = [(dof, s.pivot) for dof, s in drivers.items() if getattr(s, "pivot", None) is not None]
+    if not piv:
+        return
+    dof0, p0 = piv[0]
+    for dof in dofs_of(D)[:D]:
+        if dof in drivers or dof in forces:
+            what = "driver" if dof in drivers else "force"
+            raise t.error(f"{dof0}.pivot", f"given together with a {what} on {dof!r}{where}: a pivot drives the "
+                                           f"translation dofs {', '.join(dofs_of(D)[:D])}; expected no driver or "
+                                           f"force on them")
+    for dof, p in piv[1:]:
+        if tuple(p) != tuple(p0):
+            raise t.error(f"{dof}.pivot", f"= {list(p)}: expected the same pivot as {dof0} ({list(p0)})")
+    free = [r for r in dofs_of(D)[D:] if r not in drivers or drivers[r] is None]
+    if free:
+        raise t.error(f"{dof0}.pivot", f"expected every rotation dof driven with a pivot (not driven here: "
+                                       f"{', '.join(free)})")
 
 
 def _stage_forces(t: Table, D: int, drivers: dict) -> dict:
@@ -919,7 +1133,11 @@ def _stage_forces(t: Table, D: int, drivers: dict) -> dict:
                     raise _dof_error(bt_, dof, D)
                 if dof in drivers.get(body, {}) and drivers[body][dof] is not None:
                     raise bt_.error(dof, "this dof is driven in this stage; a driven dof cannot also carry a force")
-                forces[body][dof] = bt_.history(dof, "force" if dof[0] != "r" else None)
+                if dof in dofs_of(D)[:D] and _has_pivot(drivers.get(body, {})):
+                    raise bt_.error(dof, "this stage drives the body about a pivot, which drives its translation "
+                                         "dofs; expected no force on them")
+                forces[body][dof] = bt_.history(dof, "force" if dof[0] != "r" else None,
+                                                quantity="force" if dof[0] != "r" else "moment")
             bt_.done()
         ftab.done()
     return forces
@@ -1261,6 +1479,15 @@ def _check_stages(source: str, stages: list, rigid: list):
                     if frees and r.rho is None and r.mass is None:
                         raise InputError(f"{source}: stages[{i}].{key}.{body}.{dof}: body {body!r} has no mass "
                                          f"(no rho or mass), so its dof {dof!r} cannot be freed or loaded")
+        cur = controls_at(rigid, stages, i)  # a pivot set earlier drives the translations: no driver/force on them
+        for (body, dof), c in cur.items():
+            if c.pivot is not None:
+                for tr in ("x", "y", "z")[:len(c.pivot)]:
+                    ct = cur.get((body, tr))
+                    if ct is None or ct.kind != "pivot":
+                        raise InputError(f"{source}: {ct.label if ct else f'stages[{i}]'}: the dof {tr!r} of {body!r} "
+                                         f"is driven by the pivot of {c.label}; expected no driver or force on it "
+                                         f"while that pivot applies (free {dof!r} or drive it without a pivot first)")
         for key, ref in (("stop_at_displacement", st.stop_displacement), ("stop_after_peak", st.stop_after_peak)):
             if ref is not None and ref[0] not in rigid_names:
                 raise InputError(f"{source}: stages[{i}].{key}.body = {ref[0]!r}: expected a rigid body among "
@@ -1315,7 +1542,7 @@ def history_value(hist, t: float) -> float:
 def _unit_of(kind: str, dof: str) -> str:
     rot = dof.startswith("r")
     return {"displacement": "rad" if rot else "m", "velocity": "rad/s" if rot else "m/s",
-            "force": "N m" if rot else "N"}[kind]
+            "acceleration": "m/s^2", "force": "N m" if rot else "N", "pivot": "m/s"}[kind]
 
 
 def stage_history_warnings(case: Case) -> list:
@@ -1393,12 +1620,7 @@ def _parse_rigid(t: Table, U: dict, rname: str, vertices, D: int = 2) -> RigidSp
         for dof in list(dt.data):
             if dof not in dofs_of(D):
                 raise _dof_error(dt, dof, D)
-            d = dt.table(dof)
-            kind = d.string("kind", required=True, choices=("velocity", "displacement"))
-            hist = d.history("history", None if dof[0] == "r" else "length", required=True,
-                             protocol=kind == "displacement")
-            drivers[dof] = (kind, hist)
-            d.done()
+            drivers[dof] = _read_driver(dt.table(dof), dof, D)
         dt.done()
     ft = t.table("forces")
     if ft is not None:
@@ -1409,13 +1631,16 @@ def _parse_rigid(t: Table, U: dict, rname: str, vertices, D: int = 2) -> RigidSp
                 raise ft.error(dof, "this dof is driven; a driven dof cannot also carry a force")
             forces[dof] = ft.history(dof, "force" if dof[0] != "r" else "moment")  # a moment on a rotation dof
         ft.done()
+    if dt is not None:
+        _check_pivot(dt, drivers, forces, D)
     if rho is not None and mass is not None:
         raise t.error("mass", "given together with rho: give rho [kg/m^3] (mass and inertia from the polygon) or "
                               "mass [kg] (and inertia), not both")
     if rho is not None and inertia is not None:
         raise t.error("inertia", "given together with rho (the inertia then comes from the polygon): give it with "
                                  "mass instead")
-    if rho is None and mass is None and not (len(drivers) == len(dofs_of(D))):
+    n_driven = len(set(drivers) | (set(dofs_of(D)[:D]) if _has_pivot(drivers) else set()))
+    if rho is None and mass is None and not (n_driven == len(dofs_of(D))):
         raise t.missing("rho", "give rho [kg/m^3] or mass [kg] (only a body with all "
                              f"{'three' if D == 2 else 'six'} dofs driven may omit both)")
     return RigidSpec(name=rname, vertices=vertices, rho=rho, mass=mass, inertia=inertia,

@@ -76,8 +76,18 @@ def _report(case: Case, model, per_interface: dict) -> list[str]:
         ext = " x ".join(_g(v) for v in (V.max(axis=0) - V.min(axis=0)))
         mass = "no mass (fixed or fully driven)" if r.rho is None and r.mass is None else \
             (f"rho {_g(r.rho)} kg/m^3" if r.rho is not None else f"mass {_g(r.mass)} kg")
+        piv = [(d, s.pivot) for d, s in r.drivers.items() if getattr(s, "pivot", None) is not None]
+        driven = sorted(set(r.drivers) | (set(case.dofs[:case.dimension]) if piv else set()))
         L.append(f"rigid body {r.name!r} (group {r.group!r}): {ext} m, {mass}; driven dofs "
-                 f"{sorted(r.drivers) or 'none'}")
+                 f"{driven or 'none'}" + (f" ({piv[0][0]} about the pivot {list(piv[0][1])} m, which drives "
+                                          f"{', '.join(case.dofs[:case.dimension])})" if piv else ""))
+    moving = [(b.name, b.initial_velocity, b.initial_spin) for b in list(case.blocks) + list(case.rigid_bodies)
+              if b.initial_velocity is not None or b.initial_spin is not None]
+    for name, v, w in moving[:5]:
+        L.append(f"initial motion of {name!r}: velocity {list(v) if v is not None else 0} m/s, spin "
+                 f"{(list(w) if isinstance(w, tuple) else w) if w is not None else 0} rad/s")
+    if len(moving) > 5:
+        L.append(f"initial motion: {len(moving) - 5} more bodies")
     if not case.interfaces:
         L.append("interfaces: none (bodies do not interact)")
     for itf in case.interfaces:
@@ -106,6 +116,9 @@ def _report(case: Case, model, per_interface: dict) -> list[str]:
         for (body, dof), (lab, kind, h, s) in sorted(active_histories(case, si).items()):
             if s != si and not (si == 0 and s == -1):  # a stage's own histories; the bodies' ones at stage 0
                 continue
+            if kind == "pivot":
+                L.append(f"  {lab}: drives {body}.{dof} (rotation about the pivot)")
+                continue
             if isinstance(h, dict):
                 off = t0 if case.history_times == "stage" else 0.0
                 what = (f"times {_g(h['times'][0] + off)} to {_g(h['times'][-1] + off)} s, values "
@@ -114,5 +127,13 @@ def _report(case: Case, model, per_interface: dict) -> list[str]:
                            if len(h["values"]) > 2 else ""))
             else:
                 what = f"constant {_g(h)}"
+            if isinstance(h, dict) and "file" in h:
+                what += f", from {h['file']}"
+            if kind == "acceleration" and isinstance(h, dict) and len(h["times"]) > 1:
+                from .records import record_velocity_knots
+                T, A = np.asarray(h["times"]), np.asarray(h["values"])
+                v = record_velocity_knots(T, A)
+                d = float(np.sum(np.diff(T) * 0.5 * (v[:-1] + v[1:])))
+                what += f"; at its end the driven velocity is {_g(v[-1])} m/s and the displacement {_g(d)} m"
             L.append(f"  {lab}: {kind}, {what}")
     return L

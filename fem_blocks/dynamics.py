@@ -267,8 +267,7 @@ class Simulation:
                 b.u[~b.driven] = 0.0
             b.Ftheta = (1 - th) * b.applied_force(t0, self.g) + th * b.applied_force(t1, self.g)
             uf = b.u + h * self._rigid_accel(b)
-            for k, drv in b.drivers.items():
-                uf[k] = drv.step_velocity(t0, t1)
+            b.drive(uf, t0, t1, h, th)  # drivers (and a pivot's translation velocity: bodies._DrivenDofs)
             b.ufree = uf
 
     def _rigid_accel(self, b) -> np.ndarray:
@@ -303,6 +302,7 @@ class Simulation:
                     e[k - 3] = drv.history(t1) - b.q[k]
                     b.rotate(e)
                 b.q[k] = drv.history(t1)
+        b.hold_pivot()  # a rotation driver with a pivot: the pivot's material point stays at p
 
     def step(self) -> StepInfo:
         h, th = self.h, self.theta

@@ -61,6 +61,35 @@ def mesh_block_type(spec: BlockTypeSpec, dimension: int = 2):
     return meshing.load_msh(spec.file)
 
 
+def mass_centre(body) -> np.ndarray:
+    """Mass centre of a placed deformable block, c = Σ_a m_a x_a / Σ_a m_a with m_a = Σ_b M_ab (the row sums of one
+    displacement component of its mass matrix, lumped or consistent: exact for both), x_a the placed nodes."""
+    d = body.gdim
+    ex = np.zeros(body.type.ndof)
+    ex[0::d] = 1.0
+    w = (body.type.M @ ex)[0::d]
+    return w @ body.reference_points / w.sum()
+
+
+def set_initial_motion(body, velocity=None, spin=None) -> None:
+    """The initial velocity of a body (docs/case-files.md "Initial velocity and spin"): the rigid field
+    u_a = v + ω × (x_a - c) at the nodes x_a of a deformable block (c its mass centre, `mass_centre`; 2D
+    ω × r = ω (-r_y, r_x)), stored in the type frame (R^T u_a); on a rigid body its dofs (v, ω) at the centre of
+    mass. None: at rest. (The case checks that the body can move: no clamps, no driver on those dofs.)"""
+    if velocity is None and spin is None:
+        return
+    d = 2 if body.kind == 1 and len(body.dof_names) == 3 else (3 if body.kind == 1 else body.gdim)
+    v = np.zeros(d) if velocity is None else np.asarray(velocity, dtype=float).reshape(d)
+    w = np.zeros(1 if d == 2 else 3) if spin is None else np.atleast_1d(np.asarray(spin, dtype=float))
+    if body.kind == 1:
+        body.u[:d] = v
+        body.u[d:] = w
+        return
+    r = body.reference_points - mass_centre(body)
+    u = v + (w[0] * np.column_stack([-r[:, 1], r[:, 0]]) if d == 2 else np.cross(w, r))
+    body.u[:] = (u @ body.R).ravel()  # type frame: R^T u per node
+
+
 def build_model(case: Case) -> Model:
     """Bodies of dimension case.dimension (2: BlockType/DeformableBody/RigidBody; 3: the *3D classes) and the
     ContactStep of the interfaces (the same for both dimensions). A case not yet expanded is expanded first."""
@@ -92,12 +121,14 @@ def build_model(case: Case) -> Model:
                         name=label)
         except InputError as e:
             raise InputError(str(e)) from None
+        set_initial_motion(body, b.initial_velocity, b.initial_spin)
         bodies.append(body)
         names.append(b.name)
         groups.append(b.group)
     for i, r in enumerate(case.rigid_bodies):
         label = f"{case.source}: body {r.name!r}"
-        drivers = {dof: Driver(kind, hist, name=f"{label}.drivers.{dof}") for dof, (kind, hist) in r.drivers.items()}
+        drivers = {dof: Driver(spec[0], spec[1], name=f"{label}.drivers.{dof}", pivot=getattr(spec, "pivot", None))
+                   for dof, spec in r.drivers.items()}
         if D == 2:
             body = RigidBody(r.vertices, rho=r.rho, thickness=r.thickness, mass=r.mass, inertia=r.inertia,
                              drivers=drivers, forces=r.forces, name=label)
@@ -107,6 +138,7 @@ def build_model(case: Case) -> Model:
                                    drivers=drivers, forces=r.forces, name=label)
             except InputError as e:
                 raise InputError(str(e)) from None
+        set_initial_motion(body, r.initial_velocity, r.initial_spin)
         bodies.append(body)
         names.append(r.name)
         groups.append(r.group)

@@ -292,7 +292,8 @@ def _enter_stage(model: Model, sim: Simulation, case: Case, si: int, t0: float =
             b.set_force(dof, _shift(hist, off))
         else:
             b.set_driver(dof, None if kind == "free" else Driver(kind, _shift(hist, off),
-                                                                 name=f"stages[{si}].drivers.{bname}"))
+                                                                 name=f"stages[{si}].drivers.{bname}",
+                                                                 pivot=getattr(st.drivers[bname][dof], "pivot", None)))
         changed = True
     if changed and model.contact is not None:
         model.contact.mark_W_dirty()  # rigid W (driven dofs) changed

@@ -460,18 +460,43 @@ class CyclicProtocol:
                                  "history_times = \"stage\"", unit="time", lo=0.0)
 
 
+DRIVER_KINDS = ("velocity", "displacement", "acceleration")  # the `kind` of a rigid dof's driver (bodies.Driver)
+
+
+class DriverSpec(tuple):
+    """A rigid dof's driver as read from a case file: the pair (kind, history) — it unpacks as one — with
+    `pivot`: None, or the point [m] (global, SI) a rotation driver turns the body about (its translation dofs are
+    then driven too: bodies._DrivenDofs). kind is one of DRIVER_KINDS."""
+
+    def __new__(cls, kind: str, history, pivot=None):
+        obj = super().__new__(cls, (kind, history))
+        obj.pivot = None if pivot is None else tuple(float(x) for x in pivot)
+        return obj
+
+    def __getnewargs__(self):
+        return (self[0], self[1], self.pivot)
+
+
+def _translations(dof: str, pivot) -> tuple:
+    """The translation dofs a pivot of dimension len(pivot) drives."""
+    return ("x", "y", "z")[:len(pivot)]
+
+
 @dataclass(frozen=True)
 class Control:
-    """How a rigid dof is controlled: kind "velocity" | "displacement" (driven) or "force" (free, with a
-    history); label: the key path that set it; stage: its stage index (-1: the body's own)."""
+    """How a rigid dof is controlled: kind "velocity" | "displacement" | "acceleration" (driven), "pivot" (a
+    translation dof driven by the pivot of a rotation driver; history None) or "force" (free, with a history);
+    label: the key path that set it; stage: its stage index (-1: the body's own); pivot: the pivot of a rotation
+    driver (None)."""
     kind: str
     history: Any
     label: str
     stage: int
+    pivot: Any = None
 
     @property
     def driven(self) -> bool:
-        return self.kind in ("velocity", "displacement")
+        return self.kind in DRIVER_KINDS + ("pivot",)
 
 
 def controls_at(rigid_bodies, stages, k: int) -> dict:
@@ -479,18 +504,40 @@ def controls_at(rigid_bodies, stages, k: int) -> dict:
     order (a driver replaces a force, "free" removes both, a force frees a driven dof). The one definition of
     "stages accumulate". Free dofs without a force are absent."""
     out = {}
+
+    def drive(body, dof, spec, label, stage):
+        kind, hist = spec
+        pivot = getattr(spec, "pivot", None)
+        out[(body, dof)] = Control(kind, hist, label, stage, pivot)
+        if pivot is not None:  # the pivot drives the translations (replacing their drivers or forces)
+            for tr in _translations(dof, pivot):
+                out[(body, tr)] = Control("pivot", None, label + ".pivot", stage)
+
+    def free(body, dof):
+        c = out.pop((body, dof), None)
+        if c is not None and c.pivot is not None:
+            for tr in _translations(dof, c.pivot):
+                if out.get((body, tr)) is not None and out[(body, tr)].kind == "pivot":
+                    out.pop((body, tr))
+
     for r in rigid_bodies:
-        for dof, (kind, hist) in r.drivers.items():
-            out[(r.name, dof)] = Control(kind, hist, f"rigid_bodies.{r.name}.drivers.{dof}", -1)
+        for dof, spec in r.drivers.items():
+            drive(r.name, dof, spec, f"rigid_bodies.{r.name}.drivers.{dof}", -1)
         for dof, hist in r.forces.items():
             out[(r.name, dof)] = Control("force", hist, f"rigid_bodies.{r.name}.forces.{dof}", -1)
     for i, st in enumerate(stages[:k + 1]):
         for body, dof, kind, hist in st.changes():
             if kind == "free":
-                out.pop((body, dof), None)
+                free(body, dof)
             else:
+                if (body, dof) in out and out[(body, dof)].pivot is not None:
+                    free(body, dof)  # a new driver or force on a rotation dof replaces its pivot
                 what = "forces" if kind == "force" else "drivers"
-                out[(body, dof)] = Control(kind, hist, f"stages[{i}].{what}.{body}.{dof}", i)
+                label = f"stages[{i}].{what}.{body}.{dof}"
+                if kind == "force":
+                    out[(body, dof)] = Control(kind, hist, label, i)
+                else:
+                    drive(body, dof, st.drivers[body][dof], label, i)
     return out
 
 

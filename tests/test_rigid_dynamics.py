@@ -102,6 +102,6 @@ def test_bad_rigid_inputs():
     with pytest.raises(InputError, match="driven"):
         RigidBody(SQUARE, rho=1.0, drivers={"x": Driver("velocity", 0.0)}, forces={"x": 1.0})
     with pytest.raises(InputError, match="kind"):
-        Driver("acceleration", 1.0)
+        Driver("jerk", 1.0)
     with pytest.raises(InputError, match="strictly increasing"):
         History([0.0, 0.0], [1.0, 2.0])
