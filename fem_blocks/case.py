@@ -1136,7 +1136,7 @@ def _stage_forces(t: Table, D: int, drivers: dict) -> dict:
                 if dof in dofs_of(D)[:D] and _has_pivot(drivers.get(body, {})):
                     raise bt_.error(dof, "this stage drives the body about a pivot, which drives its translation "
                                          "dofs; expected no force on them")
-                forces[body][dof] = bt_.history(dof, "force" if dof[0] != "r" else None,
+                forces[body][dof] = bt_.history(dof, "force" if dof[0] != "r" else "moment",
                                                 quantity="force" if dof[0] != "r" else "moment")
             bt_.done()
         ftab.done()

@@ -1,7 +1,7 @@
 """`units = "mm-N-MPa"`: the same model written in SI and in mm, N, MPa (mass unit the tonne = N s²/mm) runs the
 same history. Every converted quantity enters the run: lengths (vertices, block size, mesh size, position,
-thickness, alert), E, rho, rigid `mass` and `inertia`, a force history, a moment history (N m / N mm), a
-displacement-driver history, gravity, and the interface parameters c_N, c_T (stiffness), w (energy) and b
+thickness, alert), E, rho, rigid `mass` and `inertia`, a force history, a moment history (N m / N mm) of a rigid body and one
+set by a stage, a displacement-driver history, gravity, and the interface parameters c_N, c_T (stiffness), w (energy) and b
 (Frémond viscosity, decohesion under way).
 
 The mm file is written from the SI values with the factors stated here (independent of case.py's table):
@@ -83,14 +83,22 @@ duration = 0.01
 h = 1e-3
 theta = 0.7
 output_every = 100
+[[stages]]
+name = "turn"
+duration = 0.005
+h = 1e-3
+theta = 0.7
+output_every = 100
+[stages.forces.top]
+rz = {{times = [0.01, 0.015], values = [{mz}, {mz2}]}}
 """
 
 SI = dict(units="", g=-9.81, E=1e10, rho=2000.0, t=0.1, lx=0.4, ly=0.2, ms=0.2, x0=0.05, bx0=-0.1, by0=-0.1,
           bx1=0.6, settle=-2e-5, tx1=0.4, ty1=0.3, mass=40.0, inertia=0.5, alert=1e-3, cN=1e10, cT=5e9, w=0.01,
-          b=0.01, mz=20.0)
+          b=0.01, mz=20.0, mz2=60.0)
 LENGTHS = ("g", "t", "lx", "ly", "ms", "x0", "bx0", "by0", "bx1", "settle", "tx1", "ty1", "alert")
 FACTORS = dict({k: 1e3 for k in LENGTHS}, E=1e-6, rho=1e-12, mass=1e-3, inertia=1e3, cN=1e-9, cT=1e-9, w=1e-3,
-               b=1e-3, mz=1e3)
+               b=1e-3, mz=1e3, mz2=1e3)
 
 
 def run(tmp_path, name, values):
@@ -108,7 +116,7 @@ def test_mm_n_mpa_case_runs_the_same_history_as_si(tmp_path):
     mm["units"] = 'units = "mm-N-MPa"'
     a = run(tmp_path, "si", SI)
     b = run(tmp_path, "mm", mm)
-    assert a.keys() == b.keys() and len(a["step"]) == 11
+    assert a.keys() == b.keys() and len(a["step"]) == 16
     for k in a:
         if k in ("sweeps", "change", "residual"):  # solver diagnostics: round-off changes a sweep count by 1
             continue
