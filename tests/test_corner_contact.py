@@ -167,3 +167,86 @@ def test_block_on_a_corner_falls_through_with_the_former_limit():
     beta = np.radians(45.0)
     ts, th, pen = fall_from_corner(beta, max_angle=30.0, until=0.1)
     assert pen > 0.01
+
+
+# ----------------------------------------------------------------------------- contacts missed by fast bodies
+IMPACT = """
+name = "side_impact"
+gravity = [0.0, 0.0]
+[materials.stone]
+E = 1e10
+nu = 0.2
+rho = 2000.0
+thickness = 0.1
+[block_types.b]
+geometry = "rectangle"
+lx = 0.1
+ly = 0.1
+mesh_size = 0.05
+cell = "quad"
+material = "stone"
+mass = "consistent"
+[[blocks]]
+name = "blk"
+type = "b"
+position = [-0.1115, 0.0]   # its right side 11.5 mm from the wall: gaps 9.5, 7.5, ... 1.5, -0.5 mm at 2 mm per step
+group = "blk"
+initial_velocity = [2.0, 0.0]
+[[rigid_bodies]]
+name = "wall"
+group = "wall"
+vertices = [[0.0, -0.5], [0.2, -0.5], [0.2, 0.6], [0.0, 0.6]]
+[rigid_bodies.drivers]
+x = {kind = "velocity", history = 0.0}
+y = {kind = "velocity", history = 0.0}
+rz = {kind = "velocity", history = 0.0}
+[[interfaces]]
+name = "hit"
+between = ["blk", "wall"]
+mu = 0.0
+alert = ALERT
+[contact]
+geometry = "updated"
+tol = 1e-12
+max_sweeps = 1000
+[output]
+paraview = false
+[[stages]]
+name = "throw"
+duration = 0.012
+h = 1e-3
+theta = 0.5
+"""
+
+
+@pytest.mark.dolfinx
+@pytest.mark.parametrize("alert", [1e-3, 1e-2])
+def test_fast_side_impact_missed_contact_is_reported(tmp_path, alert, capsys):
+    """A block thrown at a fixed wall at 2 m/s, h = 1e-3 s (2 mm per step, no gravity, μ = 0): with alert = 1 mm the
+    right side is 1.5 mm from the wall at the start of step 6 (not a contact) and 0.5 mm inside at the start of step
+    7: the run warns once (stderr and summary.json "warnings"), naming the interface, and records the depth 5e-4 m
+    within 1e-6 m (the free flight is exact: constant velocity) and the suggested alert 2 (1 mm + 0.5 mm) = 3 mm;
+    the push-out creates energy (observed: 4 J -> 8.99 J; asserted > 1.5 x). With alert = 1 cm the wall is found 9.5 mm ahead: no
+    warning, and the energy does not grow (θ = 1/2 conserves the elastic energy of the bounce, the contact only
+    dissipates: E_end <= E_0 (1 + 1e-9))."""
+    from fem_blocks.case import load_case
+    from fem_blocks.runner import run_case
+    p = tmp_path / "impact.toml"
+    p.write_text(IMPACT.replace("ALERT", repr(alert)))
+    s = run_case(load_case(str(p)), str(tmp_path / "out"), progress=False)
+    err = capsys.readouterr().err
+    m = s["missed_contacts"]
+    from fem_blocks.output.history import read_history
+    e = np.asarray(read_history(tmp_path / "out" / "history.csv")["total_energy"], float)
+    print(f"alert {alert}: energy {e[0]:.6g} -> {e.max():.6g} J, missed {m}")
+    if alert == 1e-3:
+        assert m["first"] is not None and m["first"]["interface"] == "hit" and m["first"]["step"] == 7
+        assert m["first"]["depth"] == pytest.approx(5e-4, abs=1e-6)
+        assert m["first"]["suggested_alert"] == pytest.approx(3e-3, rel=1e-9)
+        assert err.count("'hit'") == 1 and "alert >= 0.003" in err
+        assert sum("was found" in w for w in s["warnings"]) == 1
+        assert e.max() > 1.5 * e[0]  # what the warning is about (an unwarned run would look like a success)
+    else:
+        assert m == dict(steps=0, first=None, deepest=None)
+        assert "was found" not in err
+        assert e.max() <= e[0] * (1 + 1e-9)
