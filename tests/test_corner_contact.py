@@ -250,3 +250,47 @@ def test_fast_side_impact_missed_contact_is_reported(tmp_path, alert, capsys):
         assert m == dict(steps=0, first=None, deepest=None)
         assert "was found" not in err
         assert e.max() <= e[0] * (1 + 1e-9)
+
+
+@pytest.mark.dolfinx
+def test_box_on_an_edge_at_45_degrees_topples_without_penetrating():
+    """3D: a stiff deformable box (b = 0.168 along x, 0.1 along y, h = 0.2 along z; hexahedra 2 x 1 x 2,
+    consistent mass) stands on its bottom edge along y, bottom face at 45° from a fixed rigid floor (z = 0), node
+    contact points (corners need them: "positions" has none there), updated geometry, μ = 2, h = 2e-3 s (202 steps,
+    7 s) and alert = 5 mm (the side face lands at ~1.6 mm per step: more than the default 1 mm). Its centre of mass
+    is beyond the edge (α = 40°): it topples onto its side face at the rigid landing time (about the edge I_O =
+    m (b² + h²)/3: the 2D reference) within 1 % (observed +4.9e-3), no node below the floor by more than 1e-5 m
+    (observed: none), and it does not turn about the other axes (|rx|, |rz| <= 1e-6 rad; observed 2e-10). With the
+    former 30° limit neither face at the edge would face the floor (both at 45°)."""
+    from fem_blocks.bodies import BlockType3D, DeformableBody3D, RigidBody3D, rotation3d
+    from fem_blocks.meshing import box_corners, mesh_box
+    beta = np.radians(45.0)
+    side, t_land = rigid_landing(beta)
+    assert side > 0
+    held = {k: Driver("velocity", 0.0) for k in ("x", "y", "z", "rx", "ry", "rz")}
+    floor = RigidBody3D(box_corners(2.0, 1.0, 0.1, (-1.0, -0.5, -0.1)), rho=2000.0, drivers=held, name="floor")
+    bt = BlockType3D(mesh_box(BW, 0.1, BH, divisions=(2, 1, 2)), Material(E=1e10, nu=0.2, rho=RHO),
+                     mass="consistent")
+    R = rotation3d(np.array([0.0, beta, 0.0]))  # about +y: the left edge (x = -b) lifts
+    blk = DeformableBody3D(bt, position=-R @ np.array([BW, 0.05, 0.0]), R=R, name="block")
+    cs = ContactStep([InterfaceSpec("base", ("block", "floor"), mu=2.0, placement="nodes", alert=5e-3)],
+                     ["block", "floor"],
+                     ContactOptions(tol=1e-12, max_sweeps=1000, geometry="updated"))
+    sim = Simulation([blk, floor], h=2e-3, theta=0.5, contact=cs)
+    ts, th, pen, off = [0.0], [beta], 0.0, 0.0
+    while sim.time < 1.5 * t_land:
+        sim.step()
+        r = blk.rotation()
+        ts.append(sim.time)
+        th.append(beta + r[1])
+        off = max(off, abs(r[0]), abs(r[2]))
+        pen = max(pen, -float(blk.current_points()[:, 2].min()))
+        if th[-1] >= np.pi / 2 or th[-1] <= 0.0:
+            break
+    assert th[-1] >= np.pi / 2, f"did not topple (tilt {np.degrees(th[-1]):.1f}°)"
+    t_num = ts[-2] + (ts[-1] - ts[-2]) * (th[-2] - np.pi / 2) / (th[-2] - th[-1])
+    print(f"3D: landing {t_num:.5f} s vs rigid {t_land:.5f} s ({t_num / t_land - 1:+.2e}), penetration {pen:.3g} m, "
+          f"off-axis rotation {off:.3g} rad, {len(ts) - 1} steps")
+    assert t_num == pytest.approx(t_land, rel=0.01)
+    assert pen <= 1e-5
+    assert off <= 1e-6
