@@ -294,3 +294,18 @@ def test_box_on_an_edge_at_45_degrees_topples_without_penetrating():
     assert t_num == pytest.approx(t_land, rel=0.01)
     assert pen <= 1e-5
     assert off <= 1e-6
+
+
+def test_max_angle_case_file_key(tmp_path):
+    """[[interfaces]] max_angle reaches the detection table (cos of the angle, per interface); the default is the
+    schema's; out of (0, 90) the case is refused (tests/bad_cases/543, 544)."""
+    from fem_blocks.case import load_case
+    text = IMPACT.replace("alert = ALERT", "alert = 1e-3\nmax_angle = 45.0")
+    p = tmp_path / "c.toml"
+    p.write_text(text)
+    itf = load_case(str(p)).interfaces[0]
+    assert itf.max_angle == 45.0
+    assert det.build_table([itf], {"blk": 0, "wall": 1}).cos_max_angle[0] == pytest.approx(np.cos(np.pi / 4),
+                                                                                          rel=1e-15)
+    p.write_text(IMPACT.replace("ALERT", "1e-3"))
+    assert load_case(str(p)).interfaces[0].max_angle == 60.0
