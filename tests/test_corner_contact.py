@@ -309,3 +309,36 @@ def test_max_angle_case_file_key(tmp_path):
                                                                                           rel=1e-15)
     p.write_text(IMPACT.replace("ALERT", "1e-3"))
     assert load_case(str(p)).interfaces[0].max_angle == 60.0
+
+
+# ----------------------------------------------------------------------------- 3D: the bound of a box's vertex
+def _box(R, pivot):
+    """8 corners and 6 outward quads of the unit box, rotated by R about its corner `pivot` placed at the origin."""
+    from test_detection3d import HEX_FACES, UNIT
+    V = (UNIT - UNIT[pivot]) @ R.T
+    return V, HEX_FACES.copy()
+
+
+@pytest.mark.parametrize("max_angle, found", [(None, True), (56.0, True), (54.0, False)])
+def test_box_on_a_vertex_3d(max_angle, found):
+    """A unit box standing on its vertex with its long diagonal vertical: its three faces at the vertex are all at
+    acos(1/√3) = 54.74° from the floor (the worst tilt for a vertex: the three normals are orthonormal, so their
+    cosines with the vertical satisfy Σ cos² = 1). The vertex (node placement) is a contact on the floor's top,
+    gap 0, normal +z, with the default 60° and 56°, not with 54°."""
+    from fem_blocks.contact import detection_3d as d3
+    from fem_blocks.geometry import rotation3d
+    d = np.array([1.0, 1.0, 1.0]) / np.sqrt(3)  # the diagonal from corner 0 to corner 6 -> +z
+    axis = np.cross(d, [0.0, 0.0, 1.0])
+    R = rotation3d(axis / np.linalg.norm(axis) * np.arccos(d[2]))
+    assert np.allclose(R @ d, [0, 0, 1], atol=1e-15)
+    blk = _box(R, 0)
+    floor = (np.array([[-1, -1, -0.2], [1, -1, -0.2], [1, 1, -0.2], [-1, 1, -0.2],
+                       [-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]], float), _box(np.eye(3), 0)[1])
+    flat = d3.flatten_boundaries([blk[0], floor[0]], [blk[1], floor[1]])
+    table = d3.simple_table(alert=1e-3, placement="nodes", max_angle=max_angle)
+    cs = d3.detect(*flat, np.zeros(2, int), np.zeros(2, int), table)
+    at_vertex = np.linalg.norm(cs.point, axis=1) < 1e-12
+    assert at_vertex.sum() == (1 if found else 0)
+    if found:
+        assert abs(cs.gap[at_vertex][0]) < 1e-15
+        np.testing.assert_allclose(cs.n[at_vertex][0], [0, 0, 1], atol=1e-15)
