@@ -416,7 +416,8 @@ class _MissedContactWatch:
     (stderr, summary.json "warnings"), naming the interface, the bodies, the time and the depth, and suggests
     alert >= 2 (alert + p0); summary.json "missed_contacts" records the first and the deepest and the number of
     steps that had one. Frozen geometry detects once, at the start (no watch). Cost: max(g0 - g) over the contacts
-    per step (0.2 ms for 1e5 contacts, load 3.7 on 2 cores), the full test only when it exceeds 0.1 x the smallest alert."""
+    per step (0.2 ms for 1e5 contacts, load 3.7 on 2 cores), the full test only when it exceeds 0.1 x the smallest
+    alert."""
 
     FRACTION = 0.1
 

@@ -226,9 +226,9 @@ def test_fast_side_impact_missed_contact_is_reported(tmp_path, alert, capsys):
     right side is 1.5 mm from the wall at the start of step 6 (not a contact) and 0.5 mm inside at the start of step
     7: the run warns once (stderr and summary.json "warnings"), naming the interface, and records the depth 5e-4 m
     within 1e-6 m (the free flight is exact: constant velocity) and the suggested alert 2 (1 mm + 0.5 mm) = 3 mm;
-    the push-out creates energy (observed: 4 J -> 8.99 J; asserted > 1.5 x). With alert = 1 cm the wall is found 9.5 mm ahead: no
-    warning, and the energy does not grow (θ = 1/2 conserves the elastic energy of the bounce, the contact only
-    dissipates: E_end <= E_0 (1 + 1e-9))."""
+    the push-out creates energy (observed: 4 J -> 8.99 J; asserted > 1.5 x). With alert = 1 cm the wall is found
+    9.5 mm ahead: no warning, and the energy does not grow (θ = 1/2 conserves the elastic energy of the bounce,
+    the contact only dissipates: E_end <= E_0 (1 + 1e-9)). The watch is a runner's: this runs the case file."""
     from fem_blocks.case import load_case
     from fem_blocks.runner import run_case
     p = tmp_path / "impact.toml"

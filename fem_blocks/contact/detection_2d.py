@@ -23,7 +23,7 @@ Candidate points (`placement`, per interface):
   thesis §7.2.1.a; the hinge then sits a quarter of an edge inside the corner).
 Each point carries its tributary length x thickness (`area`). A point is paired with the nearest facing
 antagonist edge (angle between outward normals within `max_angle` of opposite: InterfaceSpec.max_angle, default
-MAX_ANGLE = 60°, so that one edge of a right-angled corner faces a flat antagonist at any tilt) onto which it projects inside
+MAX_ANGLE = 60°: one edge of a right-angled corner faces a flat antagonist at any tilt) onto which it projects inside
 the edge, with -(reach) <= g <= g0 + alert.
 
 Broad phase: edge boxes enlarged by the search distance on a uniform grid (contact/broadphase.py, shared with
