@@ -347,7 +347,8 @@ class _Guards:
     * NaN/Inf in any displacement, velocity or contact impulse;
     * penetration: -(g - g0) at a contact point with rigid compression (coulomb, brittle, fremond) or -g for the
       compliant laws (elastic, mixed: joint closed beyond its thickness), above `[checks] max_penetration`
-      (default: the interface's alert distance, beyond which detection is no longer trustworthy);
+      (default: the interface's alert distance, beyond which detection is no longer trustworthy; shallower
+      penetrations of contacts missed by fast bodies are reported, not stopped, by _MissedContactWatch);
     * energy: E - E_0 - W_ext - W_drivers (which is <= 0 for θ >= 1/2: contacts, cohesive joints and the θ-method
       only dissipate or store) above `max_energy_growth` x (K_0 + E_el,0 + |V - V_0| + |W_ext| + |W_drivers|).
     """
