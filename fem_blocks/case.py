@@ -1236,7 +1236,7 @@ def _parse_interfaces(root: Table, D: int, all_groups: set, warnings: list, sour
         law = read_fields(t, InterfaceSpec, ("law",))["law"]
         params = _law_params(t)
         mu = t.number("mu", 0.0 if law == "mixed" else None, lo=0, required=law != "mixed")
-        f = read_fields(t, InterfaceSpec, ("g0", "alert", "orientation", "reference"))
+        f = read_fields(t, InterfaceSpec, ("g0", "alert", "orientation", "reference", "max_angle"))
         try:
             interfaces.append(InterfaceSpec(name=iname, groups=tuple(between), law=law, mu=mu, params=params,
                                             placement=placement, positions=tuple(float(x) for x in pos),

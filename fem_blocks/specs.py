@@ -314,11 +314,15 @@ class InterfaceSpec:
     params: dict = spec(doc="law parameters (LAW_PARAMS), SI per unit area", toml=False, default_factory=dict)
     reference: str = spec("nominal", doc="'nominal': closed at g = g0; 'as_built': closed as built (frozen geometry)",
                           choices=("nominal", "as_built"))
+    max_angle: float = spec(60.0, doc="facing angle [degrees]: a (candidate, antagonist) edge/face pair is examined "
+                            "only if its outward normals are within max_angle of opposite (60: a corner of a "
+                            "right-angled block stays in contact at any tilt, 2D and 3D; docs/case-files.md)",
+                            lo=0.0, hi=90.0, lo_open=True, hi_open=True, expected="0 < max_angle < 90 [degrees]")
     where: dataclasses.InitVar[str | None] = None
 
     def __post_init__(self, where):
         n = f"interfaces.{self.name}"
-        check_fields(self, n, ("reference", "mu", "g0", "alert", "placement"))
+        check_fields(self, n, ("reference", "mu", "g0", "alert", "placement", "max_angle"))
         for p in self.positions:
             check_range(f"{n}.positions", p, 0.0, 1.0, lo_open=True, hi_open=True, expected="0 < position < 1")
         check_fields(self, n, ("orientation",))

@@ -22,7 +22,8 @@ Candidate points (`placement`, per interface):
 * "positions": relative positions on each candidate edge (e.g. 0.25, 0.75 — retreated from the corners,
   thesis §7.2.1.a; the hinge then sits a quarter of an edge inside the corner).
 Each point carries its tributary length x thickness (`area`). A point is paired with the nearest facing
-antagonist edge (angle between outward normals within `max_angle` of opposite) onto which it projects inside
+antagonist edge (angle between outward normals within `max_angle` of opposite: InterfaceSpec.max_angle, default
+MAX_ANGLE = 60°: one edge of a right-angled corner faces a flat antagonist at any tilt) onto which it projects inside
 the edge, with -(reach) <= g <= g0 + alert.
 
 Broad phase: edge boxes enlarged by the search distance on a uniform grid (contact/broadphase.py, shared with
@@ -36,6 +37,7 @@ import numpy as np
 from numba import njit
 
 from ..errors import InputError
+from ..specs import InterfaceSpec, default_of
 from .tables import check_g0_alert, check_lengths, check_positions
 from .broadphase import grid_pairs
 
@@ -405,6 +407,7 @@ def update_geometry(cs: ContactSet, bx, bedges) -> ContactSet:
     return out
 
 
+MAX_ANGLE = default_of(InterfaceSpec, "max_angle")  # [degrees] the facing angle's default (specs.InterfaceSpec)
 PLACEMENT_CODE = {"positions": 0, "nodes": 1, "overlap": 2, None: 2}  # None: the 2D default, "overlap"
 
 
@@ -444,5 +447,5 @@ def build_table(interfaces, group_index: dict) -> InterfaceTable:
         positions=positions,
         cand_group=np.array([group_index[i.candidate] if i.candidate else -1 for i in interfaces], dtype=np.int64),
         thickness=np.array([getattr(i, "thickness", 1.0) for i in interfaces], dtype=float),
-        cos_max_angle=np.cos(np.deg2rad([getattr(i, "max_angle", 30.0) for i in interfaces])),
+        cos_max_angle=np.cos(np.deg2rad([getattr(i, "max_angle", MAX_ANGLE) for i in interfaces])),
         split_head=split)

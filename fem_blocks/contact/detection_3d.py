@@ -66,6 +66,7 @@ from numba import njit
 from ..errors import InputError
 from .tables import check_g0_alert, check_lengths, check_positions
 from .broadphase import grid_pairs
+from .detection_2d import MAX_ANGLE
 
 PROBE = 1e-2  # node points: fraction of the way from the node toward its candidate face's centre (tie-break probe)
 
@@ -120,7 +121,7 @@ class InterfaceTable:
 
 
 def simple_table(g0=0.0, alert=1e-3, positions=(0.25, 0.75), placement="positions", tri_rule=3,
-                 max_angle=30.0) -> InterfaceTable:
+                 max_angle=None) -> InterfaceTable:
     """One interface between all bodies (a single group 0)."""
     pos = np.asarray(positions, dtype=float).reshape(1, -1)
     return InterfaceTable(pair_iface=np.zeros((1, 1), dtype=np.int64), g0=np.array([float(g0)]),
@@ -128,7 +129,8 @@ def simple_table(g0=0.0, alert=1e-3, positions=(0.25, 0.75), placement="position
                             placement=np.array([0 if placement == "positions" else 1], dtype=np.int64),
                             positions=pos, tri_rule=np.array([tri_rule], dtype=np.int64),
                             cand_group=-np.ones(1, dtype=np.int64),
-                            cos_max_angle=np.cos(np.deg2rad([max_angle])), split_head=-np.ones(1, dtype=np.int64))
+                            cos_max_angle=np.cos(np.deg2rad([MAX_ANGLE if max_angle is None else max_angle])),
+                            split_head=-np.ones(1, dtype=np.int64))
 
 
 @dataclass
