@@ -211,7 +211,7 @@ def write_rotations(path, history: dict, stages=(), title=""):
         if r:
             ref = r["relative_to_rotation_rad"]
             ref = "" if ref is None else (f", reference at {ref:.5g} rad" if np.isscalar(ref) else
-                                          f", reference at |{np.linalg.norm(ref):.5g}| rad")
+                                          f", reference at {np.linalg.norm(ref):.5g} rad (|rotation vector|)")
             stops.append((r["time"], f"stage {st['name']!r} stop: relative {r['relative_angle_rad']:.3g} rad at "
                                      f"t = {r['time']:.4g} s{ref}"))
     return plot_rotations(path, t, series, stops, title)
