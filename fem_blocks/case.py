@@ -1144,7 +1144,8 @@ def _stage_forces(t: Table, D: int, drivers: dict) -> dict:
 
 
 def _stage_stops(t: Table, D: int, st: StageSpec):
-    """[stages.stop_at_displacement], [stages.stop_after_peak], [stages.stop_at_equilibrium]."""
+    """[stages.stop_at_displacement], [stages.stop_at_rotation], [stages.stop_after_peak],
+    [stages.stop_at_equilibrium]."""
     sd = t.table("stop_at_displacement")
     if sd is not None:
         body = sd.string("body", required=True)
@@ -1152,6 +1153,11 @@ def _stage_stops(t: Table, D: int, st: StageSpec):
         st.stop_displacement = (body, dof, abs(sd.number("value", required=True, dim=None if dof[0] == "r"
                                                          else "length")))
         sd.done()
+    sr = t.table("stop_at_rotation")
+    if sr is not None:
+        st.stop_rotation = (sr.string("body", required=True), sr.string("relative_to"),
+                            sr.number("value", required=True, lo=0.0, lo_open=True))
+        sr.done()
     sp = t.table("stop_after_peak")
     if sp is not None:
         st.stop_after_peak = (sp.string("body", required=True), sp.string("dof", required=True,

@@ -108,6 +108,7 @@ def _report(case: Case, model, per_interface: dict) -> list[str]:
     for si, (st, (t0, t1)) in enumerate(zip(case.stages, times)):
         stops = [s for s, on in (("at equilibrium", st.stop_at_equilibrium),
                                  ("at a displacement", st.stop_displacement is not None),
+                                 ("at a rotation", st.stop_rotation is not None),
                                  ("after the peak", st.stop_after_peak is not None)) if on]
         L.append(f"stage {si} {st.name!r}: t = {_g(t0)} to {_g(t1)} s, h = {_g(st.h)} s, "
                  f"{max(1, int(round(st.duration / st.h)))} steps, theta = {_g(st.theta)}"

@@ -78,6 +78,51 @@ def rotation_bodies(case: Case, model: Model) -> list[int]:
     return sorted(out)
 
 
+def _rotation_stop(case: Case, model: Model, si: int, ref: tuple) -> tuple:
+    """[stages.stop_at_rotation] (body, relative_to, value) -> (body, reference body or None, value), the bodies
+    (blocks or rigid bodies) found by name here, after expand (generated blocks have no name before); InputError
+    naming the case file and the key for a name that matches no body."""
+    out = []
+    for key, nm in (("body", ref[0]), ("relative_to", ref[1])):
+        if nm is not None and nm not in model.names:
+            raise InputError(f"{case.source}: stages[{si}].stop_at_rotation.{key} = {nm!r}: expected the name of a "
+                             f"block or rigid body")
+        out.append(None if nm is None else model.bodies[model.names.index(nm)])
+    return out[0], out[1], ref[2]
+
+
+def body_rotation(b, dim: int):
+    """Rotation of a body since its placement: 2D the angle [rad] (counter-clockwise; deformable: body.rotation(),
+    rigid: q[2]); 3D the rotation matrix (deformable: exp([w]x) of body.rotation(); rigid: its orientation)."""
+    from .bodies import rotation3d
+    if dim == 2:
+        return float(b.rotation()) if b.kind == 0 else float(b.q[2])
+    return rotation3d(b.rotation()) if b.kind == 0 else np.array(b.orientation, dtype=float)
+
+
+def relative_rotation(b, ref, dim: int) -> float:
+    """The angle [rad] of body b's rotation relative to body ref (since placement when ref is None): 2D
+    |θ_b − θ_ref|, 3D the angle of Rot_refᵀ Rot_b (|rotation_vector|)."""
+    from .bodies import rotation_vector
+    rb = body_rotation(b, dim)
+    if dim == 2:
+        return abs(rb - (0.0 if ref is None else body_rotation(ref, dim)))
+    rr = np.eye(3) if ref is None else body_rotation(ref, dim)
+    return float(np.linalg.norm(rotation_vector(rr.T @ rb)))
+
+
+def _rotation_record(b, ref, dim: int, t: float, angle: float) -> dict:
+    """The stage record of a stop at a rotation: the time, the relative angle and both bodies' rotations since
+    placement (2D angles [rad], 3D rotation vectors [rad])."""
+    from .bodies import rotation_vector
+
+    def rot(x):
+        r = body_rotation(x, dim)
+        return r if dim == 2 else rotation_vector(r).tolist()
+    return dict(time=t, relative_angle_rad=angle, body_rotation_rad=rot(b),
+                relative_to_rotation_rad=None if ref is None else rot(ref))
+
+
 def _rotation_names(model: Model, i: int) -> list[str]:
     """history.csv columns of the rotation of deformable body i: NAME.rot (2D, rad), NAME.rotx/roty/rotz (3D)."""
     name = model.names[i]
@@ -726,6 +771,9 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
     cv = case.output.get("curve")
     curve_body = model.bodies[model.index(cv["body"])] if cv else None
     rot_ids = rotation_bodies(case, model)  # [output] rotations
+    for si, st in enumerate(case.stages):  # [stages.stop_at_rotation]: its bodies named when the run starts
+        if st.stop_rotation is not None:
+            _rotation_stop(case, model, si, st.stop_rotation)
     cols = history_columns(model, rot_ids)
     hpath = os.path.join(out_dir, "history.csv")
     if ck is not None and os.path.exists(hpath):
@@ -775,7 +823,7 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
         conv["rotation_warning"] = rot_warning  # printed by the CLI before its last line (convergence_line)
         summary["convergence"] = conv
         summary["exit_status"] = conv["exit_status"] if code is None else code
-        summary.update(_figures(case, sim, model, out_dir, hist.columns_dict(), conv))
+        summary.update(_figures(case, sim, model, out_dir, hist.columns_dict(), conv, summary.get("stages")))
         write_summary(os.path.join(out_dir, "summary.json"), summary)
         return summary
 
@@ -812,6 +860,9 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
                 for key, ref in (("disp", st.stop_displacement), ("peak", st.stop_after_peak)):
                     if ref is not None:
                         stop_body[key] = (model.bodies[model.index(ref[0])], model.dofs.index(ref[1])) + tuple(ref[2:])
+                if st.stop_rotation is not None:
+                    stop_body["rot"] = _rotation_stop(case, model, si, st.stop_rotation)
+                stop_rec = None
                 n_steps = max(1, int(round(st.duration / st.h)))
                 t_stage = _time.perf_counter()
                 stage_bad.clear()
@@ -862,6 +913,12 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
                         b, d, val = stop_body["disp"]
                         if abs(b.q[d]) >= val * (1 - 1e-12):
                             reason = f"target displacement {val:g} reached after {k} steps"
+                    if "rot" in stop_body:
+                        b, ref, val = stop_body["rot"]
+                        ang = relative_rotation(b, ref, model.dimension)
+                        if ang >= val:
+                            reason = f"rotation {ang:.6g} rad (target {val:g}) reached after {k} steps"
+                            stop_rec = _rotation_record(b, ref, model.dimension, sim.time, ang)
                     if "peak" in stop_body:
                         b, d, drop, min_steps = stop_body["peak"]
                         f = abs(b.reaction[d])
@@ -896,6 +953,7 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
                             print(f"fem-blocks: warning: {w}", file=sys.stderr)
                         run["stages_done"].append(dict(name=st.name, steps=k, h=st.h, theta=st.theta,
                                                        stopped=stopped or "duration", unconverged_steps=n_unconv,
+                                                       **({"stop_rotation": stop_rec} if stop_rec else {}),
                                                        wall_time=_time.perf_counter() - t_stage,
                                                        **({"warnings": cut} if cut else {})))
                         run["stage_done"] = True
@@ -1064,10 +1122,12 @@ def _cracked_bricks(b) -> dict:
                                    max_width_mm=1e3 * b["max_width_m"], bricks=b["cracked_names"])}
 
 
-def _figures(case, sim, model, out_dir, hist: dict, conv=None) -> dict:
+def _figures(case, sim, model, out_dir, hist: dict, conv=None, stages=()) -> dict:
     """force_displacement.png and crack_pattern.png, and the curve's peak figures for summary.json (keys named
     with their unit: translations mm / forces kN, rotations rad / moments kN·m; figures.dof_unit). `hist`: the
-    run's history columns (HistoryWriter.columns_dict: the rows of history.csv, kept in memory)."""
+    run's history columns (HistoryWriter.columns_dict: the rows of history.csv, kept in memory); with `[output]
+    rotations`, rotations.png (figures.write_rotations; `stages`: summary.json "stages", their stops at a rotation).
+    """
     from .output.figures import curve_data, dof_unit, post_peak, post_peak_summary, write_crack_pattern, write_curve
     out = {}
     if case.dimension == 3:  # deformed blocks, off-screen (pyvista when installed, else matplotlib)
@@ -1083,6 +1143,10 @@ def _figures(case, sim, model, out_dir, hist: dict, conv=None) -> dict:
     elif getattr(model, "contact", None) is not None and sim is not None:  # no figure: the count all the same
         from .output.figures import brick_cracks
         out.update(_cracked_bricks(brick_cracks(sim.last_contact, model.contact)))
+    if case.output.get("rotations") and "time" in hist:  # [output] rotations: the rotations against time
+        from .output.figures import write_rotations
+        write_rotations(os.path.join(out_dir, "rotations.png"), hist, stages, title=case.name)
+        out["rotations_png"] = "rotations.png"
     cv = case.output.get("curve")
     if cv:
         body, fk, dk = cv["body"], f"R{cv['force']}", f"u{cv['displacement']}"

@@ -427,6 +427,9 @@ class StageSpec:
     drivers: dict = spec(doc="body -> dof -> (kind, history) | None (free)", default_factory=dict)
     forces: dict = spec(doc="body -> dof -> history", default_factory=dict)
     stop_after_peak: tuple | None = spec(None, doc="(body, reaction dof, relative drop, min_steps)")
+    stop_rotation: tuple | None = spec(None, doc="(body, relative_to | None, angle [rad]): stop when the body's "
+                                       "rotation relative to relative_to (since placement if None) reaches angle",
+                                       key="stop_at_rotation")
     on_nonconvergence: str | None = spec(None, doc="'warn', 'fail', 'refine' or 'adaptive' for this stage (default: "
                                          "[contact])",
                                          choices=NONCONV)

@@ -8,7 +8,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from .plots import plot_crack_pattern, plot_curve, plot_hysteresis, plot_polygons_3d, plot_polygons_3d_pyvista
+from .plots import plot_crack_pattern, plot_curve, plot_hysteresis, plot_rotations, plot_polygons_3d, plot_polygons_3d_pyvista
 
 
 def _loop(edges: np.ndarray) -> np.ndarray:
@@ -187,6 +187,34 @@ def write_crack_pattern(path, sim, result, geometry=None, title=""):
                        crack_widths=None if b is None else d["crack_widths"],
                        crack_label=d["crack_label"])
     return d
+
+
+def write_rotations(path, history: dict, stages=(), title=""):
+    """rotations.png: the rotation columns of history.csv against time — the `[output] rotations` blocks (2D
+    NAME.rot; 3D the angle |(NAME.rotx, NAME.roty, NAME.rotz)|) and the rigid bodies' rotation dofs that move (2D
+    NAME.urz; 3D NAME.urx, .ury, .urz) — with the stops at a rotation of `stages` (summary.json "stages", entries
+    with "stop_rotation") marked: the relative angle reached and the reference body's rotation then."""
+    t = np.asarray(history["time"], dtype=float)
+    series = {}
+    for c in history:
+        if c.endswith(".rot"):
+            series[f"{c} (block)"] = history[c]
+        elif c.endswith(".rotx"):
+            b = c[:-5]
+            v = np.column_stack([np.asarray(history[f"{b}.rot{k}"], dtype=float) for k in "xyz"])
+            series[f"|{b}.rot| (block)"] = np.linalg.norm(v, axis=1)
+        elif c.rsplit(".", 1)[-1] in ("urx", "ury", "urz") and np.any(np.asarray(history[c], dtype=float) != 0):
+            series[f"{c} (rigid)"] = history[c]
+    stops = []
+    for st in stages or ():
+        r = st.get("stop_rotation")
+        if r:
+            ref = r["relative_to_rotation_rad"]
+            ref = "" if ref is None else (f", reference at {ref:.5g} rad" if np.isscalar(ref) else
+                                          f", reference at {np.linalg.norm(ref):.5g} rad (|rotation vector|)")
+            stops.append((r["time"], f"stage {st['name']!r} stop: relative {r['relative_angle_rad']:.3g} rad at "
+                                     f"t = {r['time']:.4g} s{ref}"))
+    return plot_rotations(path, t, series, stops, title)
 
 
 def dof_unit(column: str):

@@ -147,6 +147,25 @@ def draw_references(ax, references, sign=(1.0, 1.0)):
     return arts
 
 
+def plot_rotations(path, t, series: dict, stops=(), title=""):
+    """Rotations against time: `series` label -> values [rad] (one per time of `t`); `stops`: (time, label) of the
+    stage stops at a rotation, drawn as dotted vertical lines with their label in the legend. Returns `path`."""
+    t = np.asarray(t, dtype=float).ravel()
+    fig = _figure((6.4, 4.2))
+    ax = fig.add_subplot(111)
+    if not series:
+        _no_data(ax)
+    for label, y in series.items():
+        ax.plot(t, np.asarray(y, dtype=float).ravel(), lw=1.2, label=label)
+    for i, (ts, label) in enumerate(stops):
+        ax.axvline(ts, color="k", ls=":", lw=1, alpha=0.4 + 0.6 * (i + 1) / len(stops), label=label)
+    ax.set(xlabel="time [s]", ylabel="rotation since placement [rad]", title=title)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7, loc="best")
+    fig.tight_layout()
+    return _save(fig, path, 120)
+
+
 def plot_hysteresis(path, x, y, pieces, labels, xlabel, ylabel, title="", marks=None, marks_label=""):
     """Hysteresis loops: the curve y(x) drawn piece by piece, `pieces` a list of (i0, i1) point ranges (inclusive),
     piece k coloured along a sequential colour map and named `labels[k]` in the legend (e.g. "cycle 3: ±2 mm,
