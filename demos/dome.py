@@ -112,9 +112,11 @@ def main(out_dir: str, quick: bool = False, argv=None) -> dict:
     zprev = np.zeros(nb)
     hstep = cfg["h"]
     max_res = 0.0
+    sweeps_total = 0
     for k in range(1, cfg["steps"] + 1):
         info = sim.step()
         max_res = max(max_res, float(info.contact["residual"]))
+        sweeps_total += int(info.contact["sweeps"])
         if not info.contact["converged"]:
             print(f"dome: step {k}: NLGS not converged (residual {info.contact['residual']:.2g})", file=sys.stderr)
         uz = np.array([b.displacement_global()[:, 2].mean() for b in blocks])
@@ -167,7 +169,8 @@ def main(out_dir: str, quick: bool = False, argv=None) -> dict:
         max_edge_change=edge_change(blocks), max_rotation_rad=max(float(np.linalg.norm(b.rotation())) for b in blocks),
         nlgs_unconverged_steps=int(cst.n_unconverged), nlgs_last_residual=float(info.contact["residual"]),
         nlgs_max_residual=max_res, nlgs_tol=cst.opts.tol, nlgs_max_sweeps=cst.opts.max_sweeps,
-        nlgs_order=cst.opts.order,
+        nlgs_order=cst.opts.order, nlgs_sweeps_total=int(sweeps_total),
+        contact_timers_s={k: round(v, 3) for k, v in cst.timers.items()},  # detection (with Delassus), nlgs, ...
         outputs=dict(paraview="paraview/blocks.pvd", contacts="paraview/contacts.pvd", history="history.csv",
                      png="dome.png"))
     write_summary(os.path.join(out_dir, "summary.json"), summary)
