@@ -837,10 +837,6 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
                     output["curve"] = dict(body=drv[0][0], force=drv[0][1], displacement=drv[0][1])
                     break
     references = _parse_reference(ref_tables, output.get("curve"), U, base)
-    for itf in interfaces:
-        if itf.reference == "as_built" and contact.geometry != "frozen":
-            raise InputError(f"{source}: interfaces.{itf.name}.reference = 'as_built': expected contact.geometry = "
-                             f"'frozen' (joints closed as built are a small-displacement model)")
     case = Case(source=source, name=name, units=units, gravity=gravity, materials=materials,
                 block_types=block_types, blocks=blocks, rigid_bodies=rigid, stages=stages, output=output,
                 contact=contact, interfaces=interfaces, checks=checks, dimension=D, warnings=warnings,

@@ -312,7 +312,7 @@ class InterfaceSpec:
     orientation: str = spec("any", doc="'any', or 'bed'/'head' (chosen by the normal), or 'crack' (split bricks)",
                             choices=("any", "bed", "head", "crack"))
     params: dict = spec(doc="law parameters (LAW_PARAMS), SI per unit area", toml=False, default_factory=dict)
-    reference: str = spec("nominal", doc="'nominal': closed at g = g0; 'as_built': closed as built (frozen geometry)",
+    reference: str = spec("nominal", doc="'nominal': closed at g = g0; 'as_built': the initial contacts closed as built",
                           choices=("nominal", "as_built"))
     max_angle: float = spec(60.0, doc="facing angle [degrees]: a (candidate, antagonist) edge/face pair is examined "
                             "only if its outward normals are within max_angle of opposite (60: a corner of a "

@@ -14,6 +14,8 @@ geometry). Then u_{i+1} = u_free + W H P (one batched solve per block type).
 Geometry: "frozen" (small displacements; detection, frames, G and W_del once in the reference
 configuration; gaps follow the displacement jumps gt = gt_ref + (G q)_N) or "updated" (re-detection
 from the current configuration every `redetect_every` steps, reactions carried over by contact key;
+`reference = "as_built"`: each contact of the initial set carries its initial gap as an offset with its key,
+gt = g - g0 - g_built, g_built = (g - g0) at t = 0, 0 for a contact detected later (nominal);
 the steps in between keep the pairs and recompute points, frames, gaps and G from the current positions by
 detection_2d.update_geometry (2D) / detection_3d.update_geometry (3D)).
 
@@ -61,10 +63,6 @@ class ContactStep:
         self.body_parent = (-np.ones(len(body_groups), dtype=np.int64) if body_parent is None
                             else np.asarray(body_parent, dtype=np.int64))
         self.opts = options or ContactOptions()
-        for itf in self.interfaces:
-            if itf.reference == "as_built" and self.opts.geometry != "frozen":
-                raise InputError(f"interfaces.{itf.name}.reference = 'as_built' needs contact.geometry = 'frozen' "
-                                 f"(got {self.opts.geometry!r})")
         self.group_names = sorted(set(body_groups))
         gid = {g: i for i, g in enumerate(self.group_names)}
         self.body_group = np.array([gid[g] for g in body_groups], dtype=np.int64)
@@ -81,6 +79,7 @@ class ContactStep:
         self.P_prev, self.h_prev = None, None
         self.W_dirty = True
         self._rigid_W_restored = None  # 3D resume: rigid W of the checkpoint, used at the next Delassus build
+        self.g_built = None  # updated geometry: per contact, the as-built offset (initial g - g0; 0 = nominal)
         self.n_unconverged = 0
         self.steps = 0
         self.friction_total = 0.0  # frictional dissipation of every step so far [J] (contact/friction.py)
@@ -187,15 +186,23 @@ class ContactStep:
             nc = len(self.cs.gap)
             self.P = np.zeros((nc, self.dim))
             st = self._initial_state()
+            built = np.zeros(nc)  # updated geometry: as-built gap offsets g_built (0 = nominal)
             if old is not None and oldP is not None and nc:
                 m = match(old, self.cs)
                 ok = m >= 0
                 self.P[ok] = oldP[m[ok]]
                 st[ok] = self.state[m[ok]]
+                if self.g_built is not None:
+                    built[ok] = self.g_built[m[ok]]
             self.state = st
             if ref:  # frozen geometry: reference gaps; "as_built" joints are closed in the initial configuration
                 self.gap_ref = self.cs.gap - self.cs.g0
                 self.gap_ref[self._as_built()[self.cs.interface]] = 0.0
+            elif updated:  # the initial set's as-built contacts keep their initial g - g0 as an offset
+                if first:
+                    ab = self._as_built()[self.cs.interface] if nc else np.zeros(0, dtype=bool)
+                    built[ab] = (self.cs.gap - self.cs.g0)[ab]
+                self.g_built = built
         elif updated and len(self.cs.gap):  # between re-detections: same pairs, current points, frames and gaps
             self.cs = self._det.update_geometry(self.cs, s.positions(), s.bedges if self.dim == 2 else s.bfaces)
         if redetect or updated:
@@ -234,7 +241,8 @@ class ContactStep:
                              f"start by {-gt[a]:.3g} m (more than the alert distance {alerts[a]:.3g} m)")
 
     def _as_built(self) -> np.ndarray:
-        """Per interface: joints closed as built (reference gap = initial gap, frozen geometry only)."""
+        """Per interface: joints closed as built (frozen: reference gap 0; updated: the initial set's contacts carry
+        their initial g - g0 as the offset g_built)."""
         return np.array([itf.reference == "as_built" for itf in self.interfaces], dtype=bool)
 
     def initial_contacts(self, sim) -> dict:
@@ -304,6 +312,8 @@ class ContactStep:
                 d["contact.P_prev"], d["contact.h_prev"] = self.P_prev, np.float64(self.h_prev)
         if getattr(self, "gap_ref", None) is not None:
             d["contact.gap_ref"] = self.gap_ref
+        if self.g_built is not None:
+            d["contact.g_built"] = self.g_built
         if self.dim == 3 and self.scene is not None and len(self.scene.rigid) and self.scene.rigid_W:
             # 3D: the rigid W of the last Delassus assembly depends on the orientation then (frozen geometry keeps
             # it until the next rebuild), so it is part of the state
@@ -331,6 +341,8 @@ class ContactStep:
         self.P_prev = np.array(d["contact.P_prev"]) if "contact.P_prev" in d else None
         self.h_prev = float(d["contact.h_prev"]) if "contact.h_prev" in d else None
         self.gap_ref = np.array(d["contact.gap_ref"]) if "contact.gap_ref" in d else None
+        self.g_built = (np.array(d["contact.g_built"]) if "contact.g_built" in d
+                        else np.zeros(len(self.cs.gap)) if self.opts.geometry == "updated" else None)
         self.W_dirty = True  # rebuilt at the next step (new scene); 3D: with the rigid W in use at the export
         self._rigid_W_restored = (np.array(d["contact.rigid_W"]) if "contact.rigid_W" in d
                                   and not bool(d["contact.W_dirty"]) else None)
@@ -381,7 +393,7 @@ class ContactStep:
         if self.opts.geometry == "frozen":
             gt = self.gap_ref + K.local_velocity(self.G, s.gather("q"), s.U_offset)[:, 0]
         else:
-            gt = cs.gap - cs.g0
+            gt = cs.gap - cs.g0 - self.g_built  # as-built contacts of the initial set: g - g0 - g_built
         from ..laws import S_UP
         gt = gt - self.state[:, S_UP]  # crushed joints: the contact surface moved by the plastic closure u_p <= 0
         gbar = gt + h * (1 - th) * vi[:, 0]
