@@ -257,21 +257,7 @@ class Table:
         t = Table(self.data[k], self.key(k), self.source, self.units)
         f = t.string("file", required=True)
         base = os.path.dirname(os.path.abspath(self.source)) if os.path.exists(self.source) else os.getcwd()
-        full = f if os.path.isabs(f) else os.path.join(base, f)
-        if not os.path.isfile(full):
-            raise t.error("file", f"= {f!r}: file not found (expected a CSV file, relative to the case file)")
-        try:
-            with open(full, encoding="utf-8") as fh:
-                text = fh.read()
-        except (OSError, UnicodeDecodeError) as e:
-            raise t.error("file", f"= {f!r}: unreadable ({type(e).__name__}): expected a text CSV file") from None
-        rows = []
-        for n, line in enumerate(text.splitlines(), 1):
-            s_ = line.strip()
-            if s_ and not s_.startswith("#"):
-                sep = "," if "," in s_ else (";" if ";" in s_ else None)
-                rows.append((n, [c.strip().strip('"').strip() for c in s_.split(sep)]))
-        header = rows.pop(0)[1] if rows and not all(_is_number(c) for c in rows[0][1]) else None
+        full, rows, header = _csv_rows(t, f, base)
         idx = []
         for key, dflt in (("time", 0), ("value", 1)):
             t.used.add(key)
@@ -1419,11 +1405,11 @@ def _is_number(s: str) -> bool:
     return True
 
 
-def _read_reference_csv(t: Table, base: str, fd: float, ff: float):
-    """The CSV file of a [[reference]] curve -> (its path, [(d, F)] in SI). Cells separated by commas (else
-    semicolons, else blanks); blank lines and lines starting with '#' skipped; a first row holding a non-number
-    is the header; `columns` = [displacement, force] header names (default: the first two columns)."""
-    f = t.string("file")
+def _csv_rows(t: Table, f: str, base: str):
+    """The CSV file `f` of key `file` of table t (relative to `base`, the case file's folder) -> (its path, [(line
+    number, cells)], header cells or None). Cells separated by commas (else semicolons, else blanks), stripped of
+    blanks and double quotes; blank lines and lines starting with '#' skipped; a first row holding a non-number is
+    the header. Missing or unreadable file: InputError naming the key."""
     full = f if os.path.isabs(f) else os.path.join(base, f)
     if not os.path.isfile(full):
         raise t.error("file", f"= {f!r}: file not found (expected a CSV file, relative to the case file)")
@@ -1439,6 +1425,15 @@ def _read_reference_csv(t: Table, base: str, fd: float, ff: float):
             sep = "," if "," in s else (";" if ";" in s else None)
             rows.append((n, [c.strip().strip('"').strip() for c in s.split(sep)]))
     header = rows.pop(0)[1] if rows and not all(_is_number(c) for c in rows[0][1]) else None
+    return full, rows, header
+
+
+def _read_reference_csv(t: Table, base: str, fd: float, ff: float):
+    """The CSV file of a [[reference]] curve -> (its path, [(d, F)] in SI). Cells separated by commas (else
+    semicolons, else blanks); blank lines and lines starting with '#' skipped; a first row holding a non-number
+    is the header; `columns` = [displacement, force] header names (default: the first two columns)."""
+    f = t.string("file")
+    full, rows, header = _csv_rows(t, f, base)
     cols = t.raw("columns")
     if cols is not None:
         if not (isinstance(cols, list) and len(cols) == 2 and all(isinstance(c, str) and c for c in cols)):
