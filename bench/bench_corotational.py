@@ -22,36 +22,18 @@ import numpy as np
 
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
 sys.path.insert(0, os.path.dirname(__file__))
-from fem_blocks import builders  # noqa: E402
-from fem_blocks.bodies import BlockType, DeformableBody, Driver, Material, RigidBody  # noqa: E402
-from fem_blocks.contact.step import ContactOptions, ContactStep, InterfaceSpec  # noqa: E402
-from fem_blocks.dynamics import Simulation  # noqa: E402
-from fem_blocks.meshing import mesh_rectangle  # noqa: E402
 
 
 def build_bench1(corotational):
-    from bench_lmgc90_wall import ROWS
-    blocks = builders.courses(ROWS, 0.10, 0.05)
-    mat = Material(E=1e10, nu=0.15, rho=1800.0, thickness=1.0, plane="strain")
-    types, bodies = {}, []
-    for b in blocks:
-        if b.size_key not in types:
-            types[b.size_key] = BlockType(mesh_rectangle(b.length, b.height, 0.025, cell="quad"), mat, mass="lumped")
-        bodies.append(DeformableBody(types[b.size_key], (b.x, b.y)))
-    floor = RigidBody([(-0.1, -0.1), (0.6, -0.1), (0.6, 0.0), (-0.1, 0.0)],
-                      drivers={k: Driver("velocity", 0.0) for k in ("x", "y", "rz")})
-    cs = ContactStep([InterfaceSpec("bricks", ("b", "b"), mu=0.3), InterfaceSpec("floor", ("b", "f"), mu=0.5)],
-                     ["b"] * len(bodies) + ["f"], ContactOptions(tol=1e-4, max_sweeps=10000, geometry="updated"))
-    sim = Simulation(bodies + [floor], h=1e-4, theta=0.505, contact=cs, gravity=(0.0, -9.81),
-                     corotational=corotational)
+    from bench_lmgc90_wall import build
+    sim, cs, *_ = build(geometry="updated", corotational=corotational)
     return sim, cs
 
 
 def build_wall(n, corotational):
     import bench_wall
-    bench_wall.ContactOptions = functools.partial(ContactOptions, geometry="updated")
-    bench_wall.Simulation = functools.partial(Simulation, corotational=corotational)
-    sim, cs, *_ = bench_wall.build(n, "dry", h=1e-4, theta=0.505, velocity_reset=False)
+    sim, cs, *_ = bench_wall.build(n, "dry", h=1e-4, theta=0.505, velocity_reset=False, geometry="updated",
+                                   corotational=corotational)
     return sim, cs
 
 

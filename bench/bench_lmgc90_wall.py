@@ -29,8 +29,8 @@ ROWS = [[0.5, 1, 1, 1, 1, 0.5], [1] * 5, [0.5, 1, 1, 1, 1, 0.5], [1] * 5, [0.5, 
         [0.5, 1, G, 1, 0.5], [1, 3, 1], [0.5, 1, 1, 1, 1, 0.5]]
 
 
-def main(steps=2000, placement=None, history=None):
-    t0 = time.perf_counter()
+def build(placement=None, geometry="frozen", corotational=None):
+    """The benchmark's model -> (sim, contact step, blocks (builder geometry), deformable bodies, floor)."""
     blocks = builders.courses(ROWS, 0.10, 0.05)
     mat = Material(E=1e10, nu=0.15, rho=1800.0, thickness=1.0, plane="strain")
     types, bodies = {}, []
@@ -42,8 +42,15 @@ def main(steps=2000, placement=None, history=None):
                       drivers={k: Driver("velocity", 0.0) for k in ("x", "y", "rz")})
     cs = ContactStep([InterfaceSpec("bricks", ("b", "b"), mu=0.3, placement=placement),
                       InterfaceSpec("floor", ("b", "f"), mu=0.5, placement=placement)],
-                     ["b"] * len(bodies) + ["f"], ContactOptions(tol=1e-4, max_sweeps=10000))
-    sim = Simulation(bodies + [floor], h=1e-4, theta=0.505, contact=cs, gravity=(0.0, -9.81))
+                     ["b"] * len(bodies) + ["f"], ContactOptions(tol=1e-4, max_sweeps=10000, geometry=geometry))
+    sim = Simulation(bodies + [floor], h=1e-4, theta=0.505, contact=cs, gravity=(0.0, -9.81),
+                     corotational=corotational)
+    return sim, cs, blocks, bodies, floor
+
+
+def main(steps=2000, placement=None, history=None):
+    t0 = time.perf_counter()
+    sim, cs, blocks, bodies, floor = build(placement)
     info0 = sim.step()
     t_setup = time.perf_counter() - t0
     for k in cs.timers:

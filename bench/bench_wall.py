@@ -41,7 +41,8 @@ from fem_blocks.meshing import mesh_rectangle  # noqa: E402
 FREMOND = dict(c_N=0.5e10, c_T=0.3e10, w=18.0, mu=0.7)
 
 
-def build(n_bricks, joints="dry", h=1e-3, theta=1.0, velocity_reset=True, coarse="none", max_sweeps=1000):
+def build(n_bricks, joints="dry", h=1e-3, theta=1.0, velocity_reset=True, coarse="none", max_sweeps=1000,
+          geometry="frozen", corotational=None):
     """The wall, its floor, the contact step and the simulation; returns (sim, cs, floor, blocks, weight, t_build)."""
     per = max(2, int(round(np.sqrt(n_bricks * 0.25 / 0.5))))  # about twice as wide as high (in bricks)
     courses = max(1, int(round(n_bricks / per)))
@@ -59,8 +60,10 @@ def build(n_bricks, joints="dry", h=1e-3, theta=1.0, velocity_reset=True, coarse
     joint = (InterfaceSpec("j", ("b", "b"), mu=0.7) if joints == "dry" else
              InterfaceSpec("j", ("b", "b"), law="fremond", params=dict(FREMOND)))
     cs = ContactStep([joint, InterfaceSpec("f", ("b", "g"), mu=0.7)],
-                     ["b"] * len(bodies) + ["g"], ContactOptions(tol=1e-4, max_sweeps=max_sweeps, coarse=coarse))
-    sim = Simulation(bodies + [floor], h=h, theta=theta, contact=cs, velocity_reset=velocity_reset)
+                     ["b"] * len(bodies) + ["g"], ContactOptions(tol=1e-4, max_sweeps=max_sweeps, coarse=coarse,
+                                                                geometry=geometry))
+    sim = Simulation(bodies + [floor], h=h, theta=theta, contact=cs, velocity_reset=velocity_reset,
+                     corotational=corotational)
     t_build = time.perf_counter() - t0
     weight = sum(1800.0 * b.length * b.height * 0.12 for b in blocks) * 9.81
     return sim, cs, floor, blocks, weight, t_build
