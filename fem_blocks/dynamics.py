@@ -439,20 +439,18 @@ class Simulation:
 
     def rotations(self) -> np.ndarray:
         """Rotation of every body since its placement, batched per group (`body.rotation()` of each deformable body,
-        up to rounding; 3D framed bodies call it, one log map each): 2D (nb,) angles [rad] (framed: unwrapped frame angle + the best-fit small rotation of
-        q; rigid: q[2]); 3D (nb, 3) rotation vectors (deformable: of R exp([θ_q]x) R0ᵀ; rigid: of the orientation)."""
+        up to rounding; the best-fit small rotation of q by BlockType.rotation_weights, one product per group; 3D
+        framed bodies call body.rotation(), one log map each): 2D (nb,) angles [rad] (framed: unwrapped frame angle +
+        the best-fit small rotation of q; rigid: q[2]); 3D (nb, 3) rotation vectors (deformable: of R exp([θ_q]x) R0ᵀ;
+        rigid: of the orientation)."""
         from .bodies import rotation_vector
         d = self.dim
         out = np.zeros(len(self.bodies)) if d == 2 else np.zeros((len(self.bodies), 3))
         for gr in self.groups:
-            mp = gr.type.mass_properties
-            k = len(gr.members)
-            Q = gr.Q.T.reshape(k, -1, d)
+            th = np.einsum("kd,dn->nk", gr.type.rotation_weights(), gr.Q)  # best-fit small rotation of q, per body
             if d == 2:
-                th = np.einsum("n,kn->k", mp.m, mp.r0[:, 0] * Q[..., 1] - mp.r0[:, 1] * Q[..., 0]) / mp.I0
-                out[gr.members] = th + (gr.phi if gr.framed else 0.0)
+                out[gr.members] = th[:, 0] + (gr.phi if gr.framed else 0.0)
             else:
-                th = np.einsum("ij,kj->ki", mp.I0inv, np.einsum("n,kni->ki", mp.m, np.cross(mp.r0[None], Q)))
                 for j, b in enumerate(gr.members):
                     out[b] = self.bodies[b].rotation() if gr.framed else self.bodies[b].R0 @ th[j]
         for i in self.rigid:
