@@ -811,16 +811,11 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
         summary = _summary(case, model, sim, info, run, t_start, t_setup, pv, pc, status)
         summary["energy_created_ratio_max"] = guards.max_ratio
         summary["warnings"] = start_warnings + [w for s in run["stages_done"] for w in s.get("warnings", [])]
-        rot_warning = watch.message()
-        if rot_warning:
-            summary["warnings"].append(rot_warning)
+        summary["warnings"] += [m for m in (watch.message(), missed.message()) if m]
         summary["rotation"] = watch.state if watch.active else None
-        miss_warning = missed.message()
-        if miss_warning:
-            summary["warnings"].append(miss_warning)
         if missed.active:  # (updated geometry only: frozen-geometry summaries keep their keys)
             summary["missed_contacts"] = missed.state
-        conv["rotation_warning"] = rot_warning  # printed by the CLI before its last line (convergence_line)
+        conv["rotation_warning"] = watch.message()  # printed by the CLI before its last line (convergence_line)
         summary["convergence"] = conv
         summary["exit_status"] = conv["exit_status"] if code is None else code
         summary.update(_figures(case, sim, model, out_dir, hist.columns_dict(), conv, summary.get("stages")))
@@ -884,12 +879,10 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
                         cstats["max_residual"] = max(cstats["max_residual"], c["residual"])
                         cstats["max_change"] = max(cstats["max_change"], c["change"])
                     failure = guards.check(sim, info, run["e0"])
-                    rot_warning = watch.check(sim)
-                    if rot_warning:
-                        print(f"fem-blocks: warning: {rot_warning}", file=sys.stderr)
-                    miss_warning = missed.check(sim)
-                    if miss_warning:
-                        print(f"fem-blocks: warning: {miss_warning}", file=sys.stderr)
+                    for w in (watch, missed):  # each warns once, at the step where it first fires
+                        msg = w.check(sim)
+                        if msg:
+                            print(f"fem-blocks: warning: {msg}", file=sys.stderr)
                     if failure is None and c and not c["converged"] and policy in ("fail", "refine", "adaptive") \
                             and (policy == "fail" or level >= max_level):
                         if policy == "fail":
