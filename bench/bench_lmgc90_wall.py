@@ -100,7 +100,7 @@ def main(steps=2000, placement=None, history=None):
     n = steps - 1
     weight = sum(1800.0 * b.length * b.height for b in blocks) * 9.81
     tm = cs.timers
-    print(f"bricks {len(blocks)}, block types {len(types)}, dofs {sum(b.type.ndof for b in bodies)}, "
+    print(f"bricks {len(blocks)}, block types {len({id(b.type) for b in bodies})}, dofs {sum(b.type.ndof for b in bodies)}, "
           f"contacts {info.contact['contacts']}")
     print(f"setup {t_setup:.2f} s (incl. first step and numba compilation)")
     print(f"per step {wall / n * 1e3:.2f} ms: free velocity {t_free / n * 1e3:.2f}, detection+Delassus "
