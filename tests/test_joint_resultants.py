@@ -1,0 +1,120 @@
+"""Joint resultants and the line of thrust (issue #23, output/joints.py).
+
+Closed forms:
+- lever rule: two contacts of one joint with normal forces p1, p2 at ξ1, ξ2: N = p1 + p2, point of application
+  (p1 ξ1 + p2 ξ2) / N, the same whichever body is the candidate (action–reaction);
+- a block (b × h) at rest on a table under gravity tilted by α (= a table tilted by α): the table's resultant on
+  the block balances the weight, N = m g cos α, T = m g sin α, and its line of action passes through the centre of
+  mass, so it crosses the joint at e = (h/2) tan α from its middle: it reaches the toe (e = b/2) at tan α = b/h;
+- a stack of blocks at rest: the joint under block k carries the weight of the blocks above it (N = Σ m g)."""
+import numpy as np
+import pytest
+from types import SimpleNamespace
+
+from fem_blocks.output.joints import history_columns, history_values, joint_resultants
+
+G, B, H, RHO = 9.81, 0.1, 0.3, 2000.0
+
+
+def cs2(cand, ant, points, n, area):
+    n = np.asarray(n, float)
+    return SimpleNamespace(cand_body=np.asarray(cand), ant_body=np.asarray(ant), point=np.asarray(points, float),
+                           n=n, t=np.column_stack([-n[:, 1], n[:, 0]]), area=np.asarray(area, float))
+
+
+@pytest.mark.parametrize("flip", [False, True])
+def test_lever_rule_either_orientation(flip):
+    """Horizontal joint y = 0 of length 1 between body 0 (below) and body 1 (above); points at x = 0.25, 0.75
+    ('positions' placement, tributary 0.5 each). p1 = 3, p2 = 1 N (+ tangential 0.5, 0.25 N)."""
+    p, q = np.array([3.0, 1.0]), np.array([0.5, 0.25])
+    if not flip:   # candidate = upper body 1; n = outward normal of body 0 = +y
+        cs = cs2([1, 1], [0, 0], [[0.25, 0], [0.75, 0]], [[0, 1], [0, 1]], [0.5, 0.5])
+    else:          # candidate = lower body 0; n = outward normal of body 1 = -y; same physical forces
+        cs = cs2([0, 0], [1, 1], [[0.25, 0], [0.75, 0]], [[0, -1], [0, -1]], [0.5, 0.5])
+    # physical force of body 0 on body 1 at each point: (-q, p) in x, y. Not flipped: t = (-1, 0), r = (p, q) on
+    # body 1. Flipped: t = (1, 0), r = force of body 1 on body 0 = (q, -p) = p n + q t: r = (p, q) again
+    r = np.column_stack([p, q])
+    j = joint_resultants(cs, r)
+    assert j.bodies.tolist() == [[0, 1]] and j.n_contacts.tolist() == [2]
+    assert np.allclose(j.force[0], [-q.sum(), p.sum()], rtol=0, atol=1e-14)
+    assert j.N[0] == pytest.approx(4.0, abs=1e-14) and j.T[0] == pytest.approx(0.75, abs=1e-14)
+    assert np.allclose(j.normal[0], [0, 1]) and np.allclose(j.middle[0], [0.5, 0])
+    assert j.half_width[0] == pytest.approx(0.5, abs=1e-14)
+    x_app = (3 * 0.25 + 1 * 0.75) / 4  # lever rule
+    assert np.allclose(j.point[0], [x_app, 0], atol=1e-14)
+    assert abs(j.ecc[0]) == pytest.approx(0.5 - x_app, abs=1e-14) and j.inside[0]
+
+
+def test_triangular_pressure_edge_of_kern_and_open_joint():
+    """'overlap' placement: points at both ends (tributary 0.5 each); p at x = 0 only: the point of application
+    is the corner (|e| = half-width, still inside); a tension-only pair (N < 0): no point, not inside; a pair
+    with no force: NaN."""
+    cs = cs2([1, 1, 2, 2, 3, 3], [0, 0, 1, 1, 2, 2], [[0, 0], [1, 0], [0, 1], [1, 1], [0, 2], [1, 2]],
+             [[0, 1]] * 6, [0.5] * 6)
+    r = np.array([[2.0, 0], [0, 0], [-1.0, 0], [-1.0, 0], [0, 0], [0, 0]])
+    j = joint_resultants(cs, r)
+    assert j.bodies.tolist() == [[0, 1], [1, 2], [2, 3]]
+    assert np.allclose(j.point[0], [0, 0], atol=1e-14) and abs(j.ecc[0]) == pytest.approx(0.5, abs=1e-14)
+    assert j.inside.tolist() == [True, False, False]
+    assert np.isnan(j.ecc[1]) and np.isnan(j.ecc[2]) and j.N[1] == pytest.approx(-2.0)
+
+
+def test_history_columns_and_values():
+    cs = cs2([1, 1], [0, 0], [[0.25, 0], [0.75, 0]], [[0, 1], [0, 1]], [0.5, 0.5])
+    j = joint_resultants(cs, np.array([[1.0, 0], [1.0, 0]]))
+    names = ["base", "brick"]
+    assert history_columns(names, [(1, 0)]) == ["base|brick.N", "base|brick.T", "base|brick.e"]
+    v = history_values(j, [(1, 0), (0, 2)], names + ["x"])
+    assert v["base|brick.N"] == 2.0 and v["base|brick.e"] == 0.0 and np.isnan(v["base|x.e"])
+
+
+def test_3d_eccentricity_two_axes():
+    """A 1 x 1 joint in z = 0 with 4 points at (±1/4, ±1/4) (tributary 1/4 each); normal loads 1, 2, 3, 4:
+    point of application = load-weighted mean of the points, half-widths 1/2."""
+    pts = np.array([[0.25, 0.25, 0], [0.75, 0.25, 0], [0.25, 0.75, 0], [0.75, 0.75, 0]])
+    n = np.tile([0.0, 0, 1], (4, 1))
+    cs = SimpleNamespace(cand_body=np.ones(4, int), ant_body=np.zeros(4, int), point=pts, n=n,
+                         t=np.tile([1.0, 0, 0], (4, 1)), s=np.tile([0.0, 1, 0], (4, 1)), area=np.full(4, 0.25))
+    w = np.array([1.0, 2, 3, 4])
+    j = joint_resultants(cs, np.column_stack([w, np.zeros(4), np.zeros(4)]))
+    assert j.N[0] == pytest.approx(10.0)
+    assert np.allclose(j.point[0], w @ pts / w.sum(), atol=1e-14)
+    assert np.allclose(j.half_width[0], [0.5, 0.5], atol=1e-14) and j.inside[0]
+
+
+# ----------------------------------------------------------------------------- simulations
+def tilted_block(tan_alpha, steps=150, h=2e-3):
+    """A b x h block (2 x 6 Q4, E = 10 GPa) at rest on a fixed rigid table, gravity tilted by α (default 2D
+    placement, μ = 0.8 > tan α). Returns the joint resultants of the last step and the block's mass."""
+    from fem_blocks.bodies import BlockType, DeformableBody, Driver, Material, RigidBody
+    from fem_blocks.contact.step import ContactOptions, ContactStep, InterfaceSpec
+    from fem_blocks.dynamics import Simulation
+    from fem_blocks.meshing import mesh_rectangle
+    bt = BlockType(mesh_rectangle(B, H, B / 2, cell="quad"), Material(E=1e10, nu=0.2, rho=RHO, thickness=1.0))
+    blk = DeformableBody(bt, position=(0.0, 0.0))
+    table = RigidBody([(-0.5, -0.1), (0.6, -0.1), (0.6, 0.0), (-0.5, 0.0)],
+                      drivers={k: Driver("velocity", 0.0) for k in ("x", "y", "rz")}, name="table")
+    step = ContactStep([InterfaceSpec("base", ("block", "table"), mu=0.8)], ["block", "table"],
+                       ContactOptions(tol=1e-12, max_sweeps=20000))
+    a = np.arctan(tan_alpha)
+    sim = Simulation([blk, table], h=h, theta=1.0, contact=step, gravity=(G * np.sin(a), -G * np.cos(a)))
+    for _ in range(steps):
+        sim.step()
+    rec = sim.last_contact
+    return joint_resultants(rec.cs, rec.r, step.contact_points(rec.cs), step.joint_lengths(rec.cs)), RHO * B * H
+
+
+@pytest.mark.dolfinx
+@pytest.mark.parametrize("ratio", [0.5, 0.95, 1.0])
+def test_tilting_table_resultant_moves_to_the_toe(ratio):
+    """tan α = ratio b/h: e = (h/2) tan α = ratio b/2 toward the toe (x = b), N = m g cos α, T = m g sin α,
+    after 0.3 s at rest (θ = 1). Observed: N, T within 1e-11 relative; the point within 1e-7 b below the
+    overturning angle and 7e-5 b of the toe at tan α = b/h (the block is at the limit: the toe carries everything)."""
+    tan_a = ratio * B / H
+    j, m = tilted_block(tan_a)
+    a = np.arctan(tan_a)
+    assert len(j) == 1 and j.inside[0]
+    assert j.N[0] == pytest.approx(m * G * np.cos(a), rel=1e-9)
+    assert j.T[0] == pytest.approx(m * G * np.sin(a), rel=1e-9)
+    assert j.half_width[0] == pytest.approx(B / 2, rel=1e-12)
+    assert j.point[0][0] - B / 2 == pytest.approx(0.5 * H * tan_a, abs=(1e-3 if ratio == 1.0 else 1e-6) * B)
