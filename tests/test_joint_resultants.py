@@ -118,3 +118,56 @@ def test_tilting_table_resultant_moves_to_the_toe(ratio):
     assert j.T[0] == pytest.approx(m * G * np.sin(a), rel=1e-9)
     assert j.half_width[0] == pytest.approx(B / 2, rel=1e-12)
     assert j.point[0][0] - B / 2 == pytest.approx(0.5 * H * tan_a, abs=(1e-3 if ratio == 1.0 else 1e-6) * B)
+
+
+@pytest.fixture(scope="module")
+def arch_at_rest():
+    """demos/arch.toml (15 voussoirs, intrados R = 1 m, ring depth 0.3 m, μ = 0.5, θ = 1, h = 2e-3 s) with mesh
+    size t/2, run 0.2 s: at rest. Returns (model, joint resultants of the last step)."""
+    import os
+    import tomllib
+    from fem_blocks.case import parse_case
+    from fem_blocks.dynamics import Simulation
+    from fem_blocks.model import build_model
+    from _paths import DEMOS
+    with open(os.path.join(DEMOS, "arch.toml"), "rb") as f:
+        doc = tomllib.load(f)
+    doc["arch"]["mesh_size"] = 0.15
+    case = parse_case(doc, "arch.toml")
+    model = build_model(case)
+    st = case.stages[0]
+    sim = Simulation(model.bodies, h=st.h, theta=st.theta, gravity=model.gravity, contact=model.contact)
+    for _ in range(100):
+        sim.step()
+    rec, step = sim.last_contact, model.contact
+    return model, joint_resultants(rec.cs, rec.r, step.contact_points(rec.cs), step.joint_lengths(rec.cs))
+
+
+VOUSSOIR_WEIGHT = RHO * G * 0.5 * np.sin(np.pi / 15) * (1.3 ** 2 - 1.0 ** 2)  # trapezoid (straight faces), 1 m thick
+
+
+@pytest.mark.dolfinx
+def test_arch_line_of_thrust_inside_every_joint(arch_at_rest):
+    """16 joints (14 between voussoirs, 2 on the piers), each compressed, its point of application inside it."""
+    model, j = arch_at_rest
+    vous = [i for i, nm in enumerate(model.names) if nm.startswith("voussoir")]
+    assert len(vous) == 15
+    inner = [k for k in range(len(j)) if set(j.bodies[k]) <= set(vous)]
+    springing = [k for k in range(len(j)) if len(set(j.bodies[k]) & set(vous)) == 1]
+    assert len(inner) == 14 and len(springing) == 2
+    assert np.all(j.N > 0) and np.all(j.inside)
+    assert np.allclose(j.half_width, 0.15, rtol=1e-5)  # ring depth / 2 (updated geometry: overlaps of the moved blocks)
+
+
+@pytest.mark.dolfinx
+def test_arch_joint_resultants_balance_the_weight(arch_at_rest):
+    """Statics: on every voussoir the joint resultants balance its weight (m g = ρ g A, A the trapezoid between radii 1 and 1.3 m, from the
+    geometry), and the two springing joints carry the weight of the whole arch (15 m g)."""
+    model, j = arch_at_rest
+    vous = [i for i, nm in enumerate(model.names) if nm.startswith("voussoir")]
+    for v in vous:
+        f = sum((1 if b == v else -1) * j.force[k] for k, (a, b) in enumerate(j.bodies) if v in (a, b))
+        assert np.allclose(f, [0.0, VOUSSOIR_WEIGHT], rtol=0, atol=1e-6 * VOUSSOIR_WEIGHT), (model.names[v], f)
+    on_arch = sum((1 if b in vous else -1) * j.force[k] for k, (a, b) in enumerate(j.bodies)
+                  if (a in vous) != (b in vous))
+    assert np.allclose(on_arch, [0.0, 15 * VOUSSOIR_WEIGHT], rtol=0, atol=1e-6 * 15 * VOUSSOIR_WEIGHT)
