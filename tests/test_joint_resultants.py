@@ -63,9 +63,9 @@ def test_history_columns_and_values():
     cs = cs2([1, 1], [0, 0], [[0.25, 0], [0.75, 0]], [[0, 1], [0, 1]], [0.5, 0.5])
     j = joint_resultants(cs, np.array([[1.0, 0], [1.0, 0]]))
     names = ["base", "brick"]
-    assert history_columns(names, [(1, 0)]) == ["base|brick.N", "base|brick.T", "base|brick.e"]
+    assert history_columns(names, [(1, 0)]) == ["brick|base.N", "brick|base.T", "brick|base.e"]
     v = history_values(j, [(1, 0), (0, 2)], names + ["x"])
-    assert v["base|brick.N"] == 2.0 and v["base|brick.e"] == 0.0 and np.isnan(v["base|x.e"])
+    assert v["brick|base.N"] == 2.0 and v["brick|base.e"] == 0.0 and np.isnan(v["base|x.e"])
 
 
 def test_3d_eccentricity_two_axes():

@@ -155,10 +155,11 @@ def joint_resultants(cs, r, points=None, lengths=None) -> JointResultants:
 
 def history_columns(names, joints_wanted) -> list[str]:
     """history.csv columns of the joints `joints_wanted` [(a, b), ...] (body indices) with body names `names`:
-    'A|B.N', 'A|B.T' [N] and 'A|B.e' [m] (eccentricity; empty when the joint is open)."""
+    'A|B.N', 'A|B.T' [N] and 'A|B.e' [m] (eccentricity; NaN while the joint is open), A and B in the given order
+    (the values are those of the joint (min, max): force of the lower body index on the higher)."""
     cols = []
     for a, b in joints_wanted:
-        tag = f"{names[min(a, b)]}|{names[max(a, b)]}"
+        tag = f"{names[a]}|{names[b]}"
         cols += [f"{tag}.N", f"{tag}.T", f"{tag}.e"]
     return cols
 
@@ -168,7 +169,7 @@ def history_values(res: JointResultants | None, joints_wanted, names) -> dict:
     3D: e = |(e_t, e_s)|)."""
     out = {}
     for a, b in joints_wanted:
-        tag = f"{names[min(a, b)]}|{names[max(a, b)]}"
+        tag = f"{names[a]}|{names[b]}"
         try:
             j = res.index(a, b) if res is not None else None
         except KeyError:
@@ -180,3 +181,44 @@ def history_values(res: JointResultants | None, joints_wanted, names) -> dict:
         out.update({f"{tag}.N": float(res.N[j]), f"{tag}.T": float(res.T[j]),
                     f"{tag}.e": float(e) if np.ndim(e) == 0 else float(np.hypot(*e))})
     return out
+
+
+def record_joints(result, locate=None, lengths=None) -> JointResultants | None:
+    """joint_resultants of a contact.result.ContactResult (None without contacts). `locate(cs)`, `lengths(cs)`: the
+    contact step's contact_points / joint_lengths (2D); default cs.point, cs.area."""
+    if result is None or not result.has_contacts():
+        return None
+    cs = result.cs
+    return joint_resultants(cs, result.r, None if locate is None else locate(cs),
+                            None if lengths is None else lengths(cs))
+
+
+class JointsWriter:
+    """The joints of a run as a vertex cloud per frame in `<directory>/joints.pvd`, written by
+    output.contacts.ContactsWriter next to each contacts frame: one vertex per joint at its point of application
+    (the joint's middle where N <= 0), point data force (global, force of body_a on body_b, N), N, T, e
+    (2D: along tangent; 3D: (e_t, e_s)), half_width, inside (1/0), open (1 where N <= 0), body_a, body_b,
+    n_contacts, normal, tangent."""
+
+    def __init__(self, directory: str, dim: int, locate=None, lengths=None, append: bool = False,
+                 keep_until_time: float | None = None):
+        from .pvd import SeriesWriter
+        self.dim, self.locate, self.lengths = dim, locate, lengths
+        self.series = SeriesWriter(directory, "joints", append, keep_until_time)
+
+    def arrays(self, result):
+        j = record_joints(result, self.locate, self.lengths)
+        if j is None:
+            return np.zeros((0, self.dim)), {}
+        opened = ~(j.N > 0)
+        x = np.where(opened[:, None], j.middle, j.point)
+        e = np.where(np.isnan(j.ecc), 0.0, j.ecc)
+        data = dict(force=j.force, N=j.N, T=j.T, e=e, half_width=j.half_width,
+                    inside=j.inside.astype(np.int64), open=opened.astype(np.int64),
+                    body_a=j.bodies[:, 0].copy(), body_b=j.bodies[:, 1].copy(),
+                    n_contacts=j.n_contacts.astype(np.int64), normal=j.normal, tangent=j.tangent)
+        return x, data
+
+    def write(self, time: float, result) -> str:
+        x, data = self.arrays(result)
+        return self.series.write_frame(time, x, [("vertex", np.arange(len(x)))], point_data=data)
