@@ -1315,7 +1315,7 @@ def _parse_output(root: Table, D: int) -> dict:
         jts = out.raw("joints", [])  # names matched to the built bodies by the runner (runner.joint_pairs)
         if not (isinstance(jts, list) and all(isinstance(p, list) and len(p) == 2 and p[0] != p[1]
                                               and all(isinstance(x, str) and x for x in p) for p in jts)):
-            raise out.error("joints", f"= {jts!r}: expected a list of pairs of body names, e.g. "
+            raise out.error("joints", f"= {jts!r}: expected a list of pairs of two different body names, e.g. "
                                       "[[\"voussoir6\", \"voussoir7\"]]")
         output["joints"] = [list(p) for p in jts]
         output.update(read_fields(out, OutputSpec, ("joints_paraview", "line_of_thrust")))

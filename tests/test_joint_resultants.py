@@ -171,3 +171,67 @@ def test_arch_joint_resultants_balance_the_weight(arch_at_rest):
     on_arch = sum((1 if b in vous else -1) * j.force[k] for k, (a, b) in enumerate(j.bodies)
                   if (a in vous) != (b in vous))
     assert np.allclose(on_arch, [0.0, 15 * VOUSSOIR_WEIGHT], rtol=0, atol=1e-6 * 15 * VOUSSOIR_WEIGHT)
+
+
+BRICK_CASE = """
+[materials.m]
+E = 1e9
+nu = 0.2
+rho = 2000.0
+[block_types.b]
+geometry = "rectangle"
+lx = 0.2
+ly = 0.1
+mesh_size = 0.1
+material = "m"
+[[blocks]]
+type = "b"
+name = "brick"
+position = [-0.1, 0.0]
+[[rigid_bodies]]
+name = "base"
+group = "base"
+vertices = [[-1.0, -0.1], [1.0, -0.1], [1.0, 0.0], [-1.0, 0.0]]
+[rigid_bodies.drivers]
+x = {kind = "velocity", history = 0.0}
+y = {kind = "velocity", history = 0.0}
+rz = {kind = "velocity", history = 0.0}
+[[interfaces]]
+between = ["blocks", "base"]
+mu = 0.5
+[output]
+joints = [["brick", "base"]]
+joints_paraview = true
+line_of_thrust = true
+[[stages]]
+duration = 0.02
+h = 0.001
+theta = 1.0
+"""
+
+
+@pytest.mark.dolfinx
+def test_run_writes_joint_history_paraview_and_line_of_thrust(tmp_path):
+    """A 0.2 x 0.1 m brick (1 m thick, 2000 kg/m³) resting on a fixed base: history.csv brick|base.N = its weight
+    m g = 392.4 N and e = 0 (symmetric), T = 0; joints.pvd holds one point at the joint's middle (x = 0, y = 0)
+    with N; line_of_thrust.png and summary.json "line_of_thrust" (1 compressed joint, none outside)."""
+    import csv
+    import json
+    import meshio
+    from fem_blocks.cli import main
+    case = tmp_path / "brick.toml"
+    case.write_text(BRICK_CASE)
+    out = tmp_path / "out"
+    assert main(["run", str(case), "--out", str(out), "--quiet"]) == 0
+    rows = list(csv.DictReader(open(out / "history.csv")))
+    w = 2000.0 * 0.2 * 0.1 * 9.81
+    last = rows[-1]
+    assert float(last["brick|base.N"]) == pytest.approx(w, rel=1e-6)
+    assert abs(float(last["brick|base.T"])) < 1e-6 * w and abs(float(last["brick|base.e"])) < 1e-6 * 0.1
+    s = json.load(open(out / "summary.json"))
+    assert s["line_of_thrust"] == dict(png="line_of_thrust.png", joints=1, compressed=1, outside=[])
+    assert (out / "line_of_thrust.png").stat().st_size > 1000
+    vtus = sorted((out / "paraview").glob("joints_*.vtu"))
+    m = meshio.read(vtus[-1])
+    assert len(m.points) == 1 and np.allclose(m.points[0, :2], [0.0, 0.0], atol=1e-6)
+    assert m.point_data["N"][0] == pytest.approx(w, rel=1e-6) and m.point_data["inside"][0] == 1
