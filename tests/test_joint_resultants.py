@@ -235,3 +235,21 @@ def test_run_writes_joint_history_paraview_and_line_of_thrust(tmp_path):
     m = meshio.read(vtus[-1])
     assert len(m.points) == 1 and np.allclose(m.points[0, :2], [0.0, 0.0], atol=1e-6)
     assert m.point_data["N"][0] == pytest.approx(w, rel=1e-6) and m.point_data["inside"][0] == 1
+
+
+def test_joints_writer_3d_frame(tmp_path):
+    """JointsWriter (3D): one vertex per joint at the point of application, N and the 2-vector e in the file."""
+    import meshio
+    from fem_blocks.contact.result import ContactResult
+    from fem_blocks.output.joints import JointsWriter
+    pts = np.array([[0.25, 0.25, 0], [0.75, 0.25, 0], [0.25, 0.75, 0], [0.75, 0.75, 0]])
+    cs = SimpleNamespace(cand_body=np.ones(4, int), ant_body=np.zeros(4, int), point=pts,
+                         n=np.tile([0.0, 0, 1], (4, 1)), t=np.tile([1.0, 0, 0], (4, 1)),
+                         s=np.tile([0.0, 1, 0], (4, 1)), area=np.full(4, 0.25), gap=np.zeros(4))
+    w = np.array([1.0, 1, 1, 5])
+    r = np.column_stack([w, np.zeros(4), np.zeros(4)])
+    rec = ContactResult(dim=3, stats={}, cs=cs, r=r, P=r * 1e-3)
+    JointsWriter(str(tmp_path), 3).write(0.0, rec)
+    m = meshio.read(tmp_path / "joints_000000.vtu")
+    assert np.allclose(m.points[0], w @ pts / w.sum(), atol=1e-14)
+    assert m.point_data["N"][0] == pytest.approx(8.0) and m.point_data["e"].shape[0] == 1
