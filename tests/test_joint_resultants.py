@@ -253,3 +253,13 @@ def test_joints_writer_3d_frame(tmp_path):
     m = meshio.read(tmp_path / "joints_000000.vtu")
     assert np.allclose(m.points[0], w @ pts / w.sum(), atol=1e-14)
     assert m.point_data["N"][0] == pytest.approx(8.0) and m.point_data["e"].shape[0] == 1
+
+
+@pytest.mark.dolfinx
+def test_check_names_an_unknown_joint_body(capsys):
+    """`fem-blocks check` matches the [output] joints names to the built bodies as a run does (exit 2)."""
+    import os
+    from fem_blocks.cli import main
+    path = os.path.join(os.path.dirname(__file__), "bad_cases", "570_output_joints_unknown_body.toml")
+    assert main(["check", path]) == 2
+    assert "output.joints: 'wall'" in capsys.readouterr().err
