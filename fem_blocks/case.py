@@ -1298,6 +1298,13 @@ def _parse_output(root: Table, D: int) -> dict:
         if not (isinstance(rot, list) and all(isinstance(x, str) and x for x in rot)):
             raise out.error("rotations", f"= {rot!r}: expected a list of block or group names, e.g. [\"bricks\"]")
         output["rotations"] = list(dict.fromkeys(rot))
+        jts = out.raw("joints", [])  # names matched to the built bodies by the runner (runner.joint_pairs)
+        if not (isinstance(jts, list) and all(isinstance(p, list) and len(p) == 2 and p[0] != p[1]
+                                              and all(isinstance(x, str) and x for x in p) for p in jts)):
+            raise out.error("joints", f"= {jts!r}: expected a list of pairs of two different body names, e.g. "
+                                      "[[\"voussoir6\", \"voussoir7\"]]")
+        output["joints"] = [list(p) for p in jts]
+        output.update(read_fields(out, OutputSpec, ("joints_paraview", "line_of_thrust")))
         out.done()
     return output
 

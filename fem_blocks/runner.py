@@ -123,14 +123,38 @@ def _rotation_record(b, ref, dim: int, t: float, angle: float) -> dict:
                 relative_to_rotation_rad=None if ref is None else rot(ref))
 
 
+def joint_pairs(case: Case, model: Model) -> list[tuple[int, int]]:
+    """(a, b) body indices (model order) of the `[output] joints` pairs of names; InputError naming the key for a
+    name that is no body (matched after expand, as rotation_bodies)."""
+    out = []
+    for pair in case.output.get("joints") or []:
+        for nm in pair:
+            if nm not in model.names:
+                raise InputError(f"{case.source}: output.joints: {nm!r}: expected the name of a block or rigid body "
+                                 f"({', '.join(map(repr, model.names[:4]))}, ...)")
+        out.append(tuple(model.names.index(nm) for nm in pair))
+    return out
+
+
+def _joint_values(model: Model, sim, joints) -> dict:
+    """history.csv values of the `[output] joints` pairs at the last step (output/joints.py)."""
+    from .output.joints import history_values, record_joints
+    rec = None if sim is None else sim.last_contact
+    two_d = len(model.dofs) == 3
+    res = record_joints(rec, model.contact.contact_points if two_d else None,
+                        model.contact.joint_lengths if two_d else None)
+    return history_values(res, joints, model.names)
+
+
 def _rotation_names(model: Model, i: int) -> list[str]:
     """history.csv columns of the rotation of deformable body i: NAME.rot (2D, rad), NAME.rotx/roty/rotz (3D)."""
     name = model.names[i]
     return [f"{name}.rot"] if len(model.dofs) == 3 else [f"{name}.rot{c}" for c in "xyz"]
 
 
-def history_columns(model: Model, rotations=()) -> list[str]:
-    """The columns of history.csv; `rotations`: deformable body indices with rotation columns (rotation_bodies)."""
+def history_columns(model: Model, rotations=(), joints=()) -> list[str]:
+    """The columns of history.csv; `rotations`: deformable body indices with rotation columns (rotation_bodies);
+    `joints`: (a, b) body index pairs with joint-resultant columns (joint_pairs)."""
     cols = ["step", "time", "stage", "h", "kinetic", "elastic", "gravity_potential", "external_work",
             "total_energy", "driver_work", "max_velocity"]
     for i, b in enumerate(model.bodies):
@@ -144,10 +168,13 @@ def history_columns(model: Model, rotations=()) -> list[str]:
     if model.contact is not None:
         cols += ["contacts", "closed", "slip", "sweeps", "change", "residual", "converged", "dissipated",
                  "friction_dissipated"]
+        if joints:
+            from .output.joints import history_columns as joint_columns
+            cols += joint_columns(model.names, joints)
     return cols
 
 
-def history_row(model: Model, info, stage_index: int, sim=None, h=None, rotations=()) -> dict:
+def history_row(model: Model, info, stage_index: int, sim=None, h=None, rotations=(), joints=()) -> dict:
     row = dict(step=info.step, time=info.time, stage=stage_index, h=h, kinetic=info.kinetic, elastic=info.elastic,
                gravity_potential=info.gravity_potential, external_work=info.external_work,
                total_energy=info.total_energy, driver_work=None if sim is None else sim.driver_work,
@@ -170,6 +197,8 @@ def history_row(model: Model, info, stage_index: int, sim=None, h=None, rotation
                    converged=int(c.get("converged", True)), dissipated=_dissipated(sim),
                    friction_dissipated=0.0 if sim is None or sim.last_contact is None
                    else sim.last_contact.friction_total)
+        if joints:
+            row.update(_joint_values(model, sim, joints))
     return row
 
 
@@ -765,7 +794,8 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
     pv = Bodies(sim, pdir, stress=case.output["stress"], append=resume, keep_until_time=t_resume) \
         if case.output["paraview"] else None
     pc = ContactsWriter(pdir, case.dimension, locate=model.contact.contact_points if case.dimension == 2 else None,
-                        append=resume, keep_until_time=t_resume) \
+                        append=resume, keep_until_time=t_resume, joints=_joints_writer(case, model, pdir, resume,
+                                                                                       t_resume)) \
         if case.output["paraview"] and model.contact is not None else None
     ckpt_every = case.output.get("checkpoint_every", default_of(OutputSpec, "checkpoint_every"))
     cv = case.output.get("curve")
@@ -774,7 +804,8 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
     for si, st in enumerate(case.stages):  # [stages.stop_at_rotation]: its bodies named when the run starts
         if st.stop_rotation is not None:
             _rotation_stop(case, model, si, st.stop_rotation)
-    cols = history_columns(model, rot_ids)
+    joint_ids = joint_pairs(case, model)  # [output] joints
+    cols = history_columns(model, rot_ids, joint_ids)
     hpath = os.path.join(out_dir, "history.csv")
     if ck is not None and os.path.exists(hpath):
         # the rows before the checkpoint: read once from the file the run wrote (cut back to the checkpoint's
@@ -792,7 +823,7 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
     bar = Progress(progress)
     info = sim.info()
     if ck is None:
-        hist.write(history_row(model, info, 0, sim, rotations=rot_ids))
+        hist.write(history_row(model, info, 0, sim, rotations=rot_ids, joints=joint_ids))
         if pv:
             pv.write(sim.time)
         if pc:
@@ -825,7 +856,7 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
     stage_bad = {}  # this stage's unconverged rows: count, worst (step, time, residual, solver, message), solvers
 
     def make_row(inf, hh):
-        row = history_row(model, inf, run["stage"], sim, hh, rot_ids)
+        row = history_row(model, inf, run["stage"], sim, hh, rot_ids, joint_ids)
         row["_contact"] = inf.contact  # (popped by write_row: the solver and its message, not history columns)
         return row
 
@@ -1115,6 +1146,16 @@ def _cracked_bricks(b) -> dict:
                                    max_width_mm=1e3 * b["max_width_m"], bricks=b["cracked_names"])}
 
 
+def _joints_writer(case, model, pdir, resume, t_resume):
+    """output.joints.JointsWriter of `[output] joints_paraview` (None when off or without contact)."""
+    if not case.output.get("joints_paraview") or model.contact is None:
+        return None
+    from .output.joints import JointsWriter
+    two_d = case.dimension == 2
+    return JointsWriter(pdir, case.dimension, model.contact.contact_points if two_d else None,
+                        model.contact.joint_lengths if two_d else None, append=resume, keep_until_time=t_resume)
+
+
 def _figures(case, sim, model, out_dir, hist: dict, conv=None, stages=()) -> dict:
     """force_displacement.png and crack_pattern.png, and the curve's peak figures for summary.json (keys named
     with their unit: translations mm / forces kN, rotations rad / moments kN·m; figures.dof_unit). `hist`: the
@@ -1136,6 +1177,12 @@ def _figures(case, sim, model, out_dir, hist: dict, conv=None, stages=()) -> dic
     elif getattr(model, "contact", None) is not None and sim is not None:  # no figure: the count all the same
         from .output.figures import brick_cracks
         out.update(_cracked_bricks(brick_cracks(sim.last_contact, model.contact)))
+    if case.output.get("line_of_thrust") and case.dimension == 2 and model.contact is not None:
+        from .output.figures import write_line_of_thrust
+        d = write_line_of_thrust(os.path.join(out_dir, "line_of_thrust.png"), sim, sim.last_contact, model.contact,
+                                 names=model.names, title=case.name)
+        out["line_of_thrust"] = dict(png="line_of_thrust.png", joints=d["n_joints"], compressed=d["n_compressed"],
+                                     outside=d["outside"])
     if case.output.get("rotations") and "time" in hist:  # [output] rotations: the rotations against time
         from .output.figures import write_rotations
         write_rotations(os.path.join(out_dir, "rotations.png"), hist, stages, title=case.name)

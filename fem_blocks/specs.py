@@ -586,6 +586,16 @@ class OutputSpec:
     rotations: tuple = spec((), doc="deformable blocks (names or group names) whose rotation is written to history.csv: "
                                "NAME.rot [rad, counter-clockwise] in 2D, NAME.rotx/roty/rotz [rad, rotation vector] "
                                "in 3D")
+    joints: tuple = spec((), doc="joints whose resultants are written to history.csv, each a pair of block or rigid "
+                                 "body names [\"A\", \"B\"]: columns A|B.N (normal force, > 0 compression), A|B.T "
+                                 "(tangential force) [N] and A|B.e (eccentricity from the joint's middle [m]; 3D "
+                                 "|(e_t, e_s)|; empty while the joint is open) (output/joints.py)")
+    joints_paraview: bool = spec(False, doc="write paraview/joints.pvd with the contacts: one point per joint (all "
+                                            "contact points of a pair of bodies) at its point of application, its "
+                                            "resultant force, N, T, eccentricity, half-width, inside")
+    line_of_thrust: bool = spec(False, doc="write line_of_thrust.png (2D): the joints, their points of application "
+                                           "and lines of action at the end of the run, and summary.json "
+                                           "\"line_of_thrust\" (joints whose point is outside)")
 
 
 # ----------------------------------------------------------------------------- [[reference]]

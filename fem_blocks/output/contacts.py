@@ -6,7 +6,8 @@ interface (interface/law id), area (tributary area, m²), and the interface-law 
 (1 - β for Frémond–Cangémi, 1 - intact for brittle laws, D for the mixed-mode law, 0 for elastic and dry
 joints), opening u_N and slip u_T (jumps since the reference state, m), dissipated (J). One writer for 2D and 3D
 (`ContactsWriter(directory, dim)`, `.write(time, result)` with a contact.result.ContactResult); 3D adds the
-second tangent s and r_local."""
+second tangent s and r_local. With `joints` (output.joints.JointsWriter, `[output] joints_paraview`) each frame
+also writes the joint resultants to `joints.pvd`.""" 
 from __future__ import annotations
 
 import numpy as np
@@ -38,11 +39,12 @@ class ContactsWriter(SeriesWriter):
     status (-1 when the record has none), interface, area and, with a law state, law_state_fields."""
 
     def __init__(self, directory: str, dim: int, locate=None, append: bool = False, basename: str = "contacts",
-                 keep_until_time: float | None = None):
+                 keep_until_time: float | None = None, joints=None):
         if dim not in (2, 3):
             from ..errors import InputError
             raise InputError(f"ContactsWriter: dim = {dim!r}: expected 2 or 3")
         self.dim, self.locate = dim, locate
+        self.joints = joints  # output.joints.JointsWriter or None: the joint resultants, a frame with each frame
         super().__init__(directory, basename, append, keep_until_time)
 
     def arrays(self, result):
@@ -74,4 +76,6 @@ class ContactsWriter(SeriesWriter):
 
     def write(self, time: float, result) -> str:
         x, data = self.arrays(result)
+        if self.joints is not None:
+            self.joints.write(time, result)
         return self.write_frame(time, x, [("vertex", np.arange(len(x)))], point_data=data)

@@ -394,3 +394,47 @@ def write_blocks_3d(path, bodies, body_values=None, value_label="", title="", am
         vals, label = bv[owner], value_label
     plot = plot_polygons_3d_pyvista if backend == "pyvista" else plot_polygons_3d
     return plot(path, polys, vals, label, title=title, view=view, size=size, note=f"displacements x{amp:g}")
+
+
+def line_of_thrust_data(sim, result, geometry, names=None) -> dict:
+    """What line_of_thrust.png draws (2D): the blocks (current outlines), per joint (output/joints.py, all contact
+    points of a pair of bodies at the current points, ContactStep.contact_points / joint_lengths) its extent
+    `joint_seg` (middle ± half_width · tangent), the point of application `points` (compressed joints), its line of
+    action `action` (through the point along F, one joint width long) and `inside`; `chain`: per deformable block
+    with exactly two compressed joints, the segment joining their points (the line of thrust of an arch or a pier).
+    `outside`: "A|B" names of the compressed joints whose point is outside the joint."""
+    from .joints import record_joints
+    polys = body_outlines(sim, 1.0)
+    j = record_joints(result, geometry.contact_points, geometry.joint_lengths) if geometry is not None else None
+    names = names or [f"body{i}" for i in range(len(polys))]
+    if j is None or not len(j):
+        z = np.zeros((0, 2, 2))
+        return dict(polygons=polys, joint_seg=z, points=np.zeros((0, 2)), action=z, chain=z, inside=np.zeros(0, bool),
+                    n_joints=0, n_compressed=0, outside=[])
+    comp = j.N > 0
+    hw = j.half_width[:, None] * j.tangent
+    seg = np.stack([j.middle - hw, j.middle + hw], axis=1)
+    fdir = j.force / np.maximum(np.linalg.norm(j.force, axis=1), 1e-300)[:, None]
+    half = j.half_width[:, None] * fdir
+    act = np.stack([j.point - half, j.point + half], axis=1)[comp]
+    chain = []
+    for b in range(len(polys)):
+        if sim.bodies[b].kind != 0:
+            continue
+        k = np.flatnonzero(comp & ((j.bodies[:, 0] == b) | (j.bodies[:, 1] == b)))
+        if len(k) == 2:
+            chain.append(j.point[k])
+    inside = j.inside[comp]
+    out = [f"{names[a]}|{names[b]}" for (a, b), c, i in zip(j.bodies, comp, j.inside) if c and not i]
+    return dict(polygons=polys, joint_seg=seg, points=j.point[comp], action=act,
+                chain=np.array(chain).reshape(-1, 2, 2), inside=inside, n_joints=len(j),
+                n_compressed=int(comp.sum()), outside=out)
+
+
+def write_line_of_thrust(path, sim, result, geometry, names=None, title=""):
+    """line_of_thrust.png (plots.plot_line_of_thrust) of line_of_thrust_data; returns the data."""
+    from .plots import plot_line_of_thrust
+    d = line_of_thrust_data(sim, result, geometry, names)
+    plot_line_of_thrust(path, d["polygons"], d["joint_seg"], d["points"], d["action"], d["chain"], d["inside"],
+                        title=title)
+    return d

@@ -472,3 +472,36 @@ if __name__ == "__main__":  # child process of plot_polygons_3d_pyvista (no dolf
     el, az, w, h, lo, hi = a["num"]
     plot_polygons_3d_pyvista(path, polys, a["val"] if bool(a["has_val"]) else None, label, title, (el, az),
                              (int(w), int(h)), None if np.isnan(lo) else lo, None if np.isnan(hi) else hi, note)
+
+
+def plot_line_of_thrust(path, polygons, joint_seg, points, action, chain, inside, title=""):
+    """The blocks (outlines), the joints (grey segments), the points of application of the joint resultants
+    (dots: black inside the joint, red outside), their lines of action (thin) and the line of thrust (segments
+    joining the two points of blocks with two compressed joints). Returns `path`."""
+    fig = _figure((7.0, 5.0))
+    ax = fig.add_subplot(111)
+    for p in polygons:
+        q = np.vstack([p, p[:1]])
+        ax.fill(q[:, 0], q[:, 1], color="0.92", lw=0)
+        ax.plot(q[:, 0], q[:, 1], color="0.55", lw=0.6)
+    for s in joint_seg:
+        ax.plot(s[:, 0], s[:, 1], color="0.35", lw=2.2, solid_capstyle="butt")
+    for s in action:
+        ax.plot(s[:, 0], s[:, 1], color="tab:blue", lw=0.8, alpha=0.7)
+    for k, s in enumerate(chain):
+        ax.plot(s[:, 0], s[:, 1], color="tab:red", lw=1.6, label="line of thrust" if k == 0 else None)
+    inside = np.asarray(inside, bool)
+    if len(points):
+        ax.plot(points[inside, 0], points[inside, 1], "o", ms=3.5, color="k",
+                label=f"point of application, inside ({int(inside.sum())})")
+        if (~inside).any():
+            ax.plot(points[~inside, 0], points[~inside, 1], "o", ms=5, color="red",
+                    label=f"outside the joint ({int((~inside).sum())})")
+    else:
+        _no_data(ax)
+    ax.plot([], [], color="tab:blue", lw=0.8, label="line of action of the joint resultant")
+    ax.set_aspect("equal")
+    ax.set(xlabel="x [m]", ylabel="y [m]", title=title)
+    ax.legend(fontsize=7, loc="best")
+    fig.tight_layout()
+    return _save(fig, path, 130)
