@@ -420,6 +420,8 @@ def read_fields(t: "Table", cls, names, defaults: dict | None = None) -> dict:
             v = t.string(k, d, choices=tuple(c for c in md["choices"] if c is not None), required=req)
         elif base == "bool":
             v = t.boolean(k, d)
+        elif base == "str":
+            v = t.string(k, d, required=req)
         elif base == "int":
             v = t.integer(k, d, lo=md["lo"], hi=md["hi"], required=req)
         elif base == "float":

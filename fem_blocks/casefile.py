@@ -72,15 +72,17 @@ def origin_of_message(source, message: str) -> str:
     return origin(source, re.split(r"[\s:=]", str(message), maxsplit=1)[0])
 
 
-def read(path, law_kinds) -> tuple[dict, Source]:
+def read(path, law_kinds, resolve: bool = True) -> tuple[dict, Source]:
     """Load case file `path`, follow its ``extends``, apply ``unset``, resolve named laws (`law_kinds`: the law
-    kinds, e.g. laws.LAW_KEYS) -> (data for case.parse_case, Source)."""
+    kinds, e.g. laws.LAW_KEYS) -> (data for case.parse_case, Source). `resolve` False: the ``[laws]`` table is
+    kept (a `[lab]` file's generated interfaces name its laws; fem_blocks.lab resolves them per specimen)."""
     src = os.fspath(path)
     origins: dict = {}
     files: list = []
     data = _compose(src, src, [], origins, files)
     source = _source(src, files, origins)
-    resolve_laws(data, source, law_kinds)
+    if resolve:
+        resolve_laws(data, source, law_kinds)
     return data, source
 
 

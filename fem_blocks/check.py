@@ -32,6 +32,10 @@ def check_case(path: str, quick: bool = False) -> tuple[list[str], list[str]]:
     from .errors import InputError
     from .expand import expand
     from .model import build_model, groups_without_interface
+    from .lab import check_lines, load_lab
+    lab = load_lab(path)
+    if lab is not None:  # a [lab] file: every specimen's case, validated as a run would (fem_blocks/lab)
+        return check_lines(lab), [w for _, c, _ in lab.specimens for w in c.warnings]
     case = load_case(path)
     if quick:
         case = make_quick(case)

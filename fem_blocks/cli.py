@@ -67,6 +67,10 @@ def _run(case_path: str, out: str, quiet: bool, quick: bool = False, resume: boo
          force: bool = False) -> int:
     from .case import load_case
     from .case import quick as make_quick
+    from .lab import load_lab, run_lab
+    lab = load_lab(case_path)  # a [lab] file: a standard test, one generated case per specimen (fem_blocks/lab)
+    if lab is not None:
+        return run_lab(lab, out, quick=quick, quiet=quiet, resume=resume, force=force)
     case = load_case(case_path)  # validate before importing the heavy stages
     if quick:
         case = make_quick(case)

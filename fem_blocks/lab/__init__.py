@@ -1,0 +1,173 @@
+"""Virtual masonry laboratory: the standard tests of masonry as generated cases (docs/lab-tests.md).
+
+A lab case file is an ordinary case file without geometry or stages, plus a `[lab]` table naming the test:
+
+    [materials.brick]  E, nu, rho, thickness        (the bricks; `[lab] material` names another)
+    [laws.joint]       law = "mixed", k_n, ...      (the joints; `[lab] joint` names another)
+    [lab]              test = "triplet_shear", the specimen's dimensions, levels, loading
+    [contact], [output], [checks], [[reference]]    (optional; as in any case file)
+
+`load_lab(path)` reads it (with its bases and named laws, casefile.py) and asks the test's module
+(specimen.TESTS) for one ordinary case per specimen (`specimens(spec, emitter_factory)` -> [(label, data,
+info)]), each validated by `case.parse_case`. `run_lab` runs every specimen with `runner.run_case` into
+OUT/LABEL/ (history.csv, summary.json, ParaView files, crack pattern, force-displacement figure with the
+file's references: the same guards and outputs as any run), then the test's `readout(spec, runs)` reads the
+specimens' histories and returns the standard's quantities, written to OUT/summary.json, and `plot` draws the
+standard's construction on OUT/TEST.png. Data flow: case file -> [lab] spec -> specimen cases -> runs -> read-out.
+
+Exit status: the worst of the specimens' (0, 3 with unconverged steps, 1 a run stopped by a numerical failure).
+"""
+from __future__ import annotations
+
+import copy
+import importlib
+import json
+import os
+from dataclasses import dataclass, field
+
+from ..errors import InputError
+from .specimen import TESTS, Emitter, SpecimenSpec
+
+__all__ = ["LabCase", "load_lab", "parse_lab", "run_lab", "TESTS", "SpecimenSpec"]
+
+#: top-level tables a [lab] file may hold besides [lab]: they pass into every specimen (generated keys excluded)
+PASS_THROUGH = ("name", "units", "description", "dimension", "gravity", "materials", "laws", "contact", "output",
+                "checks", "reference", "history_times")
+GENERATED = ("blocks", "block_types", "rigid_bodies", "interfaces", "stages", "wall", "arch", "wall3d", "dome",
+             "allow_no_interface")
+
+
+@dataclass
+class LabCase:
+    source: str
+    name: str
+    spec: SpecimenSpec          # the test's spec (SI)
+    module: object              # the test's module (STANDARD, readout, plot)
+    specimens: list = field(default_factory=list)   # of (label, case.Case, info dict)
+    units: str = "SI"
+    inputs: dict = field(default_factory=dict)      # the material and joint law as written (file units)
+
+
+def test_module(test: str):
+    return importlib.import_module(f"{__name__}.{TESTS[test]}")
+
+
+def load_lab(path: str) -> LabCase | None:
+    """A case file with a `[lab]` table -> LabCase (every specimen validated); None for an ordinary case file."""
+    from .. import casefile
+    from ..laws import LAW_KEYS
+    data, source = casefile.read(path, LAW_KEYS, resolve=False)
+    if not isinstance(data, dict) or "lab" not in data:
+        return None
+    return parse_lab(data, source)
+
+
+def parse_lab(data: dict, source) -> LabCase:
+    """[lab] and the file's tables -> LabCase; InputError naming the file and the key."""
+    from .. import casefile
+    from ..case import UNIT_SYSTEMS, Table, parse_case, read_fields
+    from ..laws import LAW_KEYS
+    from ..specs import schema_fields
+    root = Table(data, "", source, UNIT_SYSTEMS["SI"])
+    units = root.string("units", "SI", choices=list(UNIT_SYSTEMS))
+    U = UNIT_SYSTEMS[units]
+    D = data.get("dimension", 2)
+    if D != 2:
+        raise root.error("dimension", f"= {D!r}: expected 2 (the [lab] tests are 2D)")
+    for k in data:
+        if k in GENERATED:
+            raise root.error(k, f"a [lab] case generates its own {k}; remove it (or list it in `unset` if it "
+                                "comes from a base)")
+        if k not in PASS_THROUGH and k != "lab":
+            raise root.error(k, f"unknown key in a [lab] case (expected [lab] and {', '.join(PASS_THROUGH)})")
+    t = root.table("lab", required=True)
+    t.units = U
+    test = read_fields(t, SpecimenSpec, ("test",))["test"]
+    mod = test_module(test)
+    cls = mod.SPEC
+    simple = [f.name for f in schema_fields(cls) if str(f.type).split("|")[0].strip() in ("str", "int", "float",
+                                                                                           "bool")]
+    kw = read_fields(t, cls, simple)
+    kw.update(mod.read_lists(t, U))   # the test's list keys (levels), validated, in SI
+    spec = cls(**kw)
+    mod.check(spec, t)   # the test's own rules (geometry that cannot hold the specimen): InputError naming the key
+    t.done()
+    for table, name in (("materials", spec.material), ("laws", spec.joint)):
+        if name not in (data.get(table) or {}):
+            have = sorted(data.get(table) or {})
+            raise t.error("material" if table == "materials" else "joint",
+                          f"= {name!r}: expected the name of a [{table}.NAME] table of the file"
+                          + (f" ({', '.join(map(repr, have))})" if have else f" (the file has no [{table}])"))
+    base = {k: v for k, v in data.items() if k != "lab"}
+    name = str(data.get("name") or os.path.splitext(os.path.basename(str(source)))[0])
+    lab = LabCase(source=source, name=name, spec=spec, module=mod, units=units,
+                  inputs=dict(material=copy.deepcopy(data["materials"][spec.material]),
+                              joint=copy.deepcopy(data["laws"][spec.joint])))
+    for label, d, info in mod.specimens(spec, lambda nm: Emitter(base, U, spec, f"{name}/{nm}")):
+        casefile.resolve_laws(d, source, LAW_KEYS)
+        lab.specimens.append((label, parse_case(d, source), info))
+    return lab
+
+
+def run_lab(lab: LabCase, out: str, quick: bool = False, quiet: bool = False, resume: bool = False,
+            force: bool = False) -> int:
+    """Run every specimen (runner.run_case into OUT/LABEL), read the test out, write OUT/summary.json and
+    OUT/TEST.png; return the exit status (the worst of the specimens')."""
+    from ..case import quick as make_quick
+    from ..output.history import read_history
+    from ..runner import RunStopped, convergence_line, run_case
+    os.makedirs(out, exist_ok=True)
+    runs, status = [], 0
+    for label, case, info in lab.specimens:
+        if quick:
+            case = make_quick(case)
+        d = os.path.join(out, label)
+        has_ck = resume and os.path.isdir(os.path.join(d, "checkpoints"))
+        try:
+            summ = run_case(case, d, progress=not quiet, resume=has_ck, force=force)
+            st = int(summ.get("exit_status") or 0)
+        except RunStopped as e:
+            print(f"fem-blocks: {lab.name}: specimen {label}: run stopped: {e}")
+            summ, st = None, e.code
+        status = max(status, st) if st != 130 and st != 143 else st
+        if st in (130, 143):
+            return st
+        hist = read_history(os.path.join(d, "history.csv"))
+        runs.append(dict(label=label, dir=label, info=info, history=hist, summary=summ, exit_status=st, case=case))
+        line = convergence_line((summ or {}).get("convergence"))   # (printed with --quiet too, as a run's result)
+        print(f"{lab.name}: specimen {label}: {lab.module.specimen_line(lab.spec, runs[-1])}"
+              + (f"; {line}" if line and st else ""))
+    report = lab.module.readout(lab.spec, runs)
+    png = f"{lab.spec.test}.png"
+    lab.module.plot(lab.spec, report, runs, os.path.join(out, png), title=lab.name)
+    summary = dict(case=str(lab.source), name=lab.name, test=lab.spec.test, standard=lab.module.STANDARD,
+                   exit_status=status, variant="quick x2" if quick else "",
+                   quantities=report.pop("quantities"), report=report, figure=png,
+                   specimens=[dict(label=r["label"], dir=r["dir"], exit_status=r["exit_status"], **r["info"],
+                                   convergence=convergence_line((r["summary"] or {}).get("convergence")))
+                              for r in runs],
+                   inputs=dict(lab={k: (list(v) if isinstance(v, tuple) else v) for k, v in vars(lab.spec).items()},
+                               units_of_lab="SI", material=lab.inputs["material"], joint=lab.inputs["joint"],
+                               units_of_material_and_joint=lab.units))
+    with open(os.path.join(out, "summary.json"), "w") as f:
+        json.dump(summary, f, indent=1, default=float)
+    for k, q in summary["quantities"].items():
+        meas = f" (measures {q['measures']}" + (f" = {q['input']:g}" if isinstance(q.get("input"), (int, float))
+                                               else "") + ")" if q.get("measures") else ""
+        print(f"{lab.name}: {k} = {q['value']:.6g} {q['unit']}{meas}")
+    print(f"report: {os.path.join(os.path.abspath(out), 'summary.json')}; figure: "
+          f"{os.path.join(os.path.abspath(out), png)}")
+    if status:   # the last line: the outcome
+        print(f"{lab.name}: WARNING: exit status {status}: a specimen did not complete cleanly (see its line above); "
+              "do not trust this report")
+    return status
+
+
+def check_lines(lab: LabCase) -> list[str]:
+    """`fem-blocks check` on a [lab] file: the test and one line per specimen."""
+    out = [f"case {lab.source}: lab test {lab.spec.test!r} ({lab.module.STANDARD}), {len(lab.specimens)} "
+           f"specimen(s), bricks {lab.spec.bricks}, material {lab.spec.material!r}, joint law {lab.spec.joint!r}"]
+    for label, case, info in lab.specimens:
+        out.append(f"  specimen {label}: {len(case.blocks)} blocks, {len(case.rigid_bodies)} rigid bodies, "
+                   f"{sum(round(s.duration / s.h) for s in case.stages)} steps; {info}")
+    return out

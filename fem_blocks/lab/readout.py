@@ -1,0 +1,84 @@
+"""Read-outs of the standard tests: pure functions on arrays (no I/O), each with the formula it implements.
+
+* `check_levels`: a list of at least n numbers >= 0, strictly increasing (pre-compression levels);
+* `peak_and_residual`: the peak of a curve and its residual (mean over the last `tail` fraction, an assumed
+  definition: the standards record the peak only);
+* `fit_line`: the least-squares line through n points, tau = intercept + slope sigma:
+  slope = sum (s - s_mean)(t - t_mean) / sum (s - s_mean)^2, intercept = t_mean - slope s_mean,
+  R^2 = 1 - sum (t - intercept - slope s)^2 / sum (t - t_mean)^2;
+* `triplet_readout`: EN 1052-3's peak and residual lines (docs/lab-tests.md).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import InputError
+
+MIN_LEVELS = 3   # EN 1052-3 (and issue #23): at least three pre-compression levels
+
+
+def check_levels(levels, where: str = "lab.precompressions", min_levels: int = MIN_LEVELS) -> np.ndarray:
+    """The pre-compression levels [Pa]: a list of at least min_levels numbers >= 0, strictly increasing;
+    InputError ``WHERE = VALUE: expected ...`` otherwise."""
+    text = f"a list of at least {min_levels} pre-compressions >= 0, strictly increasing, e.g. [0.2, 0.6, 1.0] MPa"
+    if not isinstance(levels, (list, tuple)) or not all(isinstance(v, (int, float)) and not isinstance(v, bool)
+                                                         for v in levels):
+        raise InputError(f"{where} = {levels!r}: expected {text}")
+    v = np.asarray(levels, dtype=float)
+    if len(v) < min_levels:
+        raise InputError(f"{where} = {levels!r}: {len(v)} level(s); expected {text}")
+    if not np.all(np.isfinite(v)) or np.any(v < 0):
+        raise InputError(f"{where} = {levels!r}: a negative or non-finite level; expected {text}")
+    if np.any(np.diff(v) <= 0):
+        raise InputError(f"{where} = {levels!r}: not strictly increasing; expected {text}")
+    return v
+
+
+def peak_and_residual(tau, tail: float = 0.1) -> tuple:
+    """(τ_peak, index of the peak, τ_res): the largest shear stress of a curve and the mean over its last `tail`
+    fraction of rows (at least one row). τ_res is NaN when the peak lies inside that tail (no post-peak branch)."""
+    t = np.asarray(tau, dtype=float)
+    if t.size == 0:
+        raise ValueError("peak_and_residual: empty curve")
+    k = int(np.argmax(t))
+    n = max(1, int(round(tail * t.size)))
+    res = float(np.mean(t[-n:])) if k < t.size - n else float("nan")
+    return float(t[k]), k, res
+
+
+def fit_line(sigma, tau) -> dict:
+    """Least-squares line τ = intercept + slope σ through n >= 2 points (module docstring) -> dict(intercept,
+    slope, r2, n). r2 is 1.0 when the points do not vary."""
+    s, t = np.asarray(sigma, dtype=float), np.asarray(tau, dtype=float)
+    if s.size < 2 or s.size != t.size:
+        raise ValueError(f"fit_line: expected two equal-length arrays of >= 2 points, got {s.size} and {t.size}")
+    ds, dt = s - s.mean(), t - t.mean()
+    slope = float(np.dot(ds, dt) / np.dot(ds, ds))
+    icpt = float(t.mean() - slope * s.mean())
+    ss_tot = float(np.dot(dt, dt))
+    ss_res = float(np.sum((t - icpt - slope * s) ** 2))
+    return dict(intercept=icpt, slope=slope, r2=1.0 if ss_tot == 0 else 1.0 - ss_res / ss_tot, n=int(s.size))
+
+
+def triplet_readout(sigma_p, curves: list, tail: float = 0.1) -> dict:
+    """The triplet report from the curves of one specimen per level: `sigma_p[i]` the pre-compression [Pa],
+    `curves[i]` a dict of per-step arrays "upper" and "lower" (shear stress of each joint [Pa]) and "total"
+    (F / 2A of the middle brick [Pa]). Returns per-level peaks and residuals per joint, and the peak and residual
+    lines fitted on the points of both joints (2 per level)."""
+    levels, sp, tp, sr, tr = [], [], [], [], []
+    for s, c in zip(sigma_p, curves):
+        row = dict(precompression_Pa=float(s))
+        for j in ("upper", "lower", "total"):
+            pk, k, res = peak_and_residual(c[j], tail)
+            row[f"peak_{j}_Pa"] = pk
+            row[f"residual_{j}_Pa"] = res
+            if j != "total":
+                sp.append(s)
+                tp.append(pk)
+                if np.isfinite(res):
+                    sr.append(s)
+                    tr.append(res)
+        levels.append(row)
+    peak = fit_line(sp, tp)
+    resid = fit_line(sr, tr) if len(set(sr)) >= 2 else None
+    return dict(levels=levels, peak_line=peak, residual_line=resid)
