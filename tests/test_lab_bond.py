@@ -23,8 +23,9 @@ pytestmark = pytest.mark.dolfinx
 from _paths import DEMOS, ROOT  # noqa: E402
 
 from fem_blocks.lab import load_lab, run_lab  # noqa: E402
-from fem_blocks.lab.bond_tension import tension_readout  # noqa: E402
-from fem_blocks.lab.bond_wrench import KNIFE_WIDTH, LEVER_DEPTH, STEEL, dead_load, wrench_readout  # noqa: E402
+from fem_blocks.lab.bond_tension import peak_problems, tension_readout  # noqa: E402
+from fem_blocks.lab.bond_wrench import (KNIFE_WIDTH, LEVER_DEPTH, STEEL, dead_load, failure_problems,  # noqa: E402
+                                         wrench_readout)
 
 # the demos' joint (Lourenço & Rots 1997 low-pressure joints, approximate), mm-N-MPa
 K_N, F_T = 82.0, 0.25
@@ -85,6 +86,16 @@ def test_wrench_readout_formula():
     assert r["failure_row"] == 2 and r["M_fail_Nm"] == pytest.approx(105.0) and r["N_fail_N"] == pytest.approx(450.0)
     assert r["f_w_Pa"] == pytest.approx(300000.0 - 450.0 / 0.021, rel=1e-12)
     assert r["fwZ_Nm"] == pytest.approx(105.0 - 450.0 * d / 6, rel=1e-12)
+
+
+def test_no_failure_is_no_result():
+    """A curve whose largest force is at its last row (still rising) or never positive has no peak: the read-outs
+    say why (and the reports then write NaN for the strengths). Catches a report that reads a truncated test or a
+    specimen broken before the load as a strength."""
+    assert failure_problems([0.0, 10.0, 5.0]) == [] and peak_problems([0.0, 10.0, 5.0]) == []
+    assert "still rising" in failure_problems([0.0, 5.0, 10.0])[0]
+    assert "still rising" in peak_problems([0.0, 5.0, 10.0])[0]
+    assert "never loaded" in failure_problems([0.0, -0.0, 0.0])[0] and "never carried" in peak_problems([0.0, -1.0])[0]
 
 
 def test_dead_load_by_hand(tmp_path):

@@ -94,7 +94,21 @@ def tension_readout(opening, force, area: float) -> dict:
 def specimen_line(s: TensionSpec, run: dict) -> str:
     c = curves(s, run)
     A = joint_area(s, run["case"])
-    return f"peak F = {np.nanmax(c['force']):.6g} N, f_t,b = {np.nanmax(c['force']) / A / 1e6:.4f} MPa"
+    bad = peak_problems(c["force"])
+    return (f"peak F = {np.nanmax(c['force']):.6g} N, f_t,b = {np.nanmax(c['force']) / A / 1e6:.4f} MPa"
+            + "".join(f"; WARNING: {b}: f_t,b is not a strength" for b in bad))
+
+
+def peak_problems(force) -> list:
+    """Why the largest F is no peak: it is at the last row (still rising: the pull ended before the peak) or the
+    joint never carried tension (F <= 0)."""
+    F = np.asarray(force, dtype=float)
+    k = int(np.nanargmax(F))
+    if not F[k] > 0:
+        return ["the joint never carried tension (F <= 0)"]
+    if k == F.size - 1:
+        return ["F was still rising at the end of the pull: the peak was not reached (increase lab.pull)"]
+    return []
 
 
 def readout(s: TensionSpec, runs: list) -> dict:
@@ -111,6 +125,11 @@ def readout(s: TensionSpec, runs: list) -> dict:
         q["G_f"] = dict(value=rep["G_f_J_m2"], unit="J/m2", name="work of separation per unit area ∫ F dδ / A",
                         measures=f"laws.{s.joint}.G_I" if "G_I" in p else "the joint's mode I fracture energy",
                         input=p.get("G_I"))
+    rep["warnings"] = peak_problems(c["force"])
+    if rep["warnings"]:   # no peak: the strength must not look like a result
+        for k in ("f_tb", "F_max", "opening_at_peak"):
+            q[k]["value"] = float("nan")
+        q["f_tb"]["name"] += " — NOT REACHED: " + "; ".join(rep["warnings"])
     rep["quantities"] = q
     rep["joint_area_m2"] = A
     return rep

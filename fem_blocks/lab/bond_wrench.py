@@ -171,12 +171,30 @@ def wrench_readout(F1, e1: float, F2: float, e2: float, A: float, Z: float) -> d
                 f_w_Pa=fw, fwZ_Nm=fw * Z, Z_m3=Z, A_j_m2=A)
 
 
+def failure_problems(F1) -> list:
+    """Why the largest F1 is no failure load: the knife never pushed (F1 <= 0: the specimen failed under its own
+    weight, or never met the knife), or F1 was largest at the last row (still rising: the deflection ended before
+    the failure)."""
+    F = np.asarray(F1, dtype=float)
+    k = int(np.nanargmax(F))
+    out = []
+    if not F[k] > 0:
+        out.append("the knife never loaded the lever (F1 <= 0): the joint failed before the load (e.g. under the "
+                   "dead load) or the knife never reached the lever")
+    elif k == F.size - 1:
+        out.append("F1 was still rising at the end of the deflection: the failure load was not reached (increase "
+                   "lab.deflection)")
+    return out
+
+
 def specimen_line(s: WrenchSpec, run: dict) -> str:
     c = curves(s, run)
     A, Z = section(s, run["case"])
     F2, e2 = dead_load(s, run["case"])
     r = wrench_readout(c["F1"], s.lever_arm, F2, e2, A, Z)
-    return f"failure load F1 = {r['F1_N']:.6g} N, M = {r['M_fail_Nm']:.6g} N m, f_w = {r['f_w_Pa'] / 1e6:.4f} MPa"
+    bad = failure_problems(c["F1"])
+    return (f"failure load F1 = {r['F1_N']:.6g} N, M = {r['M_fail_Nm']:.6g} N m, f_w = {r['f_w_Pa'] / 1e6:.4f} MPa"
+            + "".join(f"; WARNING: {b}: f_w is not a failure value" for b in bad))
 
 
 def readout(s: WrenchSpec, runs: list) -> dict:
@@ -200,6 +218,11 @@ def readout(s: WrenchSpec, runs: list) -> dict:
                      input=None if ft is None else ft * Z),
          "rotation_at_failure": dict(value=rep["rotation_at_failure_rad"], unit="rad",
                                      name="joint rotation at the failure load")}
+    rep["warnings"] = failure_problems(c["F1"])
+    if rep["warnings"]:   # no failure load: the standard's quantities must not look like results
+        for k in ("f_w", "F1", "M_fail", "fwZ", "rotation_at_failure"):
+            q[k]["value"] = float("nan")
+        q["f_w"]["name"] += " — NOT REACHED: " + "; ".join(rep["warnings"])
     rep["quantities"] = q
     return rep
 
@@ -219,7 +242,8 @@ def plot(s: WrenchSpec, report: dict, runs: list, path: str, title: str = ""):
     r = c["rotation"] * 1e3
     ax[0].plot(r, c["M"], "-", lw=1.3, label="M = F1 e1 + F2 e2 (the standard's)")
     ax[0].plot(r, c["Mj"], "--", lw=1, label="M_j = −e N (joint resultant)")
-    ax[0].plot([r[k]], [report["M_fail_Nm"]], "o", mfc="none", ms=8, label=f"failure: M = {report['M_fail_Nm']:.4g} N m")
+    ax[0].plot([r[k]], [report["M_fail_Nm"]], "o", mfc="none", ms=8,
+               label=f"failure: M = {report['M_fail_Nm']:.4g} N m")
     if ft is not None:
         ax[0].axhline(ft * Z + report["N_fail_N"] * Z / A, ls=":", color="k", lw=0.8,
                       label="elastic–brittle: f_t Z + N Z / A_j")
