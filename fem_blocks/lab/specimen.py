@@ -23,7 +23,9 @@ from ..specs import spec
 #: bricks-plates (`plate_mu`)
 BRICKS, PLATES = "bricks", "plates"
 #: the tests: name -> module of fem_blocks.lab (each: SPEC, STANDARD, specimens, readout, plot)
-TESTS = {"triplet_shear": "triplet"}
+TESTS = {"triplet_shear": "triplet",
+         "couplet_tension": "bond_tension",
+         "bond_wrench": "bond_wrench"}
 
 
 @dataclass
