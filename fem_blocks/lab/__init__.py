@@ -15,20 +15,23 @@ file's references: the same guards and outputs as any run), then the test's `rea
 specimens' histories and returns the standard's quantities, written to OUT/summary.json, and `plot` draws the
 standard's construction on OUT/TEST.png. Data flow: case file -> [lab] spec -> specimen cases -> runs -> read-out.
 
-Exit status: the worst of the specimens' (0, 3 with unconverged steps, 1 a run stopped by a numerical failure).
+Exit status: the most severe of the specimens' (0; 3 with unconverged steps; 1 a run stopped by a numerical failure)
+and 1 when the read-out could not measure one of the standard's quantities (NaN, listed in summary "unmeasured").
 """
 from __future__ import annotations
 
 import copy
 import importlib
 import json
+import math
 import os
 from dataclasses import dataclass, field
 
 from ..errors import InputError
 from .specimen import TESTS, Emitter, SpecimenSpec
 
-#: exit statuses from the least to the most severe: 0 clean, 3 unconverged steps, 1 a run stopped by a guard
+#: exit statuses from the least to the most severe: 0 clean, 3 unconverged steps, 1 a run stopped by a guard or a
+#: quantity of the standard that the read-out could not measure (NaN: e.g. no failure within the loading)
 SEVERITY = {0: 0, 3: 1, 1: 2}
 __all__ = ["LabCase", "load_lab", "parse_lab", "run_lab", "TESTS", "SpecimenSpec"]
 
@@ -150,8 +153,12 @@ def run_lab(lab: LabCase, out: str, quick: bool = False, quiet: bool = False, re
         if not status:   # a complete set of runs must read out: a bug, not a specimen's failure
             raise
         report, png = dict(quantities={}, error=f"no read-out: {type(e).__name__}: {e}"), None  # (a stopped run)
+    unmeasured = [k for k, q in report.get("quantities", {}).items()
+                  if not (isinstance(q.get("value"), (int, float)) and math.isfinite(q["value"]))]
+    if unmeasured or "error" in report:   # a quantity the test did not measure (NaN): never a clean exit
+        status = max(status, 1, key=SEVERITY.get)
     summary = dict(case=str(lab.source), name=lab.name, test=lab.spec.test, standard=lab.module.STANDARD,
-                   exit_status=status, variant="quick x2" if quick else "",
+                   exit_status=status, unmeasured=unmeasured, variant="quick x2" if quick else "",
                    quantities=report.pop("quantities"), report=report, figure=png,
                    specimens=[dict(label=r["label"], dir=r["dir"], exit_status=r["exit_status"], **r["info"],
                                    convergence=r["convergence"])
@@ -168,8 +175,9 @@ def run_lab(lab: LabCase, out: str, quick: bool = False, quiet: bool = False, re
     print(f"report: {os.path.join(os.path.abspath(out), 'summary.json')}"
           + (f"; figure: {os.path.join(os.path.abspath(out), png)}" if png else f" ({report['error']})"))
     if status:   # the last line: the outcome
-        print(f"{lab.name}: WARNING: exit status {status}: a specimen did not complete cleanly (see its line above); "
-              "do not trust this report")
+        why = (f"the read-out could not measure {', '.join(unmeasured)} (NaN in summary.json)" if unmeasured
+               else "a specimen did not complete cleanly (see its line above)")
+        print(f"{lab.name}: WARNING: exit status {status}: {why}; do not trust this report")
     return status
 
 
