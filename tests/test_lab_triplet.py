@@ -97,7 +97,7 @@ def stiff_run(tmp_path_factory):
     rc = run_lab(lab, str(d / "out"), quiet=True)
     runs = [dict(history=read_history(d / "out" / label / "history.csv"), case=case, info=info)
             for label, case, info in lab.specimens]
-    return lab, rc, json.loads((d / "out" / "summary.json").read_text()), runs
+    return lab, rc, json.loads((d / "out" / "summary.json").read_text()), runs, d / "out"
 
 
 @pytest.mark.dolfinx
@@ -110,7 +110,7 @@ def test_triplet_recovers_c_tan_phi_and_the_residual_friction(stiff_run):
     Bugs caught: the ram's force divided by A instead of 2A, the pre-compression lost, applied twice or on the
     wrong area (tan α off), the residual taken at the peak, the joints' points fitted per level mean."""
     from fem_blocks.lab.triplet import curves
-    lab, rc, s, runs = stiff_run
+    lab, rc, s, runs, _ = stiff_run
     assert rc == 0 and s["exit_status"] == 0
     A = 0.2 * 0.1
     for r in runs:
@@ -135,7 +135,7 @@ def test_triplet_recovers_c_tan_phi_and_the_residual_friction(stiff_run):
 def test_specimens_are_ordinary_runs(stiff_run, tmp_path):
     """Each specimen is an ordinary case run: its own history.csv, summary.json and force_displacement.png (the
     ram's curve); summary.json lists the specimens with their exit status and convergence line."""
-    lab, rc, s, runs = stiff_run
+    lab, rc, s, runs, _ = stiff_run
     assert [sp["label"] for sp in s["specimens"]] == ["p0", "p1", "p2"]
     assert all(sp["exit_status"] == 0 and "converged" in sp["convergence"] for sp in s["specimens"])
     assert [sp["precompression_Pa"] for sp in s["specimens"]] == pytest.approx(list(LEVELS), rel=1e-15)
@@ -193,3 +193,38 @@ def test_lab_file_through_load_case_names_the_key(tmp_path):
     f.write_text(STIFF)
     with pytest.raises(InputError, match=r"lab: a standard laboratory test"):
         load_case(str(f))
+
+
+@pytest.mark.dolfinx
+def test_killed_lab_run_resumes_bitwise(stiff_run, tmp_path):
+    """SIGKILL while the second specimen runs, then `--resume`: every specimen's history.csv and the report are
+    bitwise those of the uninterrupted run (the fixture's; checkpoints do not change a run): finished specimens
+    resume from their final checkpoint, the interrupted one from its last. Bug caught: a finished specimen run
+    again on top of its outputs, a resumed specimen appending to its history twice."""
+    import signal
+    import subprocess
+    import sys
+    import time
+    ref = stiff_run[4]
+    case = tmp_path / "t.toml"
+    case.write_text(STIFF + "checkpoint_every = 20\n")
+
+    def run(out, *extra, wait=True):
+        cmd = [sys.executable, "-m", "fem_blocks.cli", "run", str(case), "--out", str(out), "--quiet", *extra]
+        return (subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT, timeout=600) if wait else
+                subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT))
+    out = tmp_path / "killed"
+    proc = run(out, wait=False)
+    t0 = time.monotonic()
+    while not (out / "p1" / "checkpoint.npz").exists() and proc.poll() is None and time.monotonic() - t0 < 300:
+        time.sleep(0.01)
+    assert proc.poll() is None, "the run ended before the second specimen's first checkpoint"
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    assert not (out / "p1" / "summary.json").exists() and not (out / "p2").exists()
+    p = run(out, "--resume")
+    assert p.returncode == 0, p.stdout + p.stderr
+    for sp in ("p0", "p1", "p2"):
+        assert (out / sp / "history.csv").read_bytes() == (ref / sp / "history.csv").read_bytes()
+    q = json.loads((out / "summary.json").read_text())["quantities"]
+    assert q == json.loads((ref / "summary.json").read_text())["quantities"]

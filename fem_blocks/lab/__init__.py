@@ -25,6 +25,7 @@ import importlib
 import json
 import math
 import os
+import sys
 from dataclasses import dataclass, field
 
 from ..errors import InputError
@@ -135,7 +136,8 @@ def run_lab(lab: LabCase, out: str, quick: bool = False, quiet: bool = False, re
             st, line = int(summ.get("exit_status") or 0), convergence_line(summ.get("convergence"))
         except RunStopped as e:
             if e.code in (130, 143):   # SIGINT / SIGTERM: stop the whole test (the checkpoint is written)
-                print(f"fem-blocks: {lab.name}: specimen {label}: run stopped: {e}")
+                print(f"fem-blocks: {lab.name}: specimen {label} interrupted ({e}); the specimens continue with: "
+                      f"fem-blocks run {lab.source} --out {out} --resume", file=sys.stderr)
                 return e.code
             summ, st, line = None, e.code, f"run stopped: {e}"
         status = max(status, st, key=SEVERITY.get)
