@@ -69,6 +69,7 @@ class DiagonalSpec(SpecimenSpec):
 
 
 SPEC = DiagonalSpec
+NAMED_LAWS = ("crack",)   # keys naming a [laws.NAME] table, checked by lab.parse_lab
 
 
 @dataclass
