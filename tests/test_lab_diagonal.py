@@ -9,9 +9,7 @@
 """
 from __future__ import annotations
 
-import copy
 import math
-import os
 
 import numpy as np
 import pytest
@@ -151,13 +149,13 @@ def test_equivalent_layer_by_hand():
 def test_elastic_G_against_continuum(tmp_path):
     """The panel (deformable bricks, linear elastic joints: strengths far above the stresses, tan_phi = 0) loaded to
     0.02 mm along its diagonal: G = S_s / γ of the run (summary.json) against the continuum estimate (thin elastic
-    joint layers, the same shoes and gauges, mesh 2.5 mm; tests/diagonal_continuum.py) within 5 % (measured: 1019
-    against 1054 MPa, -3.4 %). Catches a wrong diagonal or area in the read-out, a wrong gauge block, shoes that
-    load the wrong faces, a joint stiffness lost in the specimen (k_s -> k_n: continuum G +59 %).
+    joint layers, the same shoes and gauges, mesh 5 mm, 0.15 % from 2.5 mm; tests/diagonal_continuum.py) within
+    5 % (measured: 1019 against 1056 MPa, -3.5 %). Catches a wrong diagonal or area in the read-out, a wrong gauge
+    block, shoes that load the wrong faces, a joint stiffness lost in the specimen (k_s -> k_n: continuum G +59 %).
 
     tan_phi = 0: the mixed law's friction acts on the compressive part r̃ (docs/laws.md "Change of variables"), so a
     compressed joint sticks (rigid in shear) until tan_phi σ is reached: with tan_phi = 0.75 the same run gives
-    G = 1535 MPa (+46 %), a property of the interface model that a thin elastic layer does not have.
+    G = 1535 MPa (+45 %), a property of the interface model that a thin elastic layer does not have.
     Solver: at tan_phi = 0 the Newton iteration stalls on one of the steps of this panel (residual 5e-5 to 7e-4
     after ~2300 iterations, the other steps converge to 1e-8; which step varies with the number of steps, G is the
     same to 5 digits for 3 and 4 steps): the test accepts that (checks.accept_unconverged) and bounds the residual."""
@@ -173,7 +171,7 @@ def test_elastic_G_against_continuum(tmp_path):
     from fem_blocks.lab.diagonal import panel
     p = panel(lab.spec)
     ref = continuum_G(p.bricks, p.w, p.h, lab.spec.joint_thickness, p.shoe, p.gauges, p.g, E_B, NU_B, K_N, K_S, T,
-                      size=0.0025)
+                      size=0.005)
     assert summ["quantities"]["G"]["value"] == pytest.approx(ref["G"], rel=0.05), (summ["quantities"]["G"], ref)
 
 
