@@ -173,6 +173,14 @@ def test_elastic_G_against_continuum(tmp_path):
     ref = continuum_G(p.bricks, p.w, p.h, lab.spec.joint_thickness, p.shoe, p.gauges, p.g, E_B, NU_B, K_N, K_S, T,
                       size=0.005)
     assert summ["quantities"]["G"]["value"] == pytest.approx(ref["G"], rel=0.05), (summ["quantities"]["G"], ref)
+    # equilibrium of the panel (no gravity, quasi-static): the fixed shoe's reactions balance the driven one's
+    # (less its inertial part), both components, every row: catches a plate left out of P or a sign
+    from fem_blocks.output.history import read_history
+    h = read_history(str(tmp_path / "out" / "panel" / "history.csv"))
+    mov = sum(np.column_stack([h[f"{b}.R{d}"] - h[f"{b}.I{d}"] for d in "xy"]) for b in ("shoe_top", "shoe_right"))
+    fix = sum(np.column_stack([h[f"{b}.R{d}"] for d in "xy"]) for b in ("shoe_bottom", "shoe_left"))
+    P = summ["quantities"]["P_max"]["value"]
+    assert np.max(np.abs(mov + fix)) < 1e-6 * P
 
 
 def test_demo_listed_and_valid(capsys):
