@@ -74,8 +74,10 @@ NAMED_LAWS = ("crack",)   # keys naming a [laws.NAME] table, checked by lab.pars
 
 @dataclass
 class Panel:
-    """The specimen's geometry (SI): bricks [(name, x0, y0, lx, ly, parent or None)], panel w x h, shoe bearing
-    length, plate thickness, gauge points {name: (x, y, block)}, gauge length g, diagonal unit vectors."""
+    """The specimen's geometry (SI): units [(name, x0, y0, lx, ly, split)] the bricks as laid, bricks [(name, x0, y0,
+    lx, ly, parent or None)] the blocks (halves of the split ones), panel w x h, shoe bearing length, plate
+    thickness, gauge points {name: (x, y, block)}, gauge length g, diagonal unit vectors."""
+    units: list
     bricks: list
     w: float
     h: float
@@ -147,13 +149,12 @@ def panel(s: DiagonalSpec) -> Panel:
     w, h, Lm, Hm = module_sizes(s)
     lay = builders.running_bond(s.courses, s.bricks_per_course, s.brick_length, s.brick_height,
                                 s.joint_thickness, expanded=True, half_bricks=True)
+    units = [(f"brick{k}", b.x, b.y, b.length, b.height, s.crack is not None and b.length >= 0.75 * Lm)
+             for k, b in enumerate(lay)]   # split: builders.split_bricks' rule
     bricks = []
-    for k, b in enumerate(lay):
-        if s.crack is not None and b.length >= 0.75 * Lm:   # builders.split_bricks' rule
-            half = 0.5 * b.length
-            bricks += [(f"brick{k}a", b.x, b.y, half, b.height, k), (f"brick{k}b", b.x + half, b.y, half, b.height, k)]
-        else:
-            bricks.append((f"brick{k}", b.x, b.y, b.length, b.height, None))
+    for k, (nm, x, y, lx, ly, split) in enumerate(units):   # blocks: halves NAMEa, NAMEb as Emitter.split_brick
+        bricks += ([(f"{nm}a", x, y, 0.5 * lx, ly, k), (f"{nm}b", x + 0.5 * lx, y, 0.5 * lx, ly, k)] if split
+                   else [(nm, x, y, lx, ly, None)])
     D, g = math.hypot(w, h), gauge_length(s)
     e_v, e_h = np.array([w, h]) / D, np.array([-w, h]) / D
     c = np.array([0.5 * w, 0.5 * h])
@@ -164,7 +165,7 @@ def panel(s: DiagonalSpec) -> Panel:
         own = [b[0] for b in bricks if b[1] - tol <= p[0] <= b[1] + b[3] + tol and b[2] - tol <= p[1] <= b[2] + b[4]
                + tol]
         gauges[nm] = (float(p[0]), float(p[1]), own[0])
-    return Panel(bricks, w, h, shoe_length(s), PLATE * Hm, gauges, g, e_v, e_h)
+    return Panel(units, bricks, w, h, shoe_length(s), PLATE * Hm, gauges, g, e_v, e_h)
 
 
 def shoe_history(s: DiagonalSpec, p: Panel) -> dict:
@@ -177,8 +178,11 @@ def specimens(s: DiagonalSpec, emitter):
     """One case: the panel (module docstring)."""
     p = panel(s)
     e = emitter("panel")
-    for nm, x0, y0, lx, ly, parent in p.bricks:
-        e.brick(nm, x0, y0, lx, ly, parent=parent)
+    for k, (nm, x0, y0, lx, ly, split) in enumerate(p.units):
+        if split:
+            e.split_brick(nm, x0, y0, lx, ly, parent=k)
+        else:
+            e.brick(nm, x0, y0, lx, ly)
     w, h, sl, d = p.w, p.h, p.shoe, p.plate
     e.plate("shoe_bottom", 0.0, -d, sl, 0.0)
     e.plate("shoe_left", -d, 0.0, 0.0, sl)
