@@ -197,7 +197,7 @@ def specimens(s: DiagonalSpec, emitter):
     e.defaults("output", gauges=[dict(name=nm, block=b, point=[e.L(x), e.L(y)]) for nm, (x, y, b) in p.gauges.items()],
                curve=dict(body="shoe_top", force="y", displacement="y"))
     return [("panel", e.data, dict(width_m=w, height_m=h, shoe_length_m=sl, gauge_length_m=p.g,
-                                   bricks=len(p.bricks)))]
+                                   bricks=len(p.units), blocks=len(p.bricks)))]
 
 
 def net_area(s: DiagonalSpec, case) -> float:
