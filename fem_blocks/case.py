@@ -906,7 +906,7 @@ def _parse_blocks(root: Table, D: int, block_types: dict, names: set) -> list:
         t.dimension_keys(D, dict(angle=2, rotation_axis=3, rotation_angle=3))
         b = BlockSpec(name=bname, type=ty, position=t.vector("position", D, (0.0,) * D, dim="length"),
                       angle=0.0 if D == 3 else math.radians(t.number("angle", 0.0)),
-                      group=t.string("group", "blocks"))
+                      group=t.string("group", "blocks"), parent=t.integer("parent", -1, lo=0))
         if D == 3:
             b.R = _rotation(t)
         for c in t.tables("clamps"):

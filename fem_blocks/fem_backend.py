@@ -91,16 +91,11 @@ def assemble_operators(mesh, E, nu, rho, thickness=1.0, plane="stress") -> FEOpe
     return _assemble_fe(mesh, 2, lam_, mu_, float(thickness), float(thickness) * float(rho), (2, 3))
 
 
-def _assemble_fe(mesh, gdim, lam_, mu_, k_scale, m_scale, tensor_degrees) -> FEOperators:
-    """K = k_scale ∫ sigma(u) : eps(v) dx (k_scale None: no factor), M = m_scale ∫ u . v dx and the lumped M
-    (vertex quadrature on simplices, row sum on quadrangles/hexahedra) of a linear Lagrange space on `mesh`
-    (gdim 2: triangle|quad, 3: tetrahedron|hexahedron) with dolfinx; scipy CSR in the mesh dof order
-    gdim*node + c. tensor_degrees: (K, M) quadrature degrees on quadrangles/hexahedra (simplices: the degrees
-    estimated by ufl, exact for P1)."""
-    import ufl
+def _function_space(mesh, gdim):
+    """(dolfinx mesh, P1/Q1 vector space, perm): `perm[i]` = the BlockMesh dof (gdim*node + c) of dolfinx dof i;
+    the dolfinx cells keep the BlockMesh cell order through `msh.topology.original_cell_index`."""
     from mpi4py import MPI
     from dolfinx import cpp, fem, mesh as dmesh
-    from dolfinx.fem.petsc import assemble_matrix
     from dolfinx.io import gmshio
 
     tensor = mesh.cell_type in ("quad", "hexahedron")
@@ -121,6 +116,21 @@ def _assemble_fe(mesh, gdim, lam_, mu_, k_scale, m_scale, tensor_degrees) -> FEO
     d2g[V.dofmap.list.array] = msh.geometry.dofmap.array
     node = np.asarray(msh.geometry.input_global_indices, dtype=np.int64)[d2g]
     perm = (gdim * node[:, None] + np.arange(gdim)[None, :]).ravel()
+    return msh, V, perm
+
+
+def _assemble_fe(mesh, gdim, lam_, mu_, k_scale, m_scale, tensor_degrees) -> FEOperators:
+    """K = k_scale ∫ sigma(u) : eps(v) dx (k_scale None: no factor), M = m_scale ∫ u . v dx and the lumped M
+    (vertex quadrature on simplices, row sum on quadrangles/hexahedra) of a linear Lagrange space on `mesh`
+    (gdim 2: triangle|quad, 3: tetrahedron|hexahedron) with dolfinx; scipy CSR in the mesh dof order
+    gdim*node + c. tensor_degrees: (K, M) quadrature degrees on quadrangles/hexahedra (simplices: the degrees
+    estimated by ufl, exact for P1)."""
+    import ufl
+    from dolfinx import fem
+    from dolfinx.fem.petsc import assemble_matrix
+
+    tensor = mesh.cell_type in ("quad", "hexahedron")
+    msh, V, perm = _function_space(mesh, gdim)
 
     # material data as dolfinx Constants (not literals): the generated kernels do not depend on the material,
     # so they are JIT-compiled once per cell type and found in the cache for every other material
@@ -159,6 +169,45 @@ def _assemble_fe(mesh, gdim, lam_, mu_, k_scale, m_scale, tensor_degrees) -> FEO
     else:
         Ml = sp.diags(np.asarray(Ms.sum(axis=1)).ravel()).tocsr()  # row-sum lumping (Q1)
     return FEOperators(Ks, Ms, Ml)
+
+
+def assemble_stiffness_cells(mesh, E, nu, thickness=1.0, plane="stress") -> sp.csr_matrix:
+    """K = t ∫ sigma(u) : eps(v) dx of a 2D BlockMesh with a piecewise-constant material: `E`, `nu` arrays of one
+    value per cell of `mesh` (e.g. two materials by cell tags: E = np.where(tag, E_joint, E_brick)), sigma as in
+    the module docstring with lambda*(E, nu, plane), mu(E, nu) per cell (DG0 coefficients); Q1 with 2 x 2 Gauss.
+    scipy CSR (2n x 2n) in the BlockMesh dof order 2*node + c. Not used by the time stepping (one material per
+    block there): the continuum estimate of a brick-joint pattern (fem_blocks/lab/diagonal.py's check)."""
+    import ufl
+    from dolfinx import fem
+    from dolfinx.fem.petsc import assemble_matrix
+
+    E, nu = np.asarray(E, dtype=float).ravel(), np.asarray(nu, dtype=float).ravel()
+    nc = len(mesh.cells)
+    if E.size != nc or nu.size != nc:
+        raise InputError(f"{mesh.source}: expected one E and one nu per cell ({nc}), got {E.size} and {nu.size}")
+    for e, n in {(float(a), float(b)) for a, b in zip(E, nu)}:
+        check_elastic(e, n, plane)
+    check_range("thickness", thickness, 0.0, lo_open=True, expected="thickness > 0 [m]")
+    lam_c, mu_c = lame(E, nu, plane)
+    msh, V, perm = _function_space(mesh, 2)
+    with _quiet_jit():
+        Q = fem.FunctionSpace(msh, ("DG", 0))
+    orig = np.asarray(msh.topology.original_cell_index, dtype=np.int64)   # dolfinx cell i = BlockMesh cell orig[i]
+    dofs = np.asarray(Q.dofmap.list.array, dtype=np.int64)   # DG0: the one dof of each dolfinx cell
+    lam, mu = fem.Function(Q), fem.Function(Q)
+    lam.x.array[dofs], mu.x.array[dofs] = lam_c[orig], mu_c[orig]
+    u, v = ufl.TrialFunction(V), ufl.TestFunction(V)
+    eps = lambda w: ufl.sym(ufl.grad(w))  # noqa: E731
+    dx = ufl.dx(metadata={"quadrature_degree": 2}) if mesh.cell_type == "quad" else ufl.dx
+    form = fem.Constant(msh, float(thickness)) * ufl.inner(lam * ufl.tr(eps(u)) * ufl.Identity(2)
+                                                          + 2 * mu * eps(u), eps(v)) * dx
+    with _quiet_jit():
+        k_form = fem.form(form)
+    A = assemble_matrix(k_form)
+    A.assemble()
+    K = _petsc_to_scipy(A, perm)
+    A.destroy()
+    return K
 
 
 # ----------------------------------------------------------------------------- stresses (numpy)

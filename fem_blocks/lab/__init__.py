@@ -104,6 +104,11 @@ def parse_lab(data: dict, source) -> LabCase:
             raise t.error("material" if table == "materials" else "joint",
                           f"= {name!r}: expected the name of a [{table}.NAME] table of the file"
                           + (f" ({', '.join(map(repr, have))})" if have else f" (the file has no [{table}])"))
+    for k in getattr(mod, "NAMED_LAWS", ()):   # the test's other keys naming a [laws.NAME] table (None: unused)
+        name, have = getattr(spec, k), sorted(data.get("laws") or {})
+        if name is not None and name not in have:
+            raise t.error(k, f"= {name!r}: expected the name of a [laws.NAME] table of the file "
+                             f"({', '.join(map(repr, have))})")
     base = {k: v for k, v in data.items() if k != "lab"}
     name = str(data.get("name") or os.path.splitext(os.path.basename(str(source)))[0])
     lab = LabCase(source=source, name=name, spec=spec, module=mod, units=units,

@@ -82,3 +82,39 @@ def triplet_readout(sigma_p, curves: list, tail: float = 0.1) -> dict:
     peak = fit_line(sp, tp)
     resid = fit_line(sr, tr) if len(set(sr)) >= 2 else None
     return dict(levels=levels, peak_line=peak, residual_line=resid)
+
+
+def diagonal_curves(R, e_v, u_v1, u_v2, u_h1, u_h2, e_h, g: float, A_n: float) -> dict:
+    """ASTM E519 diagonal compression from per-row arrays: R (n, 2) the loading shoe's reaction (driver reactions
+    less inertia, summed over its plates) [N], e_v the unit vector of the loaded diagonal (the shoe moves along
+    -e_v), u_* (n, 2) the displacements of the gauge points V1, V2 (on the loaded diagonal, V2 - V1 along e_v) and
+    H1, H2 (on the other, H2 - H1 along e_h) [m], g the gauge length [m], A_n the net area [m²]:
+
+        P = -R · e_v,   S_s = 0.707 P / A_n,
+        ΔV = -(u_V2 - u_V1) · e_v  (shortening),   ΔH = (u_H2 - u_H1) · e_h  (lengthening),   γ = (ΔV + ΔH) / g.
+    """
+    R = np.asarray(R, dtype=float)
+    ev, eh = np.asarray(e_v, dtype=float), np.asarray(e_h, dtype=float)
+    P = -R @ ev
+    dV = -(np.asarray(u_v2, dtype=float) - np.asarray(u_v1, dtype=float)) @ ev
+    dH = (np.asarray(u_h2, dtype=float) - np.asarray(u_h1, dtype=float)) @ eh
+    return dict(P=P, S_s=0.707 * P / A_n, dV=dV, dH=dH, gamma=(dV + dH) / g)
+
+
+def secant_at_fraction(stress, strain, fraction: float = 1.0 / 3.0) -> dict:
+    """Secant modulus from the origin at `fraction` of the peak stress on the rising branch: the first row k with
+    stress[k] >= s* = fraction · max(stress), the strain at s* interpolated linearly between rows k-1 and k,
+    modulus = s* / strain(s*). NaN modulus when the curve starts above s* or the strain there is not > 0.
+    -> dict(stress, strain, modulus, fraction)."""
+    s, e = np.asarray(stress, dtype=float), np.asarray(strain, dtype=float)
+    if s.size == 0 or s.size != e.size:
+        raise ValueError(f"secant_at_fraction: expected two equal-length non-empty arrays, got {s.size}, {e.size}")
+    target = fraction * float(np.nanmax(s))
+    k = int(np.argmax(s >= target))
+    if k == 0:
+        es = float(e[0]) if s[0] == target else float("nan")
+    else:
+        t = (target - s[k - 1]) / (s[k] - s[k - 1])
+        es = float(e[k - 1] + t * (e[k] - e[k - 1]))
+    mod = target / es if np.isfinite(es) and es > 0 else float("nan")
+    return dict(stress=target, strain=es, modulus=mod, fraction=float(fraction))

@@ -25,7 +25,8 @@ BRICKS, PLATES = "bricks", "plates"
 #: the tests: name -> module of fem_blocks.lab (each: SPEC, STANDARD, specimens, readout, plot)
 TESTS = {"triplet_shear": "triplet",
          "couplet_tension": "bond_tension",
-         "bond_wrench": "bond_wrench"}
+         "bond_wrench": "bond_wrench",
+         "diagonal_compression": "diagonal"}
 
 
 @dataclass
@@ -71,9 +72,10 @@ class Emitter:
     def S(self, v): return float(v) / self.U["stress"]          # noqa: E704
     def T(self, v): return float(v) / self.U["time"]            # noqa: E704
 
-    def brick(self, name: str, x0: float, y0: float, lx: float, ly: float):
+    def brick(self, name: str, x0: float, y0: float, lx: float, ly: float, parent: int | None = None):
         """A brick [x0, x0+lx] x [y0, y0+ly] (SI) of group "bricks": a deformable block of a rectangle block type
-        (one per size) or, with bricks = "rigid", a free rigid body of the material's density."""
+        (one per size) or, with bricks = "rigid", a free rigid body of the material's density. `parent` (deformable
+        bricks only): the id shared by the two halves of a split brick (`split_brick`)."""
         if self.lab.bricks == "rigid":
             v = [[x0, y0], [x0 + lx, y0], [x0 + lx, y0 + ly], [x0, y0 + ly]]
             rb = dict(name=name, group=BRICKS, vertices=[[self.L(a), self.L(b)] for a, b in v])
@@ -90,6 +92,15 @@ class Emitter:
             self.data["block_types"][tname] = dict(geometry="rectangle", lx=self.L(lx), ly=self.L(ly),
                                                    mesh_size=self.L(h), cell="quad", material=self.lab.material)
         self.data["blocks"].append(dict(name=name, type=tname, position=[self.L(x0), self.L(y0)], group=BRICKS))
+        if parent is not None:
+            self.data["blocks"][-1]["parent"] = int(parent)
+
+    def split_brick(self, name: str, x0: float, y0: float, lx: float, ly: float, parent: int):
+        """A brick with a potential vertical crack in its middle (Lourenço's micro-model, builders.split_bricks):
+        two deformable halves NAMEa (left) and NAMEb (right) of lx/2 sharing the id `parent` (an integer >= 0,
+        unique per brick); `interfaces(crack=LAW)` joins them by the "crack" interface."""
+        self.brick(f"{name}a", x0, y0, 0.5 * lx, ly, parent=parent)
+        self.brick(f"{name}b", x0 + 0.5 * lx, y0, 0.5 * lx, ly, parent=parent)
 
     def plate(self, name: str, x0: float, y0: float, x1: float, y1: float, drivers: dict | None = None,
               forces: dict | None = None):
@@ -121,11 +132,15 @@ class Emitter:
             return dict(times=[self.T(t) for t in h["times"]], values=[conv(v) for v in h["values"]])
         return conv(h)
 
-    def interfaces(self, **joint_keys):
+    def interfaces(self, crack: str | None = None, **joint_keys):
         """The joint interface (bricks-bricks, law = the [laws] name `lab.joint`) and the plates' (bricks-plates,
-        Coulomb with `plate_mu`)."""
+        Coulomb with `plate_mu`); with `crack` (the name of a [laws.NAME] law) also the "crack" interface between
+        the two halves of each split brick (orientation "crack", the same `joint_keys`)."""
         self.data["interfaces"] += [dict(name="joint", between=[BRICKS, BRICKS], law=self.lab.joint, **joint_keys),
                                     dict(name="plates", between=[BRICKS, PLATES], mu=self.lab.plate_mu)]
+        if crack is not None:
+            self.data["interfaces"].append(dict(name="crack", between=[BRICKS, BRICKS], orientation="crack",
+                                                law=crack, **joint_keys))
 
     def stage(self, name: str, steps: int, duration: float = 1.0, output_frames: int = 20):
         """One quasi-static stage: `steps` steps over `duration` (a pseudo-time [s]; velocities reset every step,
