@@ -23,7 +23,8 @@ from ..specs import spec
 #: bricks-plates (`plate_mu`)
 BRICKS, PLATES = "bricks", "plates"
 #: the tests: name -> module of fem_blocks.lab (each: SPEC, STANDARD, specimens, readout, plot)
-TESTS = {"triplet_shear": "triplet"}
+TESTS = {"triplet_shear": "triplet",
+         "compression": "compression"}
 
 
 @dataclass
