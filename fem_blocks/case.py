@@ -778,6 +778,9 @@ def parse_case(data: dict, source: str = "<case>") -> Case:
         data, source = casefile.compose(data, source, LAW_KEYS)
     base = os.path.dirname(os.path.abspath(source)) if os.path.exists(source) else os.getcwd()
     root = Table(data, "", source, UNIT_SYSTEMS["SI"])
+    if "lab" in data:
+        raise root.error("lab", "a standard laboratory test: its specimens are generated cases; load the file with "
+                                "fem_blocks.lab.load_lab (the command line does)")
     units = root.string("units", "SI", choices=list(UNIT_SYSTEMS))
     U = UNIT_SYSTEMS[units]
     root.units = U
@@ -1307,6 +1310,16 @@ def _parse_output(root: Table, D: int) -> dict:
                                       "[[\"voussoir6\", \"voussoir7\"]]")
         output["joints"] = [list(p) for p in jts]
         output.update(read_fields(out, OutputSpec, ("joints_paraview", "line_of_thrust")))
+        gauges, seen = [], set()  # block names matched to the built bodies by the runner (runner.gauge_points)
+        for g in out.tables("gauges"):
+            nm = g.string("name", required=True)
+            if nm in seen:
+                raise g.error("name", f"= {nm!r}: duplicate gauge name")
+            seen.add(nm)
+            gauges.append(dict(name=nm, block=g.string("block", required=True),
+                               point=g.vector("point", D, dim="length", required=True), key=g.path))
+            g.done()
+        output["gauges"] = gauges
         out.done()
     return output
 

@@ -47,9 +47,10 @@ def check_case(path: str, quick: bool = False) -> tuple[list[str], list[str]]:
                          velocity_reset=st0.velocity_reset, contact=model.contact)
         warnings = list(case.warnings) + groups_without_interface(case, model, sim)
         per_interface = model.contact.initial_contacts(sim) if model.contact is not None else {}
-        from .runner import joint_pairs, rotation_bodies
+        from .runner import gauge_points, joint_pairs, rotation_bodies
         rotation_bodies(case, model)  # [output] rotations: names matched to the built blocks, as a run does
         joint_pairs(case, model)  # [output] joints: likewise
+        gauge_points(case, model)  # [output] gauges: blocks matched and points located, likewise
     except InputError as e:  # found while building the model (meshes, overlaps): name the case file
         msg = str(e)
         raise InputError(msg if msg.startswith(case.source) else f"{case.source}: {msg}") from None

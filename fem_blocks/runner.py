@@ -136,6 +136,33 @@ def joint_pairs(case: Case, model: Model) -> list[tuple[int, int]]:
     return out
 
 
+def gauge_points(case: Case, model: Model) -> list[tuple]:
+    """`[output] gauges` located in their blocks' meshes: (name, body index, cell nodes, weights) each
+    (output/gauges.py); InputError naming the gauge's key for a block that is not a deformable block or a point
+    outside it (matched after expand, as rotation_bodies)."""
+    from .output.gauges import locate
+    out = []
+    for g in case.output.get("gauges") or []:
+        i = model.names.index(g["block"]) if g["block"] in model.names else -1
+        if i < 0 or model.bodies[i].kind != 0:
+            blocks = [n for n, b in zip(model.names, model.bodies) if b.kind == 0]
+            raise InputError(f"{case.source}: {g['key']}.block = {g['block']!r}: expected the name of a deformable "
+                             f"block ({', '.join(map(repr, blocks[:4]))}{', ...' if len(blocks) > 4 else ''})")
+        b = model.bodies[i]
+        mesh = b.type.mesh
+        hit = locate(b.reference_points, mesh.cells, mesh.cell_type, g["point"])
+        if hit is None:
+            raise InputError(f"{case.source}: {g['key']}.point = {list(g['point'])} m: outside block "
+                             f"{g['block']!r}; expected a point of the block in its reference position")
+        out.append((g["name"], i, mesh.cells[hit[0]], hit[1]))
+    return out
+
+
+def _gauge_names(model: Model, gauges) -> list[str]:
+    D = 2 if len(model.dofs) == 3 else 3
+    return [f"{g[0]}.u{d}" for g in gauges for d in model.dofs[:D]]
+
+
 def _joint_values(model: Model, sim, joints) -> dict:
     """history.csv values of the `[output] joints` pairs at the last step (output/joints.py)."""
     from .output.joints import history_values, record_joints
@@ -152,9 +179,9 @@ def _rotation_names(model: Model, i: int) -> list[str]:
     return [f"{name}.rot"] if len(model.dofs) == 3 else [f"{name}.rot{c}" for c in "xyz"]
 
 
-def history_columns(model: Model, rotations=(), joints=()) -> list[str]:
+def history_columns(model: Model, rotations=(), joints=(), gauges=()) -> list[str]:
     """The columns of history.csv; `rotations`: deformable body indices with rotation columns (rotation_bodies);
-    `joints`: (a, b) body index pairs with joint-resultant columns (joint_pairs)."""
+    `joints`: (a, b) body index pairs with joint-resultant columns (joint_pairs); `gauges`: gauge_points."""
     cols = ["step", "time", "stage", "h", "kinetic", "elastic", "gravity_potential", "external_work",
             "total_energy", "driver_work", "max_velocity"]
     for i, b in enumerate(model.bodies):
@@ -165,6 +192,7 @@ def history_columns(model: Model, rotations=(), joints=()) -> list[str]:
             cols += [f"{name}.I{d}" for d in model.dofs]  # inertial part of R (dynamics.py docstring)
     for i in rotations:
         cols += _rotation_names(model, i)
+    cols += _gauge_names(model, gauges)
     if model.contact is not None:
         cols += ["contacts", "closed", "slip", "sweeps", "change", "residual", "converged", "dissipated",
                  "friction_dissipated"]
@@ -174,7 +202,7 @@ def history_columns(model: Model, rotations=(), joints=()) -> list[str]:
     return cols
 
 
-def history_row(model: Model, info, stage_index: int, sim=None, h=None, rotations=(), joints=()) -> dict:
+def history_row(model: Model, info, stage_index: int, sim=None, h=None, rotations=(), joints=(), gauges=()) -> dict:
     row = dict(step=info.step, time=info.time, stage=stage_index, h=h, kinetic=info.kinetic, elastic=info.elastic,
                gravity_potential=info.gravity_potential, external_work=info.external_work,
                total_energy=info.total_energy, driver_work=None if sim is None else sim.driver_work,
@@ -190,6 +218,11 @@ def history_row(model: Model, info, stage_index: int, sim=None, h=None, rotation
                 row[f"{name}.I{d}"] = b.reaction_inertia[k]
     for i in rotations:  # body.rotation(): rad, counter-clockwise (2D); rotation vector (3D)
         row.update(zip(_rotation_names(model, i), np.atleast_1d(model.bodies[i].rotation())))
+    if gauges:  # output/gauges.py: u(x) = sum_a N_a u_a in the gauge's cell
+        from .output.gauges import gauge_values
+        row.update(zip(_gauge_names(model, gauges),
+                       np.concatenate([gauge_values(model.bodies[i].displacement_global(), nodes, w)
+                                       for _, i, nodes, w in gauges])))
     if model.contact is not None:
         c = info.contact or {}
         row.update(contacts=c.get("contacts", 0), closed=c.get("active", 0), slip=c.get("slip", 0),
@@ -805,7 +838,8 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
         if st.stop_rotation is not None:
             _rotation_stop(case, model, si, st.stop_rotation)
     joint_ids = joint_pairs(case, model)  # [output] joints
-    cols = history_columns(model, rot_ids, joint_ids)
+    gauge_ids = gauge_points(case, model)  # [output] gauges
+    cols = history_columns(model, rot_ids, joint_ids, gauge_ids)
     hpath = os.path.join(out_dir, "history.csv")
     if ck is not None and os.path.exists(hpath):
         # the rows before the checkpoint: read once from the file the run wrote (cut back to the checkpoint's
@@ -823,7 +857,7 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
     bar = Progress(progress)
     info = sim.info()
     if ck is None:
-        hist.write(history_row(model, info, 0, sim, rotations=rot_ids, joints=joint_ids))
+        hist.write(history_row(model, info, 0, sim, rotations=rot_ids, joints=joint_ids, gauges=gauge_ids))
         if pv:
             pv.write(sim.time)
         if pc:
@@ -856,7 +890,7 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
     stage_bad = {}  # this stage's unconverged rows: count, worst (step, time, residual, solver, message), solvers
 
     def make_row(inf, hh):
-        row = history_row(model, inf, run["stage"], sim, hh, rot_ids, joint_ids)
+        row = history_row(model, inf, run["stage"], sim, hh, rot_ids, joint_ids, gauge_ids)
         row["_contact"] = inf.contact  # (popped by write_row: the solver and its message, not history columns)
         return row
 

@@ -596,6 +596,9 @@ class OutputSpec:
     line_of_thrust: bool = spec(False, doc="write line_of_thrust.png (2D): the joints, their points of application "
                                            "and lines of action at the end of the run, and summary.json "
                                            "\"line_of_thrust\" (joints whose point is outside)")
+    gauges: tuple = spec((), doc="displacement gauges, each {name, block, point}: history.csv NAME.ux, NAME.uy "
+                                 "(3D: NAME.uz) [m], the displacement of the material point of deformable block "
+                                 "`block` at `point` (its reference position, in length units)")
 
 
 # ----------------------------------------------------------------------------- [[reference]]
