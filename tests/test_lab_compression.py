@@ -212,19 +212,39 @@ def test_wallet_modulus_series_formula(tmp_path):
 
 
 @pytest.mark.dolfinx
-def test_demo_prism_quick_cli(tmp_path, demo_path):
-    """The prism demo end to end through the CLI (--quick): exit 0, the report names the standard and the input
-    each quantity measures, f = f_c (10.5 MPa) within 2 %, E the series formula within 1 %, and the figures."""
+def test_demo_prism_cli_short(tmp_path, demo_path):
+    """The prism demo end to end through the CLI, shortened (3 courses, 30 steps: the demo itself takes 43 s):
+    exit 0, the report names the standard and the input each quantity measures, f = f_c (10.5 MPa) within 2 %
+    after a peak, E the series formula within 1 %, and the figures (the standard's, the crack pattern and the
+    force-displacement curve of the specimen)."""
+    import re
+
     from fem_blocks.cli import main
+    with open(demo_path("compression_prism.toml"), encoding="utf-8") as f:
+        text = f.read()
+    text = re.sub(r"(?m)^courses = 5", "courses = 3", text)
+    text = re.sub(r"(?m)^steps = 200", "steps = 30", text)
+    assert "courses = 3" in text and "steps = 30" in text
+    case = tmp_path / "prism.toml"
+    case.write_text(text, encoding="utf-8")
     out = tmp_path / "out"
-    assert main(["run", demo_path("compression_prism.toml"), "--out", str(out), "--quick", "--quiet"]) == 0
+    assert main(["run", str(case), "--out", str(out), "--quiet"]) == 0
     with open(out / "summary.json") as f:
         s = json.load(f)
-    assert s["standard"].startswith("EN 1052-1")
+    assert s["standard"].startswith("EN 1052-1") and s["test"] == "compression"
     q = s["quantities"]
+    assert s["report"]["peak_reached"] is True
     assert q["f"]["value"] == pytest.approx(10.5e6, rel=0.02)
+    assert q["f"]["measures"] == "laws.joint.f_c"
     assert q["E"]["value"] == pytest.approx(1.0 / (1.0 / 16700e6 + 1.0 / (82e9 * 0.062)), rel=0.01)
     assert q["E"]["input"] == pytest.approx(q["E"]["value"], rel=0.01)
     for f in ("compression.png", os.path.join("prism", "crack_pattern.png"),
               os.path.join("prism", "force_displacement.png")):
         assert (out / f).is_file(), f
+
+
+def test_demos_listed():
+    """`fem-blocks demo --list` shows both demos with their first comment line."""
+    from fem_blocks.cli import list_demos
+    demos = list_demos()
+    assert "compression_prism" in demos and "compression_wallet" in demos
