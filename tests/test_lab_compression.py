@@ -64,6 +64,19 @@ def test_peak_confirmed():
     assert not peak_confirmed(slow, d)
 
 
+def test_stopped_run_reads_as_no_peak():
+    """A run stopped before the stress rose (history of the initial row only) gives NaN values and the specimen's
+    line a WARNING, not a traceback: a result nobody should trust does not look like one."""
+    from fem_blocks.lab.compression import analyse, gauge_points, layout, specimen_line
+    s = _spec(courses=3)
+    h = {"platen.Ry": np.zeros(1), "platen.Iy": np.zeros(1), "platen.uy": np.zeros(1)}
+    h.update({f"{g['name']}.uy": np.zeros(1) for g in gauge_points(s, layout(s))})
+    run = dict(history=h, info=dict(area_m2=0.021, gauge_length_m=0.124))
+    c, sec, ok = analyse(s, run)
+    assert not ok and np.isnan(sec["peak"]) and np.isnan(sec["modulus"])
+    assert "WARNING: no peak" in specimen_line(s, run)
+
+
 # ------------------------------------------------------------------------------------------- specimen layout
 def _spec(**kw):
     from fem_blocks.lab.compression import CompressionSpec

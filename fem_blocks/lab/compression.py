@@ -257,21 +257,28 @@ def series_modulus(s: CompressionSpec, case) -> float | None:
     return float(1.0 / (1.0 / Eb + 1.0 / (kn * H)))
 
 
-def specimen_line(s: CompressionSpec, run: dict) -> str:
+def analyse(s: CompressionSpec, run: dict) -> tuple:
+    """(curves, secant, peak reached) of one specimen; a curve that cannot be read (a run stopped before the stress
+    rose: readout.secant_at_fraction's ValueError) gives NaN values and no peak."""
     c = curves(s, run)
-    sec = secant_at_fraction(c["stress"], c["strain"])
-    ok = peak_confirmed(c["force"], c["platen"])
+    try:
+        return c, secant_at_fraction(c["stress"], c["strain"]), peak_confirmed(c["force"], c["platen"])
+    except ValueError:
+        nan = float("nan")
+        return c, dict(peak=nan, peak_index=0, stress=nan, strain=nan, modulus=nan), False
+
+
+def specimen_line(s: CompressionSpec, run: dict) -> str:
+    c, sec, ok = analyse(s, run)
     return (f"{s.specimen}, {s.courses} courses x {width_in_bricks(s):g} bricks: f = F_max/A = {sec['peak'] / 1e6:.4f}"
             f" MPa, E (secant at f/3) = {sec['modulus'] / 1e6:.1f} MPa"
-            + ("" if ok else "; WARNING: the force still rises at the end of the loading (no peak): f is a lower "
-                             "bound; increase lab.displacement"))
+            + ("" if ok else "; WARNING: no peak (the force still rises at the end of the loading, or the run "
+                             "stopped): f is a lower bound; increase lab.displacement"))
 
 
 def readout(s: CompressionSpec, runs: list) -> dict:
     r = runs[0]
-    c = curves(s, r)
-    sec = secant_at_fraction(c["stress"], c["strain"])
-    ok = peak_confirmed(c["force"], c["platen"])
+    c, sec, ok = analyse(s, r)
     k = sec["peak_index"]
     p = r["case"].interfaces[0].params   # the joint law, SI
     Es = series_modulus(s, r["case"])
@@ -288,13 +295,14 @@ def readout(s: CompressionSpec, runs: list) -> dict:
          "strain_at_peak": dict(value=float(c["strain"][k]), unit="1", name="gauge strain at the peak"),
          "strain_one_third": dict(value=sec["strain"], unit="1", name="gauge strain at one third of the peak "
                                   "(eps_1/3)")}
+    lines = None
+    if np.isfinite(sec["strain"]):   # each gauge line's strain at f/3 (their spread: the specimen's bending)
+        lines = [secant_at_fraction(c["stress"], c[f"strain_{ln}"])["strain"] for ln in ("L", "R")]
     info = r["info"]
     return dict(quantities=q, peak_reached=bool(ok), peak_index=int(k), area_m2=info["area_m2"],
                 width_m=info["width_m"], height_m=info["height_m"], gauge_length_m=info["gauge_length_m"],
                 gauge_courses=info["gauge_courses"], displacement_m=info["displacement_m"],
-                stress_one_third_Pa=sec["stress"], series_modulus_Pa=Es,
-                strain_lines_at_one_third=[float(np.interp(sec["strain"], c["strain"][:k + 1], c[f"strain_{ln}"][:k + 1]))
-                                           for ln in ("L", "R")] if k > 0 else None)
+                stress_one_third_Pa=sec["stress"], series_modulus_Pa=Es, strain_lines_at_one_third=lines)
 
 
 def plot(s: CompressionSpec, report: dict, runs: list, path: str, title: str = ""):
