@@ -47,15 +47,21 @@ import sys
 from fem_blocks.case import load_case, quick
 from fem_blocks.runner import run_case
 path, out, steps = sys.argv[1], sys.argv[2], int(sys.argv[3])
-case = quick(load_case(path))
-if steps > 0:
-    for st in case.stages:
-        st.duration = min(st.duration, steps * st.h)
-        st.output_every = min(st.output_every, steps)
-try:
-    run_case(case, out, progress=False)
-except SystemExit:
-    pass
+try:  # a [lab] file (fem_blocks/lab): each specimen's case into OUT/LABEL (trees before it: no fem_blocks.lab)
+    from fem_blocks.lab import load_lab
+except ImportError:
+    load_lab = lambda p: None
+lab = load_lab(path)
+cases = [(quick(c), f"{out}/{label}") for label, c, _ in lab.specimens] if lab else [(quick(load_case(path)), out)]
+for case, d in cases:
+    if steps > 0:
+        for st in case.stages:
+            st.duration = min(st.duration, steps * st.h)
+            st.output_every = min(st.output_every, steps)
+    try:
+        run_case(case, d, progress=False)
+    except SystemExit:
+        pass
 """
 
 PY_DRIVER = r"""
@@ -178,6 +184,13 @@ def compare_dirs(da: str, db: str) -> tuple:
     diffs, worst, notes = [], [0.0, ""], []
     for name in sorted(set(os.listdir(da)) | set(os.listdir(db))):
         pa, pb = os.path.join(da, name), os.path.join(db, name)
+        if os.path.isdir(pa) and os.path.isdir(pb) and name != "paraview":   # a [lab] test's specimens
+            d, w, n = compare_dirs(pa, pb)
+            diffs += [f"{name}/{x}" for x in d]
+            notes += [f"{name}/{x}" for x in n]
+            if w[0] > worst[0]:
+                worst[:] = [w[0], f"{name}/{w[1]}"]
+            continue
         if name.endswith(".csv") or name in ("summary.json", "returned.json"):
             if not (os.path.exists(pa) and os.path.exists(pb)):
                 diffs.append(f"{name}: only in {'new' if not os.path.exists(pa) else 'ref'}")

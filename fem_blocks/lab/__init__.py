@@ -15,19 +15,24 @@ file's references: the same guards and outputs as any run), then the test's `rea
 specimens' histories and returns the standard's quantities, written to OUT/summary.json, and `plot` draws the
 standard's construction on OUT/TEST.png. Data flow: case file -> [lab] spec -> specimen cases -> runs -> read-out.
 
-Exit status: the worst of the specimens' (0, 3 with unconverged steps, 1 a run stopped by a numerical failure).
+Exit status: the most severe of the specimens' (0; 3 with unconverged steps; 1 a run stopped by a numerical failure)
+and 1 when the read-out could not measure one of the standard's quantities (NaN, listed in summary "unmeasured").
 """
 from __future__ import annotations
 
 import copy
 import importlib
 import json
+import math
 import os
 from dataclasses import dataclass, field
 
 from ..errors import InputError
 from .specimen import TESTS, Emitter, SpecimenSpec
 
+#: exit statuses from the least to the most severe: 0 clean, 3 unconverged steps, 1 a run stopped by a guard or a
+#: quantity of the standard that the read-out could not measure (NaN: e.g. no failure within the loading)
+SEVERITY = {0: 0, 3: 1, 1: 2}
 __all__ = ["LabCase", "load_lab", "parse_lab", "run_lab", "TESTS", "SpecimenSpec"]
 
 #: top-level tables a [lab] file may hold besides [lab]: they pass into every specimen (generated keys excluded)
@@ -114,6 +119,8 @@ def run_lab(lab: LabCase, out: str, quick: bool = False, quiet: bool = False, re
     """Run every specimen (runner.run_case into OUT/LABEL), read the test out, write OUT/summary.json and
     OUT/TEST.png; return the exit status (the worst of the specimens')."""
     from ..case import quick as make_quick
+    from ..output.checkpoint import NAME as CK_NAME
+    from ..output.checkpoint import PREV as CK_PREV
     from ..output.history import read_history
     from ..runner import RunStopped, convergence_line, run_case
     os.makedirs(out, exist_ok=True)
@@ -122,29 +129,39 @@ def run_lab(lab: LabCase, out: str, quick: bool = False, quiet: bool = False, re
         if quick:
             case = make_quick(case)
         d = os.path.join(out, label)
-        has_ck = resume and os.path.isdir(os.path.join(d, "checkpoints"))
+        has_ck = resume and any(os.path.exists(os.path.join(d, f)) for f in (CK_NAME, CK_PREV))
         try:
             summ = run_case(case, d, progress=not quiet, resume=has_ck, force=force)
-            st = int(summ.get("exit_status") or 0)
+            st, line = int(summ.get("exit_status") or 0), convergence_line(summ.get("convergence"))
         except RunStopped as e:
-            print(f"fem-blocks: {lab.name}: specimen {label}: run stopped: {e}")
-            summ, st = None, e.code
-        status = max(status, st) if st != 130 and st != 143 else st
-        if st in (130, 143):
-            return st
+            if e.code in (130, 143):   # SIGINT / SIGTERM: stop the whole test (the checkpoint is written)
+                print(f"fem-blocks: {lab.name}: specimen {label}: run stopped: {e}")
+                return e.code
+            summ, st, line = None, e.code, f"run stopped: {e}"
+        status = max(status, st, key=SEVERITY.get)
         hist = read_history(os.path.join(d, "history.csv"))
-        runs.append(dict(label=label, dir=label, info=info, history=hist, summary=summ, exit_status=st, case=case))
-        line = convergence_line((summ or {}).get("convergence"))   # (printed with --quiet too, as a run's result)
-        print(f"{lab.name}: specimen {label}: {lab.module.specimen_line(lab.spec, runs[-1])}"
+        runs.append(dict(label=label, dir=label, info=info, history=hist, summary=summ, exit_status=st, case=case,
+                         convergence=line))
+        print(f"{lab.name}: specimen {label}: "   # (printed with --quiet too, as a run's result)
+              + (lab.module.specimen_line(lab.spec, runs[-1]) if summ is not None else "")
               + (f"; {line}" if line and st else ""))
-    report = lab.module.readout(lab.spec, runs)
     png = f"{lab.spec.test}.png"
-    lab.module.plot(lab.spec, report, runs, os.path.join(out, png), title=lab.name)
+    try:
+        report = lab.module.readout(lab.spec, runs)
+        lab.module.plot(lab.spec, report, runs, os.path.join(out, png), title=lab.name)
+    except (ValueError, IndexError, KeyError, ZeroDivisionError) as e:
+        if not status:   # a complete set of runs must read out: a bug, not a specimen's failure
+            raise
+        report, png = dict(quantities={}, error=f"no read-out: {type(e).__name__}: {e}"), None  # (a stopped run)
+    unmeasured = [k for k, q in report.get("quantities", {}).items()
+                  if not (isinstance(q.get("value"), (int, float)) and math.isfinite(q["value"]))]
+    if unmeasured or "error" in report:   # a quantity the test did not measure (NaN): never a clean exit
+        status = max(status, 1, key=SEVERITY.get)
     summary = dict(case=str(lab.source), name=lab.name, test=lab.spec.test, standard=lab.module.STANDARD,
-                   exit_status=status, variant="quick x2" if quick else "",
+                   exit_status=status, unmeasured=unmeasured, variant="quick x2" if quick else "",
                    quantities=report.pop("quantities"), report=report, figure=png,
                    specimens=[dict(label=r["label"], dir=r["dir"], exit_status=r["exit_status"], **r["info"],
-                                   convergence=convergence_line((r["summary"] or {}).get("convergence")))
+                                   convergence=r["convergence"])
                               for r in runs],
                    inputs=dict(lab={k: (list(v) if isinstance(v, tuple) else v) for k, v in vars(lab.spec).items()},
                                units_of_lab="SI", material=lab.inputs["material"], joint=lab.inputs["joint"],
@@ -155,11 +172,12 @@ def run_lab(lab: LabCase, out: str, quick: bool = False, quiet: bool = False, re
         meas = f" (measures {q['measures']}" + (f" = {q['input']:g}" if isinstance(q.get("input"), (int, float))
                                                else "") + ")" if q.get("measures") else ""
         print(f"{lab.name}: {k} = {q['value']:.6g} {q['unit']}{meas}")
-    print(f"report: {os.path.join(os.path.abspath(out), 'summary.json')}; figure: "
-          f"{os.path.join(os.path.abspath(out), png)}")
+    print(f"report: {os.path.join(os.path.abspath(out), 'summary.json')}"
+          + (f"; figure: {os.path.join(os.path.abspath(out), png)}" if png else f" ({report['error']})"))
     if status:   # the last line: the outcome
-        print(f"{lab.name}: WARNING: exit status {status}: a specimen did not complete cleanly (see its line above); "
-              "do not trust this report")
+        why = (f"the read-out could not measure {', '.join(unmeasured)} (NaN in summary.json)" if unmeasured
+               else "a specimen did not complete cleanly (see its line above)")
+        print(f"{lab.name}: WARNING: exit status {status}: {why}; do not trust this report")
     return status
 
 

@@ -283,8 +283,7 @@ def readout(s: CompressionSpec, runs: list) -> dict:
     p = r["case"].interfaces[0].params   # the joint law, SI
     Es = series_modulus(s, r["case"])
     fc = p.get("f_c")
-    q = {"f": dict(value=sec["peak"], unit="Pa",
-                   name="compressive strength F_max / A" + ("" if ok else " (LOWER BOUND: no peak in the loading)"),
+    q = {"f": dict(value=sec["peak"], unit="Pa", name="compressive strength F_max / A",
                    measures=f"laws.{s.joint}.f_c" if fc is not None else
                    f"laws.{s.joint}.f_c (absent: the joints have no compressive failure mode)", input=fc),
          "E": dict(value=sec["modulus"], unit="Pa", name="secant modulus at one third of the peak, F_max / (3 A "
@@ -298,11 +297,16 @@ def readout(s: CompressionSpec, runs: list) -> dict:
     lines = None
     if np.isfinite(sec["strain"]):   # each gauge line's strain at f/3 (their spread: the specimen's bending)
         lines = [secant_at_fraction(c["stress"], c[f"strain_{ln}"])["strain"] for ln in ("L", "R")]
+    extra = {}
+    if not ok:   # no peak: the standard's quantities are not measured (NaN: exit status 1, summary "unmeasured")
+        extra = dict(lower_bound_f_Pa=sec["peak"], secant_at_third_of_largest_force_Pa=sec["modulus"])
+        for v in q.values():
+            v["value"] = float("nan")
     info = r["info"]
     return dict(quantities=q, peak_reached=bool(ok), peak_index=int(k), area_m2=info["area_m2"],
                 width_m=info["width_m"], height_m=info["height_m"], gauge_length_m=info["gauge_length_m"],
                 gauge_courses=info["gauge_courses"], displacement_m=info["displacement_m"],
-                stress_one_third_Pa=sec["stress"], series_modulus_Pa=Es, strain_lines_at_one_third=lines)
+                stress_one_third_Pa=sec["stress"], series_modulus_Pa=Es, strain_lines_at_one_third=lines, **extra)
 
 
 def plot(s: CompressionSpec, report: dict, runs: list, path: str, title: str = ""):

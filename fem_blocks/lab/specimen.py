@@ -24,6 +24,8 @@ from ..specs import spec
 BRICKS, PLATES = "bricks", "plates"
 #: the tests: name -> module of fem_blocks.lab (each: SPEC, STANDARD, specimens, readout, plot)
 TESTS = {"triplet_shear": "triplet",
+         "couplet_tension": "bond_tension",
+         "bond_wrench": "bond_wrench",
          "compression": "compression"}
 
 

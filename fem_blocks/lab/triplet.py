@@ -48,9 +48,9 @@ SPEC = TripletSpec
 def read_lists(t, U) -> dict:
     """`precompressions` (file units -> Pa), checked by readout.check_levels."""
     k = "precompressions"
+    t.used.add(k)
     if not t.has(k):
         return {}
-    t.used.add(k)
     from .. import casefile
     where = f"{casefile.origin(t.source, t.key(k))}: {t.key(k)}"
     return {k: tuple(float(v) * U["stress"] for v in check_levels(t.raw(k), where, MIN_LEVELS))}
