@@ -159,6 +159,7 @@ class Simulation:
                              "frozen contact geometry is the small-rotation reference configuration)")
         self.corotational = bool(corotational)
         self.h, self.theta, self.static = None, None, False
+        self.h_nominal = None  # set_step: the nominal step of which h is a sub-step (h itself by default)
         self.set_step(h, theta, static)
 
     # -------------------------------------------------------------- set-up
@@ -175,10 +176,14 @@ class Simulation:
                 out.append((i, f"its dofs {free} are not driven (a free rigid dof has only its mass)"))
         return out
 
-    def set_step(self, h: float, theta: float, static: bool | None = None):
+    def set_step(self, h: float, theta: float, static: bool | None = None, nominal: float | None = None):
         """(Re)build the step operators for (h, theta, static); shared per block type and clamp set. static=True
-        needs theta = 1 and no `static_obstacles` (InputError otherwise); None keeps the current choice."""
+        needs theta = 1 and no `static_obstacles` (InputError otherwise); None keeps the current choice.
+        `nominal`: the step h is a sub-step of a nominal step (the runner's "refine"/"adaptive" policies): the contact
+        step then clears an existing penetration at the nominal step's rate, not the sub-step's (contact/step.py);
+        default h itself."""
         check_step(h, theta)
+        self.h_nominal = float(h if nominal is None else max(nominal, h))
         static = self.static if static is None else bool(static)
         if static:
             if theta != 1.0:

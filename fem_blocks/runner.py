@@ -716,7 +716,7 @@ def _step(sim: Simulation, model: Model, run: dict, policy: str, max_level: int,
         _failed(run, spent)
         level += 1
         _restore(sim, model, snap)
-        sim.set_step(h / 2 ** level, th)
+        sim.set_step(h / 2 ** level, th, nominal=h)
         rows, spent = [], 0
         for _ in range(2 ** level):
             info = _attempt(sim, model, budget if level < max_level else 0)
@@ -752,7 +752,7 @@ def _step_adaptive(sim: Simulation, model: Model, run: dict, max_level: int, mak
         size = 2 ** (max_level - lev)
         hs = h * size / units
         if sim.h != hs:
-            sim.set_step(hs, th)
+            sim.set_step(hs, th, nominal=h)
         snap = _snapshot(sim, model, run) if lev < max_level else None
         info = _attempt(sim, model, budget if lev < max_level else 0)
         ok = not info.contact or info.contact.get("converged", True)

@@ -11,7 +11,8 @@ contact set the step was solved on, shared with the step but never modified afte
 
 Per contact (nc rows, local frame (n, t) in 2D, (n, t, s) in 3D, docs/method.md §3–§5):
 P impulses (nc, d) [N s], r = P / h reactions [N], v the shifted local velocity at the end of the step
-(normal v_N + gbar / (h theta)), gt_end = h theta v_N the joint-corrected gap g - g0 at the end of the step [m],
+(normal v_N + gs / (h theta), contact/step.py), gt_end = gbar + h theta v_N the joint-corrected gap g - g0 at the
+end of the step [m],
 status 0 open / 1 stick / 2 slip, law codes and the committed law state (laws.py columns), the step's frictional
 dissipation per contact `friction` = -r̃_T · Δu_T [J] and its running total `friction_total` (contact/friction.py).
 """

@@ -4,12 +4,18 @@ Per step [t_i, t_{i+1}] (docs/method.md §3–§5), with impulses P = h r as unk
 
     v = v_free + W_del P,   v_free = G u_free,   W_del = sum_bodies G W_k G^T,
     gt = g - g0 (thick joints),   gbar = gt_i + h (1 - theta) v_N,i,
-    Signorini on the shifted normal velocity  v_N + gbar / (h theta) >= 0  ⊥  P_N >= 0,
+    Signorini on the shifted normal velocity  v_N + gs / (h theta) >= 0  ⊥  P_N >= 0,
+    gs = max(gbar, 0) + (h / hn) min(gbar, 0)   (hn = sim.h_nominal; gs = gbar unless h is a sub-step),
     Coulomb |P_T| <= mu P_N (implicit, on v_T).
 
-So the NLGS local problem is `u = W_del P + q` with `q = v_free + (gbar/(h theta), 0)`: at the end
-of the step the θ-rule position update gives gt_{i+1} = gbar + h theta v_N >= 0 exactly (frozen
-geometry). Then u_{i+1} = u_free + W H P (one batched solve per block type).
+A sub-step h = hn / 2^k (the runner's "refine"/"adaptive") would clear an existing penetration p = -gbar at the
+speed p / (h theta), 2^k times the nominal step's, and create kinetic energy growing as (p / h)^2; the sub-step
+clears it at the nominal rate instead (the fraction h / hn of it per sub-step), so sub-stepping never pushes a
+penetrated contact out faster than the step it replaces (docs/method.md §3).
+
+So the NLGS local problem is `u = W_del P + q` with `q = v_free + (gs/(h theta), 0)`: at the end
+of the step the θ-rule position update gives gt_{i+1} = gbar + h theta v_N >= gbar - gs, = 0 for gbar >= 0 and
+(1 - h/hn) gbar for a penetration (frozen geometry). Then u_{i+1} = u_free + W H P (one batched solve per block type).
 
 Geometry: "frozen" (small displacements; detection, frames, G and W_del once in the reference
 configuration; gaps follow the displacement jumps gt = gt_ref + (G q)_N) or "updated" (re-detection
@@ -397,15 +403,20 @@ class ContactStep:
         from ..laws import S_UP
         gt = gt - self.state[:, S_UP]  # crushed joints: the contact surface moved by the plastic closure u_p <= 0
         gbar = gt + h * (1 - th) * vi[:, 0]
+        # a sub-step of a nominal step hn (sim.set_step(..., nominal=hn)) clears an existing penetration (gbar < 0)
+        # at the nominal rate: the shifted gap gs = max(gbar, 0) + (h / hn) min(gbar, 0) (= gbar when h = hn)
+        pen = np.minimum(gbar, 0.0)
+        hn = getattr(sim, "h_nominal", None) or h
+        gs = (gbar - pen) + pen * (h / hn)
         q = vfree.copy()
-        q[:, 0] += gbar / (h * th)
+        q[:, 0] += gs / (h * th)
         c2 = perf_counter()
         tm["local"] += c2 - c1
         laws = None
         if self.cohesive:
             from ..laws import NSTATE, S_UN, S_UT
             ueff = self.state[:, [S_UN, S_UT] + ([NSTATE] if d == 3 else [])] + h * (1 - th) * vi
-            ueff[:, 0] -= gbar  # u = u_eff + h theta v_shifted (v_shifted = v_N + gbar/(h theta))
+            ueff[:, 0] -= gs  # u = u_eff + h theta v_shifted (v_shifted = v_N + gs/(h theta))
             laws = InterfaceLaws(self.law, self.par, self.state, ueff, cs.area, h, th)
         coarse = None
         if self.opts.coarse == "interfaces":
@@ -422,7 +433,7 @@ class ContactStep:
         else:
             from ..laws import NSTATE, S_UN, S_UT
             vs = res.u.reshape(-1, d)
-            self.state[:, S_UN] += h * ((1 - th) * vi[:, 0] + th * (vs[:, 0] - gbar / (h * th)))
+            self.state[:, S_UN] += h * ((1 - th) * vi[:, 0] + th * (vs[:, 0] - gs / (h * th)))
             ut_cols = [S_UT] + ([NSTATE] if d == 3 else [])  # 3D: S_US = NSTATE
             self.state[:, ut_cols] += h * ((1 - th) * vi[:, 1:] + th * vs[:, 1:])
         c3 = perf_counter()
@@ -453,7 +464,8 @@ class ContactStep:
             raise ConvergenceError(f"step {sim.step_count + 1} (t = {t1:.6g} s): {stats['solver']} did not "
                                    f"converge in "
                                    f"{res.sweeps} sweeps (change {res.change:.3g}, residual {res.residual:.3g})")
-        # v is the shifted normal velocity: g~_{i+1} = gbar + h theta v_N
-        return ContactResult(d, stats, cs=cs, P=P.copy(), r=P / h, v=v, gt_end=h * th * v[:, 0], status=status,
+        # v is the shifted normal velocity v_N + gs / (h theta): g~_{i+1} = gbar + h theta v_N
+        return ContactResult(d, stats, cs=cs, P=P.copy(), r=P / h, v=v, gt_end=h * th * v[:, 0] + (gbar - gs),
+                             status=status,
                              law=self.law.copy(), state=self.state.copy(), group_corr=gc, rigid_corr=rc,
                              rigid_impulse=ri, friction=friction, friction_total=self.friction_total)
