@@ -74,7 +74,8 @@ def test_secant_at_one_third():
     assert r["stress"] == pytest.approx(110.0, rel=1e-12)
     assert r["strain"] == pytest.approx(0.11, rel=1e-12)
     assert r["modulus"] == pytest.approx(1000.0, rel=1e-12)
-    assert math.isnan(secant_at_fraction([5.0, 6.0], [0.1, 0.2])["modulus"])
+    with pytest.raises(ValueError, match="starts at or above"):
+        secant_at_fraction([5.0, 6.0], [0.1, 0.2])
 
 
 # ----------------------------------------------------------------------------- the specimen

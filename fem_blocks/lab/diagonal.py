@@ -228,7 +228,10 @@ def readout(s: DiagonalSpec, runs: list) -> dict:
     run = runs[0]
     c = curves(s, run)
     k = int(np.nanargmax(c["S_s"]))
-    sec = secant_at_fraction(c["S_s"], c["gamma"], SECANT_FRACTION)
+    try:
+        sec = secant_at_fraction(c["S_s"], c["gamma"], SECANT_FRACTION)
+    except ValueError:   # a curve that does not rise from below S_s,max / 3 (a stopped run): G not measured
+        sec = dict(stress=float("nan"), strain=float("nan"), modulus=float("nan"))
     summ = run.get("summary") or {}
     p = panel(s)
     q = {"S_s": dict(value=float(c["S_s"][k]), unit="Pa", name="shear strength S_s = 0.707 P_max / A_n",

@@ -101,20 +101,40 @@ def diagonal_curves(R, e_v, u_v1, u_v2, u_h1, u_h2, e_h, g: float, A_n: float) -
     return dict(P=P, S_s=0.707 * P / A_n, dV=dV, dH=dH, gamma=(dV + dH) / g)
 
 
+# ----------------------------------------------------------------------------- secant modulus (compression.py, diagonal.py), peak
 def secant_at_fraction(stress, strain, fraction: float = 1.0 / 3.0) -> dict:
-    """Secant modulus from the origin at `fraction` of the peak stress on the rising branch: the first row k with
-    stress[k] >= s* = fraction · max(stress), the strain at s* interpolated linearly between rows k-1 and k,
-    modulus = s* / strain(s*). NaN modulus when the curve starts above s* or the strain there is not > 0.
-    -> dict(stress, strain, modulus, fraction)."""
+    """The secant modulus at `fraction` of the peak of a stress-strain curve (EN 1052-1: E = F_max / (3 A ε_1/3)):
+    σ_max = max σ (row k), σ* = fraction σ_max, ε* the strain where the curve first reaches σ* (linear between the
+    two rows around the crossing, rows 0..k), E = σ* / ε*. -> dict(peak, peak_index, stress (σ*), strain (ε*),
+    modulus). ValueError for a curve that starts at or above σ* or does not rise (σ_max <= 0)."""
     s, e = np.asarray(stress, dtype=float), np.asarray(strain, dtype=float)
-    if s.size == 0 or s.size != e.size:
-        raise ValueError(f"secant_at_fraction: expected two equal-length non-empty arrays, got {s.size}, {e.size}")
-    target = fraction * float(np.nanmax(s))
-    k = int(np.argmax(s >= target))
-    if k == 0:
-        es = float(e[0]) if s[0] == target else float("nan")
-    else:
-        t = (target - s[k - 1]) / (s[k] - s[k - 1])
-        es = float(e[k - 1] + t * (e[k] - e[k - 1]))
-    mod = target / es if np.isfinite(es) and es > 0 else float("nan")
-    return dict(stress=target, strain=es, modulus=mod, fraction=float(fraction))
+    if s.size < 2 or s.size != e.size:
+        raise ValueError(f"secant_at_fraction: expected two equal-length arrays of >= 2 rows, got {s.size}, {e.size}")
+    k = int(np.nanargmax(s))
+    peak = float(s[k])
+    if not peak > 0:
+        raise ValueError(f"secant_at_fraction: the stress never rises above 0 (max {peak!r})")
+    target = fraction * peak
+    j = int(np.argmax(s[:k + 1] >= target))
+    if j == 0:
+        raise ValueError(f"secant_at_fraction: the curve starts at or above {fraction:g} of its peak")
+    w = (target - s[j - 1]) / (s[j] - s[j - 1])
+    eps = float(e[j - 1] + w * (e[j] - e[j - 1]))
+    return dict(peak=peak, peak_index=k, stress=float(target), strain=eps,
+                modulus=float(target / eps) if eps != 0 else float("nan"))
+
+
+def peak_confirmed(force, displacement, drop: float = 0.01, tail: float = 0.1, flat: float = 0.01) -> bool:
+    """Whether a monotone loading passed its peak: after the largest force F_max the force fell below
+    (1 - drop) F_max, or it ends on a plateau (the slope dF/dd of the last `tail` fraction of rows, least squares,
+    below `flat` times the secant F_max / d at the peak). The thresholds are assumed (a plateau of a perfectly
+    plastic cap counts as a peak, a force still rising at the end does not)."""
+    F, d = np.asarray(force, dtype=float), np.asarray(displacement, dtype=float)
+    k = int(np.nanargmax(F))
+    if np.nanmin(F[k:]) < (1.0 - drop) * F[k]:
+        return True
+    n = max(3, int(round(tail * F.size)))
+    if F.size < n or d[k] == 0 or np.ptp(d[-n:]) == 0:
+        return False
+    slope = np.polyfit(d[-n:], F[-n:], 1)[0]
+    return bool(abs(slope) < flat * abs(F[k] / d[k]))

@@ -26,7 +26,8 @@ BRICKS, PLATES = "bricks", "plates"
 TESTS = {"triplet_shear": "triplet",
          "couplet_tension": "bond_tension",
          "bond_wrench": "bond_wrench",
-         "diagonal_compression": "diagonal"}
+         "diagonal_compression": "diagonal",
+         "compression": "compression"}
 
 
 @dataclass
