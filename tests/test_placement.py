@@ -70,6 +70,41 @@ def test_overlap_equals_nodes_on_matching_meshes():
         assert np.allclose(a, [0.25, 0.5, 0.25], rtol=1e-12)
 
 
+def detect_many(polys, placement, thickness=1.0):
+    """Contact set of bodies given as counter-clockwise boundary polygons (body i = polys[i]), one interface."""
+    itf = SimpleNamespace(name="i", groups=("a", "a"), g0=0.0, alert=1e-3, placement=placement,
+                          positions=(0.25, 0.75), candidate=None, orientation="any", thickness=thickness)
+    bx = np.vstack(polys).astype(float)
+    edges, body, local, start = [], [], [], 0
+    for i, p in enumerate(polys):
+        n = len(p)
+        edges.append(start + np.column_stack([np.arange(n), np.roll(np.arange(n), -1)]))
+        body.append(np.full(n, i))
+        local.append(np.arange(n))
+        start += n
+    body = np.concatenate(body)
+    nb = len(polys)
+    return det.detect(bx, body, np.concatenate(local), np.vstack(edges), body, np.zeros(nb, int), np.zeros(nb, int),
+                      det.build_table([itf], {"a": 0}))
+
+
+def test_overlap_node_at_a_head_joint_keeps_both_bodies():
+    """Running bond: the block's bottom node x = 0.5 sits on the head joint between two supports [-1, 0.5] and
+    [0.5, 2]. Each pair's points sum to its overlap (0.5 each: x = 0 and 0.5 with the left support, 0.5 and 1 with
+    the right one, 0.25 each by the trapezoidal rule), the node carrying one point per support. Bug caught (found
+    by the EN 1052-1 wallet): one point per candidate node kept one support only, and the joint lost 0.25 of its
+    length (a quarter of each bed joint of a running-bond wallet at every such node)."""
+    blk = [(0, 0), (0.5, 0), (1, 0), (1, 1), (0, 1)]
+    left = [(-1, -1), (0.5, -1), (0.5, 0), (0, 0), (-1, 0)]
+    right = [(0.5, -1), (2, -1), (2, 0), (1, 0), (0.5, 0)]
+    cs = detect_many([blk, left, right], "overlap", thickness=0.1)
+    for ant, xs in ((1, [0.0, 0.5]), (2, [0.5, 1.0])):
+        on = (cs.ant_body == ant) & (cs.cand_body == 0)   # (the supports' head joint is a pair of its own)
+        assert np.allclose(np.sort(cs.point[on, 0]), xs, atol=1e-15)
+        assert cs.area[on].sum() == pytest.approx(0.05, rel=1e-12)   # 0.5 x thickness 0.1
+    assert len(np.unique(cs.key)) == len(cs.key)
+
+
 def test_placement_key_errors():
     with pytest.raises(InputError, match=r"interfaces\.j\.placement = 'ends': expected 'overlap', 'nodes' or "
                                          r"'positions'"):

@@ -16,7 +16,9 @@ Candidate points (`placement`, per interface):
   within SNAP of a candidate node snap to it): candidate nodes where the meshes match, and the antagonist's
   nodes (e.g. its corners) where they fall inside a candidate edge. Each end receives half of the overlap
   length (trapezoidal rule), summed over the pairs ending at the same point with the same antagonist body, so
-  the points of a joint sum to its overlap length. Hinges can form at either body's corner whatever the mesh.
+  the points of a joint sum to its overlap length; a candidate node facing several antagonist bodies (where a bed
+  joint meets a head joint in running bond) carries one point per body. Hinges can form at either body's corner
+  whatever the mesh.
 * "nodes": the candidate's FE nodes (one point per node, shared nodes counted once; tributary = half of every
   candidate edge producing it);
 * "positions": relative positions on each candidate edge (e.g. 0.25, 0.75 — retreated from the corners,
@@ -233,6 +235,29 @@ def _grow_f(a, cap):
 
 
 # ----------------------------------------------------------------------------- public API
+SLOTS = 8   # overlap points: at most this many antagonist bodies per candidate node (keys: SLOTS x key - slot)
+
+
+def _body_slots(mask, node, ant_body, cand_body) -> np.ndarray:
+    """Per match: 0, or where `mask`, the rank of its antagonist body among the distinct antagonist bodies of the
+    masked matches at the same candidate node (by body index). InputError when a node faces more than SLOTS
+    bodies (an alert distance larger than the blocks)."""
+    slot = np.zeros(len(mask), dtype=np.int64)
+    idx = np.flatnonzero(mask)
+    if len(idx) == 0:
+        return slot
+    pairs, inv = np.unique(np.column_stack([node[idx], ant_body[idx]]), axis=0, return_inverse=True)
+    first = np.searchsorted(pairs[:, 0], pairs[:, 0])   # rows sorted by node: the first row of each node
+    rank = np.arange(len(pairs)) - first
+    if rank.max() >= SLOTS:
+        k = int(np.argmax(rank))
+        j = int(idx[np.flatnonzero(inv.ravel() == k)[0]])
+        raise InputError(f"contact detection: a boundary node of body {int(cand_body[j])} faces more than {SLOTS} "
+                         "bodies within the alert distance; expected a smaller alert distance than the blocks")
+    slot[idx] = rank[inv.ravel()]
+    return slot
+
+
 def detect(bx, bnode_body, bnode_local, bedges, bedge_body, kind, body_group, table: InterfaceTable,
            reach_frac: float = 0.25) -> ContactSet:
     """Contact points between bodies (see module docstring). All inputs are flat arrays (architecture.md)."""
@@ -273,6 +298,11 @@ def detect(bx, bnode_body, bnode_local, bedges, bedge_body, kind, body_group, ta
     ant_node = bedges[ae, np.clip(pk - 2, 0, 1)]
     key = np.where(nodes_pl | (ovl_pl & (pk < 2)), -node_idx - 1,
                    np.where(ovl_pl, -(nbn * (1 + ce) + ant_node) - 1, ce * P + pk))
+    # overlap points at a candidate node: one point per (node, antagonist body), so that a node where a bed joint
+    # meets a head joint (running bond: it faces two bricks) keeps the overlap with each; the slot s < SLOTS is
+    # the rank of the antagonist body among those the node faces, key = SLOTS x key - s (the order of the other
+    # points and their keys' relative order unchanged)
+    key = key * SLOTS - _body_slots(ovl_pl & (pk < 2), node_idx, bedge_body[ae], bedge_body[ce])
     Lc = L[ce]
     trib = np.where(nodes_pl, 0.5 * Lc, Lc / np.maximum(1, (table.positions[itf] >= 0).sum(axis=1)))
     # keep, per key, the match with the smallest |g - g0| (ties: lower antagonist edge index)
