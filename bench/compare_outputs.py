@@ -47,8 +47,14 @@ import sys
 from fem_blocks.case import load_case, quick
 from fem_blocks.runner import run_case
 path, out, steps = sys.argv[1], sys.argv[2], int(sys.argv[3])
-try:  # a [lab] file (fem_blocks/lab): each specimen's case into OUT/LABEL (trees before it: no fem_blocks.lab)
-    from fem_blocks.lab import load_lab
+import os
+import fem_blocks
+try:  # a [lab] file (fem_blocks/lab): each specimen's case into OUT/LABEL (trees before it: no fem_blocks.lab; an
+    #  editable install's finder may still find the working tree's: only this tree's package counts)
+    import fem_blocks.lab as _lab
+    if os.path.dirname(os.path.dirname(_lab.__file__)) != os.path.dirname(fem_blocks.__file__):
+        raise ImportError
+    load_lab = _lab.load_lab
 except ImportError:
     load_lab = lambda p: None
 lab = load_lab(path)

@@ -14,9 +14,8 @@ platen driven down under displacement control (x and rotation held: a locked sea
   joint at each end). The wallet's element size is adjusted so that the meshes of the full and half bricks match
   across the bed joints (a half brick in an even number of elements, `wallet_mesh_size`): with non-matching
   meshes the contact points of a bed joint (node to segment) do not pass the patch test, a uniform pressure is not
-  transmitted exactly. KNOWN GAP (docs/lab-tests.md): the contact detection keeps one point per mesh node, so a
-  node at a T-junction of a bed and a head joint loses one of its two joints' share, and the wallet reads f 20 %
-  and E 9 % low; with a point per (node, antagonist body) it reads f_c and the series formula to 1e-5.
+  transmitted exactly. The nodes where a bed joint meets a head joint carry one contact point per brick they face
+  (contact/detection_2d.py), so every joint's points sum to its overlap and the wallet's state is uniform.
 
 Course height H = brick_height + joint_thickness; specimen height h_s = courses H; loaded area A = W t (t the
 material's thickness: the model's bed-joint area).
