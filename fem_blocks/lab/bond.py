@@ -14,8 +14,8 @@ the joint's opening or rotation from the bricks themselves (rigid bricks: their 
 displacement gauges at the joint's faces), never from the plates.
 
 Rigid bricks (`bricks = "rigid"`) are polygons whose bed faces are cut into `divisions` equal edges (collinear
-vertices), so the joint between them has divisions + 1 contact points (placement "overlap": the trapezoidal rule,
-docs/case-files.md `placement`); deformable bricks have their mesh nodes.
+vertices: specimen.Emitter.brick), so the joint between them has divisions + 1 contact points (placement
+"overlap": the trapezoidal rule, docs/case-files.md `placement`); deformable bricks have their mesh nodes.
 """
 from __future__ import annotations
 
@@ -32,22 +32,6 @@ STRENGTH_KEY = {"mixed": "f_t", "brittle": "r_c"}
 def height(s) -> float:
     """H: the expanded brick's height [m] (brick + one joint thickness)."""
     return s.brick_height + s.joint_thickness
-
-
-def brick(e, name: str, x0: float, y0: float, lx: float, ly: float, divisions: int = 1):
-    """A brick [x0, x0+lx] x [y0, y0+ly] (SI): deformable through the emitter; rigid as a polygon whose bottom and top
-    faces have `divisions` equal edges (module docstring)."""
-    if e.lab.bricks != "rigid" or divisions <= 1:
-        e.brick(name, x0, y0, lx, ly)
-        return
-    xs = [x0 + lx * i / divisions for i in range(divisions + 1)]
-    v = [(x, y0) for x in xs] + [(x, y0 + ly) for x in reversed(xs)]
-    rb = dict(name=name, group=BRICKS, vertices=[[e.L(a), e.L(b)] for a, b in v])
-    if e.rho is not None:
-        rb["rho"] = e.rho
-    if e.thickness is not None:
-        rb["thickness"] = e.thickness
-    e.data["rigid_bodies"].append(rb)
 
 
 def glue(e, s, groups=(PLATES,)):

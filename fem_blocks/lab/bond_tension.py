@@ -59,8 +59,8 @@ def specimens(s: TensionSpec, emitter):
     L, H = s.brick_length, bond.height(s)
     d = 0.5 * H
     e = emitter("couplet")
-    bond.brick(e, "lower", 0.0, 0.0, L, H)
-    bond.brick(e, "upper", 0.0, H, L, H)
+    e.brick("lower", 0.0, 0.0, L, H)
+    e.brick("upper", 0.0, H, L, H)
     e.plate("base", 0.0, -d, L, 0.0)
     e.plate("cap", 0.0, 2 * H, L, 2 * H + d,
             drivers={"y": ("displacement", dict(times=[0.0, 1.0], values=[0.0, s.pull]))})

@@ -105,8 +105,8 @@ def specimens(s: WrenchSpec, emitter):
     d, H = g["d"], g["H"]
     e = emitter("couplet")
     n = s.divisions if s.bricks == "rigid" else 1
-    bond.brick(e, "lower", 0.0, 0.0, d, H, n)
-    bond.brick(e, "upper", 0.0, H, d, H, n)
+    e.brick("lower", 0.0, 0.0, d, H, divisions=n)
+    e.brick("upper", 0.0, H, d, H, divisions=n)
     e.plate("base", *g["base"])
     x0, y0, x1, y1 = g["lever"]
     lever = dict(name="lever", group=LEVER, rho=STEEL / e.U["density"],

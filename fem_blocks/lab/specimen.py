@@ -73,12 +73,16 @@ class Emitter:
     def S(self, v): return float(v) / self.U["stress"]          # noqa: E704
     def T(self, v): return float(v) / self.U["time"]            # noqa: E704
 
-    def brick(self, name: str, x0: float, y0: float, lx: float, ly: float, parent: int | None = None):
+    def brick(self, name: str, x0: float, y0: float, lx: float, ly: float, parent: int | None = None,
+              divisions: int = 1):
         """A brick [x0, x0+lx] x [y0, y0+ly] (SI) of group "bricks": a deformable block of a rectangle block type
-        (one per size) or, with bricks = "rigid", a free rigid body of the material's density. `parent` (deformable
-        bricks only): the id shared by the two halves of a split brick (`split_brick`)."""
+        (one per size) or, with bricks = "rigid", a free rigid body of the material's density, a polygon whose bottom
+        and top faces have `divisions` equal edges (collinear vertices: more contact points in a joint between rigid
+        bricks, lab/bond.py). `parent` (deformable bricks only): the id shared by the two halves of a split brick
+        (`split_brick`)."""
         if self.lab.bricks == "rigid":
-            v = [[x0, y0], [x0 + lx, y0], [x0 + lx, y0 + ly], [x0, y0 + ly]]
+            xs = [x0 + lx * i / divisions for i in range(divisions + 1)]
+            v = [(x, y0) for x in xs] + [(x, y0 + ly) for x in reversed(xs)]
             rb = dict(name=name, group=BRICKS, vertices=[[self.L(a), self.L(b)] for a, b in v])
             if self.rho is not None:
                 rb["rho"] = self.rho
