@@ -98,17 +98,14 @@ def parse_lab(data: dict, source) -> LabCase:
     spec = cls(**kw)
     mod.check(spec, t)   # the test's own rules (geometry that cannot hold the specimen): InputError naming the key
     t.done()
-    for table, name in (("materials", spec.material), ("laws", spec.joint)):
-        if name not in (data.get(table) or {}):
-            have = sorted(data.get(table) or {})
-            raise t.error("material" if table == "materials" else "joint",
-                          f"= {name!r}: expected the name of a [{table}.NAME] table of the file"
-                          + (f" ({', '.join(map(repr, have))})" if have else f" (the file has no [{table}])"))
-    for k in getattr(mod, "NAMED_LAWS", ()):   # the test's other keys naming a [laws.NAME] table (None: unused)
-        name, have = getattr(spec, k), sorted(data.get("laws") or {})
+    # keys naming a table of the file: the material, the joint law and the test's other laws (NAMED_LAWS; None:
+    # unused)
+    named = [("material", "materials"), ("joint", "laws")] + [(k, "laws") for k in getattr(mod, "NAMED_LAWS", ())]
+    for key, table in named:
+        name, have = getattr(spec, key), sorted(data.get(table) or {})
         if name is not None and name not in have:
-            raise t.error(k, f"= {name!r}: expected the name of a [laws.NAME] table of the file "
-                             f"({', '.join(map(repr, have))})")
+            raise t.error(key, f"= {name!r}: expected the name of a [{table}.NAME] table of the file"
+                               + (f" ({', '.join(map(repr, have))})" if have else f" (the file has no [{table}])"))
     base = {k: v for k, v in data.items() if k != "lab"}
     name = str(data.get("name") or os.path.splitext(os.path.basename(str(source)))[0])
     lab = LabCase(source=source, name=name, spec=spec, module=mod, units=units,
