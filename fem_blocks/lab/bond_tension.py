@@ -26,6 +26,7 @@ import numpy as np
 
 from ..specs import spec
 from . import bond
+from .readout import peak_problems as peak_messages
 from .specimen import SpecimenSpec
 
 STANDARD = "couplet direct tension (the tensile bond strength; EN 1052-5, as recalled, standardises the bond wrench)"
@@ -102,13 +103,8 @@ def specimen_line(s: TensionSpec, run: dict) -> str:
 def peak_problems(force) -> list:
     """Why the largest F is no peak: it is at the last row (still rising: the pull ended before the peak) or the
     joint never carried tension (F <= 0)."""
-    F = np.asarray(force, dtype=float)
-    k = int(np.nanargmax(F))
-    if not F[k] > 0:
-        return ["the joint never carried tension (F <= 0)"]
-    if k == F.size - 1:
-        return ["F was still rising at the end of the pull: the peak was not reached (increase lab.pull)"]
-    return []
+    return peak_messages(force, "the joint never carried tension (F <= 0)",
+                         "F was still rising at the end of the pull: the peak was not reached (increase lab.pull)")
 
 
 def readout(s: TensionSpec, runs: list) -> dict:

@@ -43,6 +43,7 @@ import numpy as np
 
 from ..specs import spec
 from . import bond
+from .readout import peak_problems as peak_messages
 from .specimen import PLATES, SpecimenSpec
 
 STANDARD = "EN 1052-5 (bond wrench, as recalled)"
@@ -175,16 +176,10 @@ def failure_problems(F1) -> list:
     """Why the largest F1 is no failure load: the knife never pushed (F1 <= 0: the specimen failed under its own
     weight, or never met the knife), or F1 was largest at the last row (still rising: the deflection ended before
     the failure)."""
-    F = np.asarray(F1, dtype=float)
-    k = int(np.nanargmax(F))
-    out = []
-    if not F[k] > 0:
-        out.append("the knife never loaded the lever (F1 <= 0): the joint failed before the load (e.g. under the "
-                   "dead load) or the knife never reached the lever")
-    elif k == F.size - 1:
-        out.append("F1 was still rising at the end of the deflection: the failure load was not reached (increase "
-                   "lab.deflection)")
-    return out
+    return peak_messages(F1, "the knife never loaded the lever (F1 <= 0): the joint failed before the load (e.g. "
+                             "under the dead load) or the knife never reached the lever",
+                         "F1 was still rising at the end of the deflection: the failure load was not reached "
+                         "(increase lab.deflection)")
 
 
 def specimen_line(s: WrenchSpec, run: dict) -> str:

@@ -138,3 +138,16 @@ def peak_confirmed(force, displacement, drop: float = 0.01, tail: float = 0.1, f
         return False
     slope = np.polyfit(d[-n:], F[-n:], 1)[0]
     return bool(abs(slope) < flat * abs(F[k] / d[k]))
+
+
+def peak_problems(force, no_load: str, still_rising: str) -> list:
+    """Why the largest force of a monotone loading is not its peak (failure) load, as messages: `no_load` when it is
+    not > 0 (the specimen never carried the load), `still_rising` when it is at the last row (the loading ended
+    before the peak); [] when it is a peak."""
+    F = np.asarray(force, dtype=float)
+    k = int(np.nanargmax(F))
+    if not F[k] > 0:
+        return [no_load]
+    if k == F.size - 1:
+        return [still_rising]
+    return []
