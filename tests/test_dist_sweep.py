@@ -107,7 +107,7 @@ def _mpirun(n, problem, out, *args):
 
 
 @pytest.mark.skipif(shutil.which("mpirun") is None, reason="no mpirun")
-@pytest.mark.parametrize("n, own", [(1, "blocks"), (2, "blocks"), (3, "cyclic"), (3, "skip0")])
+@pytest.mark.parametrize("n, own", [(1, "blocks"), (2, "blocks"), (3, "cyclic"), (3, "skip0"), (2, "ptscotch")])
 def test_mpirun_synthetic_equals_serial_colour_order_bitwise(tmp_path, n, own):
     W, q, mu = grid_problem()
     prob = tmp_path / "p.npz"
@@ -140,3 +140,15 @@ def test_mpirun_fclib_equals_serial_colour_order_bitwise(tmp_path, n):
     assert int(out["sweeps"]) == serial.sweeps and bool(out["converged"]) == serial.converged
     assert np.array_equal(out["r"], serial.r) and float(out["residual"]) == serial.residual
     assert np.all(out["n_ghost"] > 0)  # the partition cuts the contact graph: impulses cross ranks
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_residual_terms_summed_in_order_are_the_serial_natural_map(dim):
+    # the per-contact terms ‖F_α‖² of the ordered residual, summed in contact order, give nlgs.natural_map bitwise
+    # (catches a term computed differently from the serial solver's, e.g. without the mu ‖u_T‖ shift)
+    from fem_blocks.solver import nlgs
+    rng = np.random.default_rng(dim)
+    n = 5000
+    r, u, mu = rng.normal(size=dim * n), rng.normal(size=dim * n), rng.uniform(0.1, 0.9, n)
+    t = ds._natural_map_terms(r, u, mu, dim)
+    assert np.sqrt(ds._ordered_sum(t)) == nlgs.natural_map(r, u, mu, dim)

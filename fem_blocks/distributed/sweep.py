@@ -25,7 +25,7 @@ residual="ordered": the terms ‖F_α‖² are gathered to rank 0 and summed in 
 once), so the residual, hence the sweep count, is bitwise the serial one (8 bytes per contact to rank 0 per check);
 residual="allreduce": per-rank partial sums added by MPI (a few ulps from the serial value, 8 bytes per rank).
 
-Run: `mpirun -n N python -m fem_blocks.distributed.sweep PROBLEM OUT.npz [--own blocks|cyclic|skip0]
+Run: `mpirun -n N python -m fem_blocks.distributed.sweep PROBLEM OUT.npz [--own blocks|cyclic|skip0|ptscotch]
 [--residual ordered|allreduce] [--tol T]` (PROBLEM: an FCLIB .hdf5 or an .npz with indptr, indices, blocks,
 diag_pos, q, mu; OUT on rank 0: r, sweeps, residual, converged, ranks, timings and exchange counts per rank).
 """
@@ -126,6 +126,7 @@ class DistResult:
     message: str
     t_sweeps: float          # wall time in the sweep loop (local solves + exchanges + checks), this rank
     t_exchange: float        # of which in the per-colour scatters
+    t_check: float           # of which in the residual checks (matvec, natural map, reduction)
     bytes_sent_per_sweep: int
     bytes_recv_per_sweep: int
     messages_per_sweep: int  # messages this rank receives per sweep (one per colour and neighbour rank)
@@ -210,10 +211,13 @@ class DistSweep:
         if mode == "allreduce":
             s = comm.allreduce(float(np.sum(t)))
             return float(np.sqrt(s)) / self._qnorm[mode]
-        all_t = comm.gather(t, root=0)
+        from mpi4py import MPI
+        rank0 = comm.Get_rank() == 0
+        all_t = np.empty(self.n_total) if rank0 else None
+        comm.Gatherv(t, [all_t, self.counts, self.displs, MPI.DOUBLE] if rank0 else None, root=0)
         res = None
-        if comm.Get_rank() == 0:
-            s = _ordered_sum(np.concatenate(all_t)[self.ids])
+        if rank0:
+            s = _ordered_sum(all_t[self.ids])
             res = float(np.sqrt(s)) / self._qnorm[mode]
         return comm.bcast(res, root=0)
 
@@ -228,6 +232,8 @@ class DistSweep:
         n_own = rows.owned.size
         if residual == "ordered" and residual not in self._qnorm:  # ‖q‖ in global order, once (collective)
             ids = comm.gather(rows.owned, root=0)
+            self.counts = np.asarray(comm.allgather(n_own), dtype=np.int64)
+            self.displs = np.concatenate([[0], np.cumsum(self.counts)[:-1]])
             qs = comm.gather(rows.q.reshape(-1, d), root=0)
             v = None
             if comm.Get_rank() == 0:
@@ -247,7 +253,7 @@ class DistSweep:
                 s.scatter(self.vec, self.gvec)
         u = np.empty(d * n_own)
         ip, ix, bl, dp, q, mu = rows.indptr, rows.indices, rows.blocks, rows.diag_pos, rows.q, rows.mu
-        sweeps, res, converged, t_x = 0, np.inf, False, 0.0
+        sweeps, res, converged, t_x, t_c = 0, np.inf, False, 0.0, 0.0
         comm.Barrier()
         t0 = time.perf_counter()
         while sweeps < max_sweeps:
@@ -258,9 +264,11 @@ class DistSweep:
                 t_x += time.perf_counter() - t1
             sweeps += 1
             if sweeps % check_every == 0 or sweeps == max_sweeps:
+                t1 = time.perf_counter()
                 matvec_bcsr(ip, ix, bl, self.r, u)
                 u += q
                 res = self._global_residual(u, residual)
+                t_c += time.perf_counter() - t1
                 if res <= tol:
                     converged = True
                     break
@@ -270,13 +278,14 @@ class DistSweep:
         res = self._global_residual(u, residual)
         msg = (f"{'converged' if converged else 'not converged'} in {sweeps} colour-order sweeps on "
                f"{comm.Get_size()} ranks ({self.n_colours} colours, rows owned per rank), residual {res:.3g}")
-        return DistResult(self.r[:d * n_own].copy(), u, sweeps, converged, res, msg, t_loop, t_x,
+        return DistResult(self.r[:d * n_own].copy(), u, sweeps, converged, res, msg, t_loop, t_x, t_c,
                           8 * self.entries_sent, 8 * self.entries_recv, self.messages)
 
 
 def ownership(n: int, size: int, kind: str = "blocks") -> np.ndarray:
     """Owner rank per contact: "blocks" contiguous blocks in contact order, "cyclic" contact a on rank a mod size,
-    "skip0" contiguous blocks on ranks 1..size-1 and none on rank 0 (size >= 2)."""
+    "skip0" contiguous blocks on ranks 1..size-1 and none on rank 0 (size >= 2); "ptscotch": see
+    partition_contacts (collective, through the file driver only)."""
     if kind == "blocks":
         return (np.arange(n) * size // max(n, 1)).astype(np.int64)
     if kind == "cyclic":
@@ -286,6 +295,37 @@ def ownership(n: int, size: int, kind: str = "blocks") -> np.ndarray:
             return np.zeros(n, dtype=np.int64)
         return 1 + (np.arange(n) * (size - 1) // max(n, 1)).astype(np.int64)
     raise InputError(f"ownership {kind!r}: expected 'blocks', 'cyclic' or 'skip0'")
+
+
+def partition_contacts(W: BlockCSR, comm, kind: str = "ptscotch") -> np.ndarray:
+    """Owner rank per contact from PETSc MatPartitioning (`kind`) of the contact graph (α ~ β when W_αβ ≠ 0 or
+    W_βα ≠ 0); a stand-in, in the file driver, for the ownership by bodies of the time stepper. Collective; each
+    rank passes the rows of its contiguous block of contacts, every rank returns the whole owner array."""
+    import scipy.sparse as sp
+    from petsc4py import PETSc
+    size, rank = comm.Get_size(), comm.Get_rank()
+    n = W.n
+    if size == 1:
+        return np.zeros(n, dtype=np.int64)
+    lo, hi = rank * n // size, (rank + 1) * n // size
+    A = sp.csr_matrix((np.ones(W.indices.size), W.indices, W.indptr), shape=(n, n))
+    S = (A + A.T).tocsr()[lo:hi]
+    S.setdiag(0, k=lo)
+    S.eliminate_zeros()
+    S.sort_indices()
+    adj = PETSc.Mat().createAIJ(size=((hi - lo, n), (hi - lo, n)), comm=PETSc.Comm(comm),
+                                csr=(S.indptr.astype(PETSc.IntType), S.indices.astype(PETSc.IntType),
+                                     np.ones(S.nnz)))
+    part = PETSc.MatPartitioning().create(comm=PETSc.Comm(comm))
+    part.setAdjacency(adj)
+    part.setType(kind)
+    isp = PETSc.IS()
+    part.apply(isp)
+    owner = np.concatenate(comm.allgather(np.asarray(isp.getIndices(), dtype=np.int64)))
+    isp.destroy()
+    part.destroy()
+    adj.destroy()
+    return owner
 
 
 def _load(path):
@@ -307,7 +347,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m fem_blocks.distributed.sweep")
     ap.add_argument("problem")
     ap.add_argument("out")
-    ap.add_argument("--own", default="blocks", choices=["blocks", "cyclic", "skip0"])
+    ap.add_argument("--own", default="blocks", choices=["blocks", "cyclic", "skip0", "ptscotch"])
     ap.add_argument("--residual", default="ordered", choices=["ordered", "allreduce"])
     ap.add_argument("--tol", type=float, default=None)
     ap.add_argument("--max-sweeps", type=int, default=100000)
@@ -325,7 +365,7 @@ def main(argv=None) -> int:
             with np.load(a.problem) as z:
                 tol = float(z["tol"]) if "tol" in z.files else tol
     colour = colour_contacts(W)
-    owner = ownership(W.n, size, a.own)
+    owner = partition_contacts(W, comm) if a.own == "ptscotch" else ownership(W.n, size, a.own)
     rows = local_rows(W, q, mu, np.flatnonzero(owner == rank))
     col_local = colour[np.concatenate([rows.owned, rows.ghost])]
     n_colours = int(colour.max()) + 1 if colour.size else 0
@@ -334,7 +374,7 @@ def main(argv=None) -> int:
     t_setup = time.perf_counter() - t0
     res = ds.solve(tol=tol, max_sweeps=a.max_sweeps, residual=a.residual)
     per_rank = comm.gather(dict(n_own=int(rows.owned.size), n_ghost=int(rows.ghost.size), t_sweeps=res.t_sweeps,
-                                t_exchange=res.t_exchange, bytes_sent=res.bytes_sent_per_sweep,
+                                t_exchange=res.t_exchange, t_check=res.t_check, bytes_sent=res.bytes_sent_per_sweep,
                                 bytes_recv=res.bytes_recv_per_sweep, messages=res.messages_per_sweep), root=0)
     r_all = comm.gather((rows.owned, res.r.reshape(-1, rows.dim)), root=0)
     if rank == 0:
@@ -346,13 +386,15 @@ def main(argv=None) -> int:
         np.savez(a.out, r=r.ravel(), sweeps=res.sweeps, residual=res.residual, converged=res.converged, ranks=size,
                  n_own=[p["n_own"] for p in per_rank], n_ghost=[p["n_ghost"] for p in per_rank],
                  t_sweeps=[p["t_sweeps"] for p in per_rank], t_exchange=[p["t_exchange"] for p in per_rank],
+                 t_check=[p["t_check"] for p in per_rank],
                  bytes_sent=[p["bytes_sent"] for p in per_rank], bytes_recv=[p["bytes_recv"] for p in per_rank],
                  messages=[p["messages"] for p in per_rank], t_setup=t_setup)
         print(res.message)
         for p, st in enumerate(per_rank):
             print(f"rank {p}: {st['n_own']} owned, {st['n_ghost']} ghost contacts; "
                   f"{st['t_sweeps'] / max(res.sweeps, 1) * 1e6:.1f} us/sweep "
-                  f"({st['t_exchange'] / max(res.sweeps, 1) * 1e6:.1f} in exchanges); per sweep "
+                  f"({st['t_exchange'] / max(res.sweeps, 1) * 1e6:.1f} in exchanges, "
+                  f"{st['t_check'] / max(res.sweeps, 1) * 1e6:.1f} in residual checks); per sweep "
                   f"{st['bytes_sent']} B sent, {st['bytes_recv']} B received, {st['messages']} messages")
     ds.destroy()
     return 0
