@@ -152,3 +152,19 @@ def test_residual_terms_summed_in_order_are_the_serial_natural_map(dim):
     r, u, mu = rng.normal(size=dim * n), rng.normal(size=dim * n), rng.uniform(0.1, 0.9, n)
     t = ds._natural_map_terms(r, u, mu, dim)
     assert np.sqrt(ds._ordered_sum(t)) == nlgs.natural_map(r, u, mu, dim)
+
+
+@pytest.mark.skipif(shutil.which("mpirun") is None, reason="no mpirun")
+def test_mpirun_3d_equals_serial_colour_order_bitwise(tmp_path):
+    # 3x3 blocks (local solver of solver/local.py, warm-started from r_α): the same bitwise agreement on 2 ranks
+    from test_nlgs import random_problem_3d
+    Wd, q = random_problem_3d(n=40, seed=2)
+    W = to_block_csr(Wd, 3)
+    mu = np.full(W.n, 0.4)
+    prob = tmp_path / "p3.npz"
+    np.savez(prob, indptr=W.indptr, indices=W.indices, blocks=W.blocks, diag_pos=W.diag_pos, q=q, mu=mu, tol=1e-10)
+    out = _mpirun(2, prob, tmp_path / "out.npz", "--own", "cyclic")
+    serial = parallel.solve_parallel(W, q, mu, tol=1e-10, max_sweeps=100000)
+    assert serial.converged and bool(out["converged"]) and int(out["sweeps"]) == serial.sweeps
+    assert np.array_equal(out["r"], serial.r) and float(out["residual"]) == serial.residual
+    assert np.all(out["n_ghost"] > 0)
