@@ -175,7 +175,7 @@ class DistSweep:
             isf.destroy()
             ist.destroy()
         # exchange volume: entries received = ghost entries; entries sent = Σ_owned (ranks that ghost it), counted
-        # by a reverse scatter (ADD) of ones; messages = (colour, rank) pairs with something to send
+        # by a reverse scatter (ADD) of ones; messages received = (colour, owner rank) pairs among the ghosts
         remote_owner = np.searchsorted(np.asarray(comm.allgather(start + n_own)), gh_petsc, side="right")
         ones = PETSc.Vec().createSeq(d * n_gh, bsize=d, comm=PETSc.COMM_SELF)
         ones.set(1.0)
