@@ -1,0 +1,1 @@
+"""Distributed time stepper pieces on MPI and PETSc (docs/scaling.md)."""
