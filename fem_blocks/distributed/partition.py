@@ -221,8 +221,9 @@ def partition_graph(indptr, indices, weights, comm, method: str = "ptscotch") ->
 @dataclass
 class RankPartition:
     """What rank `rank` of `size` holds: the owner of every body, its owned and ghost bodies (global ids,
-    increasing), its owned contacts (a ContactSet, cand/ant as global ids; None without contacts), and the
-    graph figures (edge cut of the whole partition, the number of graph edges) and timings [s]."""
+    increasing), its owned contacts (a ContactSet, cand/ant as global ids; None without contacts), the graph
+    figures of the whole partition (edge_cut = Σ weights of the cut edges, graph_edges, cut_edges) and timings [s]
+    (graph: near pairs, serial detection and CSR; partition: PETSc; local: ghosts and the local detection)."""
     rank: int
     size: int
     owner: np.ndarray
@@ -232,6 +233,7 @@ class RankPartition:
     edge_cut: int
     graph_edges: int
     timers: dict = field(default_factory=dict)
+    cut_edges: int = 0  # graph edges between bodies of different ranks (edge_cut counts their weights)
 
     @property
     def n_contacts(self) -> int:
@@ -272,7 +274,8 @@ def partition_model(model, comm, method: str = "ptscotch") -> RankPartition:
     t["partition"] = time.perf_counter() - c0
     c0 = time.perf_counter()
     rows = np.repeat(np.arange(nb), np.diff(indptr))
-    cut = int(weights[owner[rows] != owner[indices]].sum()) // 2
+    cross = owner[rows] != owner[indices]
+    cut = int(weights[cross].sum()) // 2
     p = comm.rank
     owned = np.flatnonzero(owner == p)
     mine = owner[pairs] == p
@@ -281,7 +284,7 @@ def partition_model(model, comm, method: str = "ptscotch") -> RankPartition:
     if local is not None:
         local = local.subset(np.flatnonzero(owner[local.cand_body] == p))
     t["local"] = time.perf_counter() - c0
-    rp = RankPartition(p, comm.size, owner, owned, ghost, local, cut, len(indices) // 2, t)
+    rp = RankPartition(p, comm.size, owner, owned, ghost, local, cut, len(indices) // 2, t, int(cross.sum()) // 2)
     rp.check()
     return rp
 
