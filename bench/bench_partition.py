@@ -66,19 +66,9 @@ def wall_case(n_bricks, directory):
     return path
 
 
-def run(n_bricks, comm, method):
-    with tempfile.TemporaryDirectory() as d:
-        path = wall_case(n_bricks, d) if comm.rank == 0 else None
-        path = comm.bcast(path)
-        if comm.rank == 0:
-            text = open(path).read()
-        else:
-            text = None
-        text = comm.bcast(text)
-    with tempfile.TemporaryDirectory() as d:
-        path = os.path.join(d, f"wall_{n_bricks}.toml")
-        with open(path, "w") as f:
-            f.write(text)
+def run(n_bricks, comm, method, show=True):
+    with tempfile.TemporaryDirectory() as d:  # one case file per rank (the same text)
+        path = wall_case(n_bricks, d)
         comm.Barrier()
         c = time.perf_counter()
         model = build_model(load_case(path))
@@ -89,7 +79,7 @@ def run(n_bricks, comm, method):
     mine = (len(rp.owned), len(rp.ghost), rp.n_contacts, t_model, rp.timers["graph"], rp.timers["partition"],
             rp.timers["local"], rss)
     rows = np.array(comm.gather(mine), dtype=float) if comm.size > 1 else np.array([mine], dtype=float)
-    if comm.rank == 0:
+    if comm.rank == 0 and show:
         mm = lambda k, f="{:.0f}": f.format(rows[:, k].min()) + "–" + f.format(rows[:, k].max())  # noqa: E731
         print(f"| {comm.size} | {len(model.bodies)} | {int(rows[:, 2].sum())} | {rp.graph_edges} | {rp.cut_edges} "
               f"({rp.edge_cut}) | {mm(0)} | {mm(1)} | {mm(2)} | {rows[:, 3].max():.1f} | {rows[:, 4].max():.2f} | "
@@ -108,5 +98,6 @@ if __name__ == "__main__":
               "bodies per rank | ghosts per rank | contacts per rank | model [s] | graph [s] | partition [s] | "
               "local [s] | peak RSS per rank [MB] |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|",
               flush=True)
+    run(20, comm, a.method, show=False)  # warm-up: numba compilation (cache) outside the timed runs
     for n in a.sizes:
         run(n, comm, a.method)
