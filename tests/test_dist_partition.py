@@ -141,12 +141,9 @@ def test_near_pairs_are_the_bodies_within_reach(tmp_path, wall):
         assert len(pairs) == 15
 
 
-def test_one_rank_owns_everything_and_the_serial_contacts():
+def test_one_rank_owns_everything_and_the_serial_contacts(tmp_path):
     from mpi4py import MPI
-    import tempfile
-    with tempfile.TemporaryDirectory() as d:
-        path = write_case(__import__("pathlib").Path(d), "dry", *WALLS["dry"])
-        model = build_model(load_case(path))
+    model = build_model(load_case(write_case(tmp_path, "dry", *WALLS["dry"])))
     rp = dp.partition_model(model, MPI.COMM_SELF)
     nb = len(model.bodies)
     assert np.array_equal(rp.owned, np.arange(nb)) and len(rp.ghost) == 0 and rp.edge_cut == 0
@@ -156,11 +153,9 @@ def test_one_rank_owns_everything_and_the_serial_contacts():
                           rows(cs.cand_body, cs.ant_body, cs.cand_nodes, cs.ant_nodes, cs.point, cs.gap))
 
 
-def test_check_catches_a_missing_ghost():
+def test_check_catches_a_missing_ghost(tmp_path):
     from mpi4py import MPI
-    import tempfile
-    with tempfile.TemporaryDirectory() as d:
-        model = build_model(load_case(write_case(__import__("pathlib").Path(d), "dry", bond(2, 2), 0.0, 0.0, 1e-3)))
+    model = build_model(load_case(write_case(tmp_path, "dry", bond(2, 2), 0.0, 0.0, 1e-3)))
     rp = dp.partition_model(model, MPI.COMM_SELF)
     rp.owned = rp.owned[1:]  # body 0 now neither owned nor ghost, but candidate or antagonist of some contact
     with pytest.raises(AssertionError):
@@ -204,6 +199,9 @@ def test_mpirun_partition_ghosts_and_contacts(tmp_path, n, wall):
     assert np.array_equal(got, rows(cs.cand_body, cs.ant_body, cs.cand_nodes, cs.ant_nodes, cs.point, cs.gap))
     for k, R in enumerate(ranks):
         assert np.all(owner[R["cand_body"]] == k)
+        # the contact ownership over the serial contact set (its detection order): the candidate's rank
+        assert np.array_equal(R["contact_owner"], owner[cs.cand_body])
+        assert np.count_nonzero(R["contact_owner"] == k) == len(R["cand_body"])
         assert np.all(np.isin(R["ant_body"], np.concatenate([R["owned"], R["ghost"]])))
     # edge cut: contact counts (at least 1) on the pairs within reach or in contact, cut by the owner array
     w = np.zeros((nb, nb), dtype=np.int64)

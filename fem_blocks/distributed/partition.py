@@ -17,7 +17,9 @@ segments cross):
   MPIAdj with edge weights), the result gathered on every rank (one int per body);
 * per rank p   owned O_p = {i : owner[i] = p}; ghosts G_p = {j ∉ O_p : ∃ i ∈ O_p, (i, j) ∈ N}; owned contacts
   C_p = {c ∈ C : owner[cand_c] = p}, found by the detection on the boundaries of O_p ∪ G_p only (candidate owned);
-  the check `RankPartition.check`: every c ∈ C_p has cand_c ∈ O_p and ant_c ∈ O_p ∪ G_p.
+  the check `RankPartition.check`: every c ∈ C_p has cand_c ∈ O_p and ant_c ∈ O_p ∪ G_p; and, for the contacts
+  of the serial set C in its detection order, contact_owner[c] = owner[cand_c] (the contact ownership a
+  distributed sweep takes with the serial W).
   Edge cut = Σ_{(i,j) edge, owner[i] ≠ owner[j]} w_ij.
 
 C_p is C restricted to owned candidates because every antagonist edge within r of an owned candidate edge belongs
@@ -234,6 +236,7 @@ class RankPartition:
     graph_edges: int
     timers: dict = field(default_factory=dict)
     cut_edges: int = 0  # graph edges between bodies of different ranks (edge_cut counts their weights)
+    contact_owner: np.ndarray = None  # (nc,) rank of each contact of the serial contact set (detection order)
 
     @property
     def n_contacts(self) -> int:
@@ -284,7 +287,8 @@ def partition_model(model, comm, method: str = "ptscotch") -> RankPartition:
     if local is not None:
         local = local.subset(np.flatnonzero(owner[local.cand_body] == p))
     t["local"] = time.perf_counter() - c0
-    rp = RankPartition(p, comm.size, owner, owned, ghost, local, cut, len(indices) // 2, t, int(cross.sum()) // 2)
+    rp = RankPartition(p, comm.size, owner, owned, ghost, local, cut, len(indices) // 2, t, int(cross.sum()) // 2,
+                       owner[cand])
     rp.check()
     return rp
 
@@ -300,7 +304,7 @@ def save_rank(rp: RankPartition, path: str):
              cand_nodes=cs.cand_nodes if cs is not None else z.reshape(0, 2),
              ant_nodes=cs.ant_nodes if cs is not None else z.reshape(0, 2),
              point=cs.point if cs is not None else np.zeros((0, 2)), gap=cs.gap if cs is not None else np.zeros(0),
-             interface=cs.interface if cs is not None else z,
+             interface=cs.interface if cs is not None else z, contact_owner=rp.contact_owner,
              timers=np.array([rp.timers.get(k, 0.0) for k in ("graph", "partition", "local")]))
 
 
