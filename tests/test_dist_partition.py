@@ -10,6 +10,8 @@ Expectations, each from a source independent of the code under test:
   (ContactStep detection on a Simulation's ContactScene), each contact exactly once, same points and gaps bitwise.
   Catches: detecting on owned bodies only (contacts with a ghost antagonist lost), keeping ghost-candidate contacts
   (duplicates), or a renumbering that changes the detection's choices.
+* exchange lists: rank p sends to q exactly its contacts that share a body with a contact of q (brute force over
+  all contact pairs), and q's receive list from p is the same. Catches: coupling through the candidate body only.
 * mpirun -n 1, 2, 3: the owner array is the same on every rank, every body owned exactly once, ghosts of rank p =
   {j not owned by p: d(i, j) <= r for an owned i} from the brute force, edge cut = the brute-force cut; 3 ranks on
   a 2-body case: a rank with no bodies, no ghosts, no contacts.
@@ -203,6 +205,20 @@ def test_mpirun_partition_ghosts_and_contacts(tmp_path, n, wall):
         assert np.array_equal(R["contact_owner"], owner[cs.cand_body])
         assert np.count_nonzero(R["contact_owner"] == k) == len(R["cand_body"])
         assert np.all(np.isin(R["ant_body"], np.concatenate([R["owned"], R["ghost"]])))
+    # exchange lists: contacts sharing a body (brute force over all contact pairs) owned by different ranks
+    c, a = cs.cand_body, cs.ant_body
+    share = (c[:, None] == c[None, :]) | (c[:, None] == a[None, :]) | (a[:, None] == c[None, :]) | \
+        (a[:, None] == a[None, :])
+    co = owner[cs.cand_body]
+    for p in range(n):
+        for q in range(n):
+            if p == q:
+                continue
+            expected = np.flatnonzero((co == p) & share[:, co == q].any(axis=1))
+            assert np.array_equal(ranks[p].get(f"send{q}", np.zeros(0, dtype=np.int64)), expected)
+            assert np.array_equal(ranks[q].get(f"recv{p}", np.zeros(0, dtype=np.int64)), expected)
+    if n > 1:
+        assert all(any(k.startswith("send") for k in R) for R in ranks)  # every rank has interface contacts
     # edge cut: contact counts (at least 1) on the pairs within reach or in contact, cut by the owner array
     w = np.zeros((nb, nb), dtype=np.int64)
     np.add.at(w, (np.minimum(cs.cand_body, cs.ant_body), np.maximum(cs.cand_body, cs.ant_body)), 1)

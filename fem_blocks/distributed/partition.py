@@ -19,7 +19,8 @@ segments cross):
   C_p = {c ∈ C : owner[cand_c] = p}, found by the detection on the boundaries of O_p ∪ G_p only (candidate owned);
   the check `RankPartition.check`: every c ∈ C_p has cand_c ∈ O_p and ant_c ∈ O_p ∪ G_p; and, for the contacts
   of the serial set C in its detection order, contact_owner[c] = owner[cand_c] (the contact ownership a
-  distributed sweep takes with the serial W).
+  distributed sweep takes with the serial W), with the exchange lists of the interface impulses
+  (`exchange_lists`: contacts sharing a body with a contact owned by another rank).
   Edge cut = Σ_{(i,j) edge, owner[i] ≠ owner[j]} w_ij.
 
 C_p is C restricted to owned candidates because every antagonist edge within r of an owned candidate edge belongs
@@ -220,6 +221,32 @@ def partition_graph(indptr, indices, weights, comm, method: str = "ptscotch") ->
     return owner
 
 
+def exchange_lists(cand: np.ndarray, ant: np.ndarray, contact_owner: np.ndarray, rank: int) -> tuple[dict, dict]:
+    """The interface impulses of a distributed Gauss–Seidel sweep, for rank `rank`: contacts α, β are coupled (a
+    nonzero block W_αβ) iff they share a body; rank p needs the impulse of every contact owned elsewhere that is
+    coupled to one of its own. Returns (send, recv): send[q] = the contacts owned by `rank` coupled to a contact
+    owned by q ≠ rank, recv[q] = the contacts owned by q coupled to a contact owned by `rank` (global contact ids
+    of the serial set, increasing; only ranks with a non-empty list). send of p to q = recv of q from p."""
+    nc = len(cand)
+    C = np.concatenate([np.arange(nc), np.arange(nc)])
+    B = np.concatenate([cand, ant]).astype(np.int64)
+    R = contact_owner[C]
+    # the distinct (body, rank) pairs: the ranks owning a contact on each body
+    nr = int(contact_owner.max()) + 1 if nc else 1
+    T = np.unique(B * nr + R)
+    tb, tr = T // nr, T % nr
+    lo, hi = np.searchsorted(tb, B, "left"), np.searchsorted(tb, B, "right")
+    k = hi - lo
+    alpha = np.repeat(C, k)
+    q = tr[np.repeat(lo, k) + (np.arange(k.sum()) - np.repeat(np.cumsum(k) - k, k))]
+    p = contact_owner[alpha]
+    keep = p != q
+    E = np.unique(np.column_stack([p[keep], q[keep], alpha[keep]]), axis=0)  # (sender, receiver, contact) sorted
+    send = {int(r): E[(E[:, 0] == rank) & (E[:, 1] == r), 2] for r in np.unique(E[E[:, 0] == rank, 1])}
+    recv = {int(r): E[(E[:, 1] == rank) & (E[:, 0] == r), 2] for r in np.unique(E[E[:, 1] == rank, 0])}
+    return send, recv
+
+
 @dataclass
 class RankPartition:
     """What rank `rank` of `size` holds: the owner of every body, its owned and ghost bodies (global ids,
@@ -237,6 +264,8 @@ class RankPartition:
     timers: dict = field(default_factory=dict)
     cut_edges: int = 0  # graph edges between bodies of different ranks (edge_cut counts their weights)
     contact_owner: np.ndarray = None  # (nc,) rank of each contact of the serial contact set (detection order)
+    send: dict = None  # exchange_lists: neighbour rank -> owned contacts whose impulses it needs (global ids)
+    recv: dict = None  # neighbour rank -> its contacts whose impulses this rank needs
 
     @property
     def n_contacts(self) -> int:
@@ -289,6 +318,7 @@ def partition_model(model, comm, method: str = "ptscotch") -> RankPartition:
     t["local"] = time.perf_counter() - c0
     rp = RankPartition(p, comm.size, owner, owned, ghost, local, cut, len(indices) // 2, t, int(cross.sum()) // 2,
                        owner[cand])
+    rp.send, rp.recv = exchange_lists(cand, ant, rp.contact_owner, p)
     rp.check()
     return rp
 
@@ -305,6 +335,7 @@ def save_rank(rp: RankPartition, path: str):
              ant_nodes=cs.ant_nodes if cs is not None else z.reshape(0, 2),
              point=cs.point if cs is not None else np.zeros((0, 2)), gap=cs.gap if cs is not None else np.zeros(0),
              interface=cs.interface if cs is not None else z, contact_owner=rp.contact_owner,
+             **{f"send{q}": v for q, v in rp.send.items()}, **{f"recv{q}": v for q, v in rp.recv.items()},
              timers=np.array([rp.timers.get(k, 0.0) for k in ("graph", "partition", "local")]))
 
 
