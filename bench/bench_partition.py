@@ -4,7 +4,9 @@ The wall of bench_wall.py (bricks 0.25 x 0.06 m, Q1 0.03 m, about twice as wide 
 alert 1 mm) as a case file ([wall] running_bond on a rigid foundation), built by build_model on every rank, then
 partitioned by PETSc MatPartitioning ("ptscotch") on the body-contact graph. Rank 0 prints one markdown row: ranks,
 bodies, contacts, graph edges, edge cut (cut edges; Σ contact weights), bodies / ghosts / contacts per rank
-(min–max), times [s] (model build, graph, partition, local ghosts + detection; max over ranks), peak RSS per rank.
+(min–max), times [s] (model build, graph, partition, local ghosts + detection; max over ranks), peak RSS per rank,
+the interface contacts a rank sends per Gauss–Seidel sweep (exchange_lists: owned contacts sharing a body with a
+contact of another rank; 16 bytes each in 2D) and its neighbour ranks.
 
 Usage: mpirun -n N .venv/bin/python bench/bench_partition.py [n_bricks ...] [--method ptscotch]
 """
@@ -77,13 +79,14 @@ def run(n_bricks, comm, method, show=True):
     rp = dp.partition_model(model, comm, method)
     rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     mine = (len(rp.owned), len(rp.ghost), rp.n_contacts, t_model, rp.timers["graph"], rp.timers["partition"],
-            rp.timers["local"], rss)
+            rp.timers["local"], rss, sum(len(v) for v in rp.send.values()), len(rp.send))
     rows = np.array(comm.gather(mine), dtype=float) if comm.size > 1 else np.array([mine], dtype=float)
     if comm.rank == 0 and show:
         mm = lambda k, f="{:.0f}": f.format(rows[:, k].min()) + "–" + f.format(rows[:, k].max())  # noqa: E731
         print(f"| {comm.size} | {len(model.bodies)} | {int(rows[:, 2].sum())} | {rp.graph_edges} | {rp.cut_edges} "
               f"({rp.edge_cut}) | {mm(0)} | {mm(1)} | {mm(2)} | {rows[:, 3].max():.1f} | {rows[:, 4].max():.2f} | "
-              f"{rows[:, 5].max():.3f} | {rows[:, 6].max():.2f} | {mm(7)} |", flush=True)
+              f"{rows[:, 5].max():.3f} | {rows[:, 6].max():.2f} | {mm(7)} | {mm(8)} ("
+              f"{16 * rows[:, 8].min():.0f}–{16 * rows[:, 8].max():.0f} B) | {mm(9)} |", flush=True)
 
 
 if __name__ == "__main__":
@@ -96,7 +99,8 @@ if __name__ == "__main__":
     if comm.rank == 0:
         print(f"method {a.method}\n\n| ranks | bodies | contacts | graph edges | edge cut: edges (contacts) | "
               "bodies per rank | ghosts per rank | contacts per rank | model [s] | graph [s] | partition [s] | "
-              "local [s] | peak RSS per rank [MB] |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+              "local [s] | peak RSS per rank [MB] | interface contacts sent per rank per sweep (bytes, 2 doubles each) | "
+              "neighbour ranks |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
               flush=True)
     run(20, comm, a.method, show=False)  # warm-up: numba compilation (cache) outside the timed runs
     for n in a.sizes:
