@@ -1,0 +1,245 @@
+"""Partition of bodies across ranks (fem_blocks/distributed/partition.py) on small running-bond walls.
+
+Expectations, each from a source independent of the code under test:
+* reach: the bodies within the search distance r = max(g0 + alert) of each other are those of a brute-force
+  all-pairs distance between the axis-aligned rectangles of the expanded case (bricks and foundation, from the case
+  geometry, not from the meshes): d = hypot(max(0, gap_x), max(0, gap_y)).
+  Catches: enlarging the broad-phase boxes by r instead of r/2 or forgetting the exact distance (too many pairs),
+  `<` instead of `<=`, or a missing pair from a too small box (too few).
+* owned contacts: the union over ranks of the owned contacts is the serial contact set of the production path
+  (ContactStep detection on a Simulation's ContactScene), each contact exactly once, same points and gaps bitwise.
+  Catches: detecting on owned bodies only (contacts with a ghost antagonist lost), keeping ghost-candidate contacts
+  (duplicates), or a renumbering that changes the detection's choices.
+* exchange lists: rank p sends to q exactly its contacts that share a body with a contact of q (brute force over
+  all contact pairs), and q's receive list from p is the same. Catches: coupling through the candidate body only.
+* mpirun -n 1, 2, 3: the owner array is the same on every rank, every body owned exactly once, ghosts of rank p =
+  {j not owned by p: d(i, j) <= r for an owned i} from the brute force, edge cut = the brute-force cut; 3 ranks on
+  a 2-body case: a rank with no bodies, no ghosts, no contacts.
+"""
+import os
+import shutil
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from fem_blocks.case import load_case
+from fem_blocks.expand import expand
+from fem_blocks.model import build_model
+from fem_blocks.distributed import partition as dp
+
+from _paths import ROOT  # noqa: E402
+
+CASE = """name = "w"
+gravity = [0.0, -9.81]
+[materials.brick]
+E = 5e9
+nu = 0.2
+rho = 1800.0
+thickness = 0.12
+[wall]
+{layout}
+material = "brick"
+brick_length = 0.25
+brick_height = 0.06
+joint = {joint}
+mesh_size = 0.03
+cell = "quad"
+group = "bricks"
+[wall.foundation]
+depth = 0.2
+overhang = 0.1
+[[interfaces]]
+name = "j"
+between = ["bricks", "bricks"]
+mu = 0.7
+g0 = {g0}
+alert = {alert}
+[[interfaces]]
+name = "f"
+between = ["bricks", "foundation"]
+mu = 0.7
+g0 = {g0}
+alert = {alert}
+[[stages]]
+name = "g"
+duration = 0.01
+h = 1e-3
+"""
+
+
+
+def bond(courses, per):
+    return f'type = "running_bond"\ncourses = {courses}\nbricks_per_course = {per}'
+
+
+# (layout, joint, g0, alert): r = g0 + alert
+WALLS = {
+    "dry": (bond(4, 4), 0.0, 0.0, 1e-3),        # touching bricks: reach = the bricks sharing an edge or a corner
+    "thick": (bond(4, 3), 0.01, 0.01, 0.002),   # 1 cm joints, r = 1.2 cm
+    "far": (bond(5, 3), 0.0, 0.0, 0.065),       # r = 6.5 cm > brick height: bricks two courses apart within reach
+    # stack bond, 1 cm joints, r = 1.2 cm: diagonal bricks are 1.41 cm apart (corner to corner), out of reach,
+    # but their boxes enlarged by r/2 overlap: only the exact distance separates them
+    "stack": ('type = "courses"\nrows = [[1, 1, 1], [1, 1, 1], [1, 1, 1]]', 0.01, 0.01, 0.002),
+}
+
+
+def write_case(tmp_path, name, layout, joint, g0, alert):
+    p = tmp_path / f"{name}.toml"
+    p.write_text(CASE.format(layout=layout, joint=joint, g0=g0, alert=alert))
+    return str(p)
+
+
+def rectangles(case_path):
+    """(nb, 4) [x0, y0, x1, y1] of every body in model order (blocks, then rigid bodies), from the expanded case."""
+    case = expand(load_case(case_path))
+    out = []
+    for b in case.blocks:
+        t = case.block_types[b.type]
+        out.append([b.position[0], b.position[1], b.position[0] + t.lx, b.position[1] + t.ly])
+    for r in case.rigid_bodies:
+        V = np.asarray(r.vertices, dtype=float)
+        out.append([V[:, 0].min(), V[:, 1].min(), V[:, 0].max(), V[:, 1].max()])
+    return np.array(out)
+
+
+def brute_force_reach(rects, r):
+    """(nb, nb) bool: i != j and the distance between rectangles i and j <= r (all pairs)."""
+    gx = np.maximum(0.0, np.maximum(rects[None, :, 0] - rects[:, None, 2], rects[:, None, 0] - rects[None, :, 2]))
+    gy = np.maximum(0.0, np.maximum(rects[None, :, 1] - rects[:, None, 3], rects[:, None, 1] - rects[None, :, 3]))
+    near = np.hypot(gx, gy) <= r
+    np.fill_diagonal(near, False)
+    return near
+
+
+def serial_contacts(model):
+    """The production detection: ContactStep on a Simulation's scene, reference configuration."""
+    from fem_blocks.dynamics import Simulation
+    sim = Simulation(model.bodies, h=1e-3, theta=1.0, contact=model.contact)
+    cstep = model.contact
+    cstep._setup(sim)
+    return cstep._detect(cstep.scene.positions(reference=True))
+
+
+def rows(cand, ant, cand_nodes, ant_nodes, point, gap):
+    """Contacts as sortable rows (bodies, nodes, point, gap), lexicographically sorted."""
+    R = np.column_stack([cand, ant, cand_nodes, ant_nodes, point, gap]).astype(float)
+    return R[np.lexsort(R.T[::-1])]
+
+
+@pytest.mark.parametrize("wall", sorted(WALLS))
+def test_near_pairs_are_the_bodies_within_reach(tmp_path, wall):
+    path = write_case(tmp_path, wall, *WALLS[wall])
+    model = build_model(load_case(path))
+    r = dp.search_distance(model)
+    pairs = dp.near_pairs(dp.boundaries(model), r)
+    near = brute_force_reach(rectangles(path), r)
+    expected = np.argwhere(np.triu(near))
+    assert np.array_equal(pairs, expected)
+    if wall == "far":  # the setting reaches past the neighbours: more pairs than those sharing an edge
+        assert len(pairs) > len(np.argwhere(np.triu(brute_force_reach(rectangles(path), 1e-9))))
+    if wall == "stack":  # 9 bricks + foundation: 12 joints between bricks + 3 on the foundation, no diagonal
+        assert len(pairs) == 15
+
+
+def test_one_rank_owns_everything_and_the_serial_contacts(tmp_path):
+    from mpi4py import MPI
+    model = build_model(load_case(write_case(tmp_path, "dry", *WALLS["dry"])))
+    rp = dp.partition_model(model, MPI.COMM_SELF)
+    nb = len(model.bodies)
+    assert np.array_equal(rp.owned, np.arange(nb)) and len(rp.ghost) == 0 and rp.edge_cut == 0
+    cs = serial_contacts(model)
+    c = rp.contacts
+    assert np.array_equal(rows(c.cand_body, c.ant_body, c.cand_nodes, c.ant_nodes, c.point, c.gap),
+                          rows(cs.cand_body, cs.ant_body, cs.cand_nodes, cs.ant_nodes, cs.point, cs.gap))
+
+
+def test_check_catches_a_missing_ghost(tmp_path):
+    from mpi4py import MPI
+    model = build_model(load_case(write_case(tmp_path, "dry", bond(2, 2), 0.0, 0.0, 1e-3)))
+    rp = dp.partition_model(model, MPI.COMM_SELF)
+    rp.owned = rp.owned[1:]  # body 0 now neither owned nor ghost, but candidate or antagonist of some contact
+    with pytest.raises(AssertionError):
+        rp.check()
+
+
+def run_mpi(n, case, out, tmp_path):
+    env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1",
+               OMPI_MCA_rmaps_base_oversubscribe="1", OMPI_MCA_btl_vader_single_copy_mechanism="none",
+               PYTHONPATH=ROOT)
+    p = subprocess.run(["mpirun", "-n", str(n), sys.executable, "-m", "fem_blocks.distributed.partition", case, out],
+                       capture_output=True, text=True, cwd=ROOT, env=env, timeout=300)
+    assert p.returncode == 0, p.stdout + p.stderr
+    return [dict(np.load(f"{out}.rank{k}.npz")) for k in range(n)]
+
+
+@pytest.mark.skipif(shutil.which("mpirun") is None, reason="no mpirun")
+@pytest.mark.parametrize("n,wall", [(1, "dry"), (2, "thick"), (2, "stack"), (3, "far"), (3, "dry")])
+def test_mpirun_partition_ghosts_and_contacts(tmp_path, n, wall):
+    path = write_case(tmp_path, wall, *WALLS[wall])
+    ranks = run_mpi(n, path, str(tmp_path / "p"), tmp_path)
+    model = build_model(load_case(path))
+    nb = len(model.bodies)
+    owner = ranks[0]["owner"]
+    # the same owner array on every rank; each body owned exactly once
+    assert all(np.array_equal(R["owner"], owner) for R in ranks)
+    assert np.array_equal(np.sort(np.concatenate([R["owned"] for R in ranks])), np.arange(nb))
+    assert all(np.array_equal(R["owned"], np.flatnonzero(owner == k)) for k, R in enumerate(ranks))
+    if n > 1:
+        assert all(len(R["owned"]) > 0 for R in ranks)  # ptscotch gives every rank bodies on these walls
+    # ghosts: exactly the bodies within reach of an owned body, owned elsewhere (brute force)
+    near = brute_force_reach(rectangles(path), dp.search_distance(model))
+    for k, R in enumerate(ranks):
+        mine = owner == k
+        expected = np.flatnonzero(near[mine].any(axis=0) & ~mine)
+        assert np.array_equal(R["ghost"], expected)
+    # owned contacts of all ranks = the serial contact set, each once; every contact's bodies owned or ghost
+    cs = serial_contacts(model)
+    got = rows(*(np.concatenate([R[k] for R in ranks]) for k in ("cand_body", "ant_body", "cand_nodes",
+                                                                  "ant_nodes", "point", "gap")))
+    assert np.array_equal(got, rows(cs.cand_body, cs.ant_body, cs.cand_nodes, cs.ant_nodes, cs.point, cs.gap))
+    for k, R in enumerate(ranks):
+        assert np.all(owner[R["cand_body"]] == k)
+        # the contact ownership over the serial contact set (its detection order): the candidate's rank
+        assert np.array_equal(R["contact_owner"], owner[cs.cand_body])
+        assert np.count_nonzero(R["contact_owner"] == k) == len(R["cand_body"])
+        assert np.all(np.isin(R["ant_body"], np.concatenate([R["owned"], R["ghost"]])))
+    # exchange lists: contacts sharing a body (brute force over all contact pairs) owned by different ranks
+    c, a = cs.cand_body, cs.ant_body
+    share = (c[:, None] == c[None, :]) | (c[:, None] == a[None, :]) | (a[:, None] == c[None, :]) | \
+        (a[:, None] == a[None, :])
+    co = owner[cs.cand_body]
+    for p in range(n):
+        for q in range(n):
+            if p == q:
+                continue
+            expected = np.flatnonzero((co == p) & share[:, co == q].any(axis=1))
+            assert np.array_equal(ranks[p].get(f"send{q}", np.zeros(0, dtype=np.int64)), expected)
+            assert np.array_equal(ranks[q].get(f"recv{p}", np.zeros(0, dtype=np.int64)), expected)
+    if n > 1:
+        assert all(any(k.startswith("send") for k in R) for R in ranks)  # every rank has interface contacts
+    # edge cut: contact counts (at least 1) on the pairs within reach or in contact, cut by the owner array
+    w = np.zeros((nb, nb), dtype=np.int64)
+    np.add.at(w, (np.minimum(cs.cand_body, cs.ant_body), np.maximum(cs.cand_body, cs.ant_body)), 1)
+    edge = np.triu(near) | (w > 0)
+    cut = np.maximum(w, 1)[edge & (owner[:, None] != owner[None, :])].sum()
+    assert int(ranks[0]["edge_cut"]) == cut and all(int(R["edge_cut"]) == cut for R in ranks)
+
+
+@pytest.mark.skipif(shutil.which("mpirun") is None, reason="no mpirun")
+def test_more_ranks_than_bodies(tmp_path):
+    """One brick on its foundation (2 bodies) on 3 ranks: a rank owns nothing and the contacts are still all
+    there, once."""
+    path = write_case(tmp_path, "one", 'type = "courses"\nrows = [[1]]', 0.0, 0.0, 1e-3)
+    ranks = run_mpi(3, path, str(tmp_path / "p"), tmp_path)
+    model = build_model(load_case(path))
+    assert len(model.bodies) == 2
+    owner = ranks[0]["owner"]
+    assert np.array_equal(np.sort(np.concatenate([R["owned"] for R in ranks])), np.arange(2))
+    empty = [R for R in ranks if len(R["owned"]) == 0]
+    assert len(empty) >= 1
+    assert all(len(R["ghost"]) == 0 and len(R["cand_body"]) == 0 for R in empty)
+    cs = serial_contacts(model)
+    assert sum(len(R["cand_body"]) for R in ranks) == len(cs.gap) > 0
+    assert all(np.all(owner[R["cand_body"]] == R["rank"]) for R in ranks)
