@@ -324,11 +324,14 @@ def _assemble_jacobian(indptr, blocks, diag_pos, D, E, eps, Jb):
                 Jb[p, i, l] += D[a, i, l] + eps * E[a, i, l]
 
 
-def _direction(blu, W, Jb, F):
+def _direction(blu, W, Jb, F, linear=None):
     """Newton's direction Δr = -J⁻¹ F for J of the blocks Jb (pattern of W): the block LU with its symbolic
     analysis done once per solve (linalg.BlockLU, no pivoting between blocks, backward error checked), else — or
     when that check fails — a pivoting LU (linalg.lu_solve: SuperLU below LU_SMALL unknowns, MUMPS above).
-    None if J is singular."""
+    `linear` (e.g. distributed.linear.DistBlockSolver, any object with solve(Jb, rhs) -> x or None): its
+    solve(Jb, -F) instead. None if J is singular."""
+    if linear is not None:
+        return linear.solve(Jb, -F)
     if blu is not None:
         dr = blu.solve_checked(Jb, -F)
         if dr is not None:
@@ -338,7 +341,7 @@ def _direction(blu, W, Jb, F):
 
 
 def _newton(W: BlockCSR, q, mu, r, tol, max_iter, gs, max_sweeps_total, coh=None, memory=1, stall_window=0,
-            fallback_sweeps=10, stall_sweeps=20, compliant=False, probe=None, give_up=None):
+            fallback_sweeps=10, stall_sweeps=20, compliant=False, probe=None, give_up=None, linear=None):
     """Core iteration (2D or 3D by W.dim). coh = (law, par, st, x, ueff, area, h, theta, inside) for interface laws
     (2D only), else None: x fixed, except with inside = True, where the mixed-mode damage follows the jump
     (x_α = D(u), consistent tangent, see _cohesive_terms). `gs(r, k)` runs k Gauss–Seidel sweeps from r ->
@@ -350,6 +353,7 @@ def _newton(W: BlockCSR, q, mu, r, tol, max_iter, gs, max_sweeps_total, coh=None
     first iteration, or when `window` iterations have not brought it below that value.
     `probe` (diagnostics, bench/bench_split_step.py): called once per iteration as probe(event) with a dict (the
     iterate, F, J, the step length, the residual after the step, and the function F(r) for finite differences).
+    `linear`: the solver of J Δr = -F (see _direction; None: the serial BlockLU / lu_solve).
     Returns (r, u, iterations, sweeps, fallbacks, change, residual)."""
     n = W.n
     dim = W.dim
@@ -455,7 +459,7 @@ def _newton(W: BlockCSR, q, mu, r, tol, max_iter, gs, max_sweeps_total, coh=None
     best, last = res, 0  # stagnation watch: residual and iteration of the last halving (or restart)
     # J's pattern is W's: its LU's ordering and fill are analysed once per pattern (2D, dim * n < LU_SMALL). 3D keeps
     # lu_solve: BlockLU took 1.23 s against 0.57 s on FCLIB's KaplasTower (570 contacts; docs/benchmarks.md)
-    use_blu = BLOCK_LU and dim == 2 and dim * n < LU_SMALL and res > tol and max_iter > 0
+    use_blu = BLOCK_LU and dim == 2 and dim * n < LU_SMALL and res > tol and max_iter > 0 and linear is None
     blu = BlockLU.for_pattern(W.indptr, W.indices, dim) if use_blu else None
     Jb = np.empty_like(W.blocks)
     while res > tol and n_it < max_iter and n_gs < max_sweeps_total:
@@ -468,7 +472,7 @@ def _newton(W: BlockCSR, q, mu, r, tol, max_iter, gs, max_sweeps_total, coh=None
         _assemble_jacobian(W.indptr, W.blocks, W.diag_pos, D, E, float(eps), Jb)
         eps_it = eps
         n_it += 1
-        dr = _direction(blu, W, Jb, F)  # None if J is singular
+        dr = _direction(blu, W, Jb, F, linear)  # None if J is singular
         ok = dr is not None
         accepted = False
         t = 1.0
@@ -535,10 +539,12 @@ def _newton(W: BlockCSR, q, mu, r, tol, max_iter, gs, max_sweeps_total, coh=None
 
 
 def solve_newton(W: BlockCSR, q, mu, r0=None, tol: float = 1e-8, max_iter: int = 200,
-                 gs_sweeps: int = 20, max_sweeps_total: int = 100000, memory: int | None = None) -> SolverResult:
+                 gs_sweeps: int = 20, max_sweeps_total: int = 100000, memory: int | None = None,
+                 linear=None) -> SolverResult:
     """Semismooth Newton on the Alart–Curnier function, NLGS-started (`gs_sweeps` sweeps) and NLGS fallback.
     2D or 3D from the blocks of W (2×2 or 3×3). `memory`: length of the non-monotone line search (default 1 in
-    2D, 10 in 3D; 1 = monotone Armijo).
+    2D, 10 in 3D; 1 = monotone Armijo). `linear`: solver of each iteration's J Δr = -F, an object with
+    solve(Jb, rhs) -> x or None (distributed.linear.DistBlockSolver on W's pattern; None: serial BlockLU / LU).
 
     Returns a SolverResult; `sweeps` counts Newton iterations + Gauss–Seidel sweeps (message says which)."""
     q, mu, r = _prepare(W, q, mu, r0, tol, dims=(2, 3))
@@ -561,14 +567,15 @@ def solve_newton(W: BlockCSR, q, mu, r0=None, tol: float = 1e-8, max_iter: int =
     if gs_sweeps:
         r, n_gs0 = gs(r, gs_sweeps)
     r, u, n_it, n_gs, n_fb, change, res = _newton(W, q, mu, r, tol, max_iter, gs, max_sweeps_total,
-                                                  memory=int(memory), stall_window=0 if W.dim == 2 else 30)
+                                                  memory=int(memory), stall_window=0 if W.dim == 2 else 30,
+                                                  linear=linear)
     return _result(r, u, n_it, n_gs0 + n_gs, n_fb, change, res, tol, q)
 
 
 def solve_cohesive_newton(W: BlockCSR, q, mu, law, par, st, ueff, area, h: float, theta: float, r0=None,
                           tol: float = 1e-8, max_iter: int = 200, gs_sweeps: int = 20,
                           max_sweeps_total: int = 100000, max_outer: int = 1000, max_total_iter: int | None = None,
-                          damage_inside: bool = True, probe=None):
+                          damage_inside: bool = True, probe=None, linear=None):
     """Newton for the contact problem with interface laws (laws.py), same contract as nlgs.solve_cohesive.
     At fixed internal variables x (β, damage) each law is piecewise linear in the jump u = u_eff + hθ v (tension /
     compression branches), so the transformed problem P̃ = P + S v + c, v' = v + cmp P̃_N e_N keeps the
@@ -591,7 +598,8 @@ def solve_cohesive_newton(W: BlockCSR, q, mu, law, par, st, ueff, area, h: float
     selects the least damaged solution where a large step makes the coupled iteration jump between branches of
     the softening law. The whole step is bounded by `max_total_iter` Newton iterations (default 10 x max_iter) and
     `max_sweeps_total` fallback sweeps over all passes; beyond, it reports non-convergence.
-    `probe`: diagnostics hook of every Newton iteration (see _newton).
+    `probe`: diagnostics hook of every Newton iteration (see _newton). `linear`: solver of J Δr = -F (see
+    solve_newton).
     Returns (SolverResult, trial internal variables)."""
     q, mu, r = _prepare(W, q, mu, r0, tol)
     law = np.ascontiguousarray(law, dtype=np.int64)
@@ -656,7 +664,7 @@ def solve_cohesive_newton(W: BlockCSR, q, mu, law, par, st, ueff, area, h: float
                                                 fallback_sweeps=0 if inside else 10, stall_sweeps=0 if inside else 20,
                                                 compliant=rows == "compliant", probe=probe,
                                                 give_up=GIVE_UP if inside and rows == "compliant" and RETRY_AC_ROWS
-                                                else None)
+                                                else None, linear=linear)
         n_it, n_gs, n_fb = n_it + i1, n_gs + g1, n_fb + f1
         if inside and res > tol and rows == "compliant" and RETRY_AC_ROWS:
             # a second coupled pass with the Alart–Curnier rows, from the committed damage and the Gauss–Seidel start
