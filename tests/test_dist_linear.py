@@ -133,3 +133,60 @@ def test_mpirun_equals_spsolve_on_every_rank(tmp_path, ranks, own, d):
             continue
         x_ref = reference(indptr, indices, systems[f"blocks_{k}"], systems[f"rhs_{k}"])
         assert not bool(out[f"none_{k}"]) and rel(out[f"x_{k}"], x_ref) <= 1e-12, (kind, rel(out[f"x_{k}"], x_ref))
+
+
+
+def _random_3d(tmp_path, n=60, seed=1):
+    """A 3D problem with an SPD W (tests/test_nlgs.random_problem_3d: unique solution), μ = 0.3, as an .npz."""
+    from test_nlgs import random_problem_3d
+    Wd, q = random_problem_3d(n, seed)
+    W = to_block_csr(Wd, 3)
+    path = tmp_path / "random3d.npz"
+    np.savez(path, indptr=W.indptr, indices=W.indices, blocks=W.blocks, diag_pos=W.diag_pos, q=q,
+             mu=np.full(W.n, 0.3), tol=1e-8)
+    return W, q, np.full(W.n, 0.3), path
+
+
+@needs_mpirun
+@pytest.mark.parametrize("case, ranks, own", [("granular", 2, "cyclic"), ("capsules", 2, "blocks"),
+                                              ("random3d", 3, "skip0")])
+def test_mpirun_newton_equals_serial_newton(tmp_path, case, ranks, own):
+    """solve_newton(..., linear=DistBlockSolver) from r = 0 (gs_sweeps = 0: every step is Newton's), tolerance 1e-8,
+    against the serial solve_newton (BlockLU in 2D, SuperLU in 3D):
+    - FCLIB fc2d_granularflowonwall_00667_00000 (2D, 667 contacts, W of full rank): 5 iterations both, r within
+      1e-12 relative (measured 1.2e-16);
+    - FCLIB Capsules-i97-269 (3D, 216 contacts): 13 iterations both, u = W r + q within 1e-12 (measured 1.0e-16)
+      but r only within 1e-5 (measured 1.6e-6): W has rank 451 of 648, r is not unique, J = D + E (W + ε I) is
+      nearly singular along W's null space and r moves there with the rounding of the LU (the serial Newton with
+      MUMPS instead of SuperLU, same process, differs from it by 1.3e-6 too);
+    - a random 3D problem with SPD W (60 contacts) on 3 ranks, rank 0 owning no contact: 4 iterations both, r within
+      1e-12 (measured 1.8e-16).
+    Always: converged, the same r and iteration count on every rank, one linear solve per iteration, the natural-map
+    residual recomputed independently (fclib.residual) <= 1e-8. Catches a hook that ignores `linear`
+    (linear_calls = 0), a sign error of the right-hand side (no convergence) and a rank-dependent direction
+    (same = False)."""
+    from fem_blocks.io import fclib
+    if case == "random3d":
+        W, q, mu, problem = _random_3d(tmp_path)
+        Wsp = W.to_scipy()
+    else:
+        problem = GRANULAR if case == "granular" else CAPSULES
+        if not os.path.exists(problem):
+            pytest.skip(f"FCLIB data not found at {FCLIB_DIR}")
+        p = fclib.read(problem)
+        W, q, mu, Wsp = to_block_csr(p.W, p.dim), p.q, p.mu, p.W
+    serial = newton.solve_newton(W, q, mu, tol=1e-8, gs_sweeps=0)
+    _mpirun(ranks, "newton", problem, tmp_path / "out.npz", "--own", own, "--gs", 0, "--tol", 1e-8)
+    out = np.load(tmp_path / "out.npz", allow_pickle=True)
+    assert serial.converged and bool(out["converged"]), str(out["message"])
+    assert bool(out["same"])
+    assert int(out["sweeps"]) == serial.sweeps == {"granular": 5, "capsules": 13, "random3d": 4}[case], \
+        (str(out["message"]), serial.message)
+    assert int(out["linear_calls"]) == serial.sweeps  # no Gauss–Seidel sweep, no fallback: one solve per iteration
+    r = out["r"]
+    if case == "capsules":
+        assert rel(Wsp @ r + q, serial.u) <= 1e-12
+        assert rel(r, serial.r) <= 1e-5
+    else:
+        assert rel(r, serial.r) <= 1e-12
+    assert fclib.residual(Wsp, q, mu, r, W.dim).rel_q <= 1e-8
