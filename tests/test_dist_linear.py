@@ -3,9 +3,9 @@ matrix with rows owned per rank (MUMPS LU), x all-gathered on every rank; and th
 solver/newton.py.
 
 Expectations (independent of the code under test): x = scipy.sparse.linalg.spsolve(J, b) (SuperLU) to 1e-12
-relative (measured: at most 1.2e-15 on the systems below, condition numbers 4 to 2e2); identical bits on every rank; None
-on every rank for a singular J; Newton with the distributed solve takes the iterations of the serial Newton
-(BlockLU / SuperLU) and ends within the tolerance, r within a stated bound of the serial r.
+relative (measured: at most 1.2e-15 on the systems below, condition numbers 4 to 2e2); identical bits on every
+rank; None on every rank for a singular J; Newton with the distributed solve takes the iterations of the serial
+Newton (BlockLU / SuperLU) and ends within the tolerance, r within a stated bound of the serial r.
 
 Ranks run in subprocesses under mpirun (tests/_dist_linear_run.py, as tests/test_dist_sweep.py does)."""
 import os
