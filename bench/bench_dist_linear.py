@@ -8,7 +8,7 @@ Two stages, so that every run times the same systems:
         sides -F_k of the first K Newton iterations of solver.newton.solve_newton on PROBLEM (an FCLIB .hdf5, or
         `wall:N` for the Delassus operator of bench/bench_wall.py's N-brick running-bond wall of deformable bricks,
         dry joints, captured at its 5th step), and the serial reference solutions;
-    time IN.npz [--own blocks|cyclic] [--repeat R]  (under mpirun -n N) DistBlockSolver on each J_k, R passes: the
+    time IN.npz [--own blocks|cyclic] [--repeat R] [--options k=v,...]  (under mpirun -n N) DistBlockSolver on each J_k, R passes: the
         first call (symbolic analysis + numerical factorisation + solve), the later calls (numerical factorisation +
         solve, the analysis reused), a fresh solver per call (analysis every time), split into assembly /
         factorisation + solve / gather; on rank 0 also the serial lu_solve (and BlockLU in 2D below LU_SMALL),
@@ -99,7 +99,8 @@ def timed():
     owner = ownership(n, size, opt("--own", "blocks"))
     comm.Barrier()
     t = time.perf_counter()
-    s = DistBlockSolver(indptr, indices, d, owner, comm)
+    options = dict(o.split("=") for o in opt("--options", "").split(",") if o)
+    s = DistBlockSolver(indptr, indices, d, owner, comm, options=options)
     t_build = time.perf_counter() - t
     first, later, err = None, [], 0.0
     for rep in range(R):
@@ -114,21 +115,23 @@ def timed():
             else:
                 later.append(dt)
             ref = z[f"x_{k}"]
-            err = max(err, float(np.linalg.norm(x - ref) / np.linalg.norm(ref)))
+            err = np.inf if x is None else max(err, float(np.linalg.norm(x - ref) / np.linalg.norm(ref)))
     split = [(a - b) / max(s.n_calls - 1, 1) for a, b in zip((s.t_assemble, s.t_factor_solve, s.t_gather), split0)]
     s.destroy()
     fresh = []
     for k in range(K):
         comm.Barrier()
         t = time.perf_counter()
-        f = DistBlockSolver(indptr, indices, d, owner, comm)
+        f = DistBlockSolver(indptr, indices, d, owner, comm, options=options)
         f.solve(z[f"blocks_{k}"], z[f"rhs_{k}"])
         f.destroy()
         fresh.append(time.perf_counter() - t)
-    tmax = comm.reduce(np.array([t_build, first, np.mean(later), np.mean(fresh)] + split), op=MPI.MAX, root=0)
+    mine = np.array([t_build, first, np.mean(later), np.mean(fresh)] + split)
+    tmax = np.empty_like(mine)
+    comm.Reduce(mine, tmax, op=MPI.MAX, root=0)  # the slowest rank
     if rank == 0:
         print(f"{z['name']}: {n} contacts, {d * n} unknowns, {indices.size} blocks, {K} systems x {R}; "
-              f"N = {size} ({s.method}), own {opt('--own', 'blocks')}")
+              f"N = {size} ({s.method}), own {opt('--own', 'blocks')}, options {options}")
         print(f"  DistBlockSolver: set-up {tmax[0] * 1e3:.1f} ms; first solve {tmax[1] * 1e3:.1f} ms; later solves "
               f"{tmax[2] * 1e3:.1f} ms (assembly {tmax[4] * 1e3:.1f}, factorisation + solve {tmax[5] * 1e3:.1f}, "
               f"gather {tmax[6] * 1e3:.1f}); fresh solver per solve {tmax[3] * 1e3:.1f} ms; "

@@ -39,10 +39,11 @@ class DistBlockSolver:
     on every rank of `comm` (an mpi4py communicator).
 
     method: "auto" (MUMPS LU when PETSc has it, else "gmres"), "mumps" or "gmres" (GMRES + block Jacobi/ILU(0),
-    relative tolerance `rtol`). `self.method` says which one is used."""
+    relative tolerance `rtol`). `self.method` says which one is used. `options`: PETSc options of this solver
+    only (set under its own prefix, without the leading "-"), e.g. {"mat_mumps_icntl_7": 3} (MUMPS ordering)."""
 
     def __init__(self, indptr, indices, dim: int, owner, comm, method: str = "auto", rtol: float = 1e-12,
-                 max_it: int = 10000):
+                 max_it: int = 10000, options: dict | None = None):
         from petsc4py import PETSc
         self.comm = comm
         rank, size = comm.Get_rank(), comm.Get_size()
@@ -93,7 +94,8 @@ class DistBlockSolver:
         self.b, self.x = A.createVecs()
         self.gather, self.xall = PETSc.Scatter.toAll(self.x)
         ksp = self.ksp = PETSc.KSP().create(pcomm)
-        ksp.setOptionsPrefix(f"fb_dist_linear_{id(self)}_")
+        prefix = f"fb_dist_linear_{id(self)}_"
+        ksp.setOptionsPrefix(prefix)
         ksp.setOperators(A)
         pc = ksp.getPC()
         if method == "mumps":
@@ -105,6 +107,11 @@ class DistBlockSolver:
             ksp.setTolerances(rtol=rtol, atol=0.0, max_it=max_it)
             ksp.setGMRESRestart(200)
             pc.setType("bjacobi")  # PETSc's default sub-solver: ILU(0) on each rank's diagonal block
+        if options:
+            db = PETSc.Options()
+            for k, v in options.items():
+                db[prefix + k] = v
+            ksp.setFromOptions()
         self.n_calls = 0
         self.t_assemble = self.t_factor_solve = self.t_gather = 0.0
 
