@@ -18,8 +18,15 @@ distributed factor) when PETSc has it; otherwise GMRES preconditioned per rank (
 rank's diagonal block), to relative tolerance `rtol`. The solution y = P x (new numbering, distributed) is
 gathered on every rank by a PETSc scatter to all (VecScatterCreateToAll) and permuted back: x = Pᵀ y, identical
 bits on every rank. A failed factorisation (MUMPS: singular J), a diverged Krylov solve or a non-finite entry of
-x gives None on every rank (the KSP's reason combined with an MPI max over the ranks), and the PC is reset so that
-the next call starts from a fresh analysis.
+x gives None on every rank (the KSP's reason combined with an MPI max over the ranks), and the KSP is rebuilt, so
+that the next call starts from a fresh analysis (a bjacobi/ILU PC that failed once kept failing on the next,
+regular J; MUMPS without PC.reset() too).
+
+Measured (bench/bench_dist_linear.py, 2 cores shared with another job at 100 %, load 2.1-2.4): FCLIB
+fc2d_granularflowonwall_07002_00801 (14 004 unknowns, 31 452 blocks), N = 1: first call 100 ms (analysis +
+factorisation), later calls 39 ms (36 of them factorisation + solve), serial linalg.lu_solve (MUMPS, analysis every
+call) 98 ms; N = 2: 107 ms per call. 1000-brick wall (25 558 unknowns, 625 131 blocks): N = 1 773 ms per call
+(serial lu_solve 838 ms), N = 2 1010 ms: on this machine the distributed factorisation does not pay.
 """
 from __future__ import annotations
 
@@ -93,10 +100,20 @@ class DistBlockSolver:
         A.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, True)
         self.b, self.x = A.createVecs()
         self.gather, self.xall = PETSc.Scatter.toAll(self.x)
+        self._ksp_args = (pcomm, method, rtol, max_it, options)
+        self._make_ksp()
+        self.n_calls = 0
+        self.t_assemble = self.t_factor_solve = self.t_gather = 0.0
+
+    def _make_ksp(self):
+        """The KSP on A: preonly + LU (MUMPS), or GMRES + block Jacobi (ILU(0) per rank), and this solver's options
+        (under its own prefix)."""
+        from petsc4py import PETSc
+        pcomm, method, rtol, max_it, options = self._ksp_args
         ksp = self.ksp = PETSc.KSP().create(pcomm)
         prefix = f"fb_dist_linear_{id(self)}_"
         ksp.setOptionsPrefix(prefix)
-        ksp.setOperators(A)
+        ksp.setOperators(self.A)
         pc = ksp.getPC()
         if method == "mumps":
             ksp.setType("preonly")
@@ -112,8 +129,6 @@ class DistBlockSolver:
             for k, v in options.items():
                 db[prefix + k] = v
             ksp.setFromOptions()
-        self.n_calls = 0
-        self.t_assemble = self.t_factor_solve = self.t_gather = 0.0
 
     def solve(self, Jb, rhs) -> np.ndarray | None:
         """x with J x = rhs, J of the blocks Jb (nnzb, d, d) in the pattern (replicated: each rank inserts only its
@@ -145,9 +160,10 @@ class DistBlockSolver:
             out.reshape(-1, d)[self.order] = self.xall.array_r.reshape(-1, d)
             if not np.all(np.isfinite(out)):
                 out = None
-        else:  # start the next call from a fresh analysis
+        else:  # start the next call from a fresh KSP (a failed PC keeps its failure: measured with bjacobi/ILU)
             self.ksp.getPC().reset()
-            self.ksp.setOperators(self.A)
+            self.ksp.destroy()
+            self._make_ksp()
         self.n_calls += 1
         self.t_assemble += t1 - t0
         self.t_factor_solve += t2 - t1
