@@ -112,9 +112,10 @@ def test_mpirun_equals_spsolve_on_every_rank(tmp_path, ranks, own, d):
     """N = 1, 2, 3 ranks, contiguous blocks / cyclic ownership / rank 0 owning no contact: for a diagonally dominant,
     an unsymmetric, a singular and again a dominant J (one solver): x = spsolve to 1e-12 relative (measured
     <= 8.1e-16), the same bits on every rank; None on every rank for the singular J, no hang. Catches a wrong
-    renumbering (cyclic: the owned contacts are not a contiguous range of the global numbering), a rank's rows
-    inserted at the wrong global rows, a rank with no contact breaking the collectives, and a failure reported on
-    one rank only (the other ranks would hang or return a vector)."""
+    renumbering (checked: `new = order` instead of its inverse fails the cyclic cases, where the owned contacts are
+    not a contiguous range of the global numbering) and blocks inserted transposed; a rank with no contact takes
+    part in every collective. Not caught: dropping the MPI max of the failure flag (MUMPS reports a singular J on
+    every rank by itself; the max guards the other failures)."""
     indptr, indices = pattern(90, seed=5 + d)
     n = indptr.size - 1
     rng = np.random.default_rng(d)
