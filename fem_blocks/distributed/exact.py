@@ -39,14 +39,13 @@ from llvmlite import ir
 from numba import njit, types
 from numba.extending import intrinsic
 
-NLIMB = 66        # limbs of 32 bits: 2^(32·66) > 2^(2045 + 53 + 30) (largest term times 2^30 terms)
+NLIMB = 66        # limbs of 32 bits: a term touches limbs j..j+2, j = k >> 5 <= 63; the top limb holds the rest
 PENDING = NLIMB   # terms added since the last normalisation (an upper bound: parts' counts add)
 POSINF = NLIMB + 1
 NEGINF = NLIMB + 2
 NAN = NLIMB + 3
 NBINS = NLIMB + 4
 RENORM = 1 << 30  # normalise when PENDING reaches this: limbs stay below 2^62 + 2^32
-_MASK = (1 << 32) - 1
 _SCALE = 1 << 1074
 
 
