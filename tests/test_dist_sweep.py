@@ -150,7 +150,7 @@ def test_residual_terms_summed_in_order_are_the_serial_natural_map(dim):
     rng = np.random.default_rng(dim)
     n = 5000
     r, u, mu = rng.normal(size=dim * n), rng.normal(size=dim * n), rng.uniform(0.1, 0.9, n)
-    t = ds._natural_map_terms(r, u, mu, dim)
+    t = nlgs.natural_map_terms(r, u, mu, dim)
     assert np.sqrt(ds._ordered_sum(t)) == nlgs.natural_map(r, u, mu, dim)
 
 

@@ -41,7 +41,6 @@ from numba import njit
 from ..errors import InputError
 from ..linalg import BlockCSR, matvec_bcsr
 from ..solver import nlgs
-from ..solver.local import _proj_cone2, _proj_cone3
 
 
 @dataclass
@@ -82,30 +81,6 @@ def local_rows(W: BlockCSR, q, mu, owned) -> LocalRows:
     diag = np.where(dpos >= 0, dpos - starts + indptr[:-1], -1).astype(np.int64)
     return LocalRows(owned, ghost, indptr, local.astype(np.int64), np.ascontiguousarray(W.blocks[pos]), diag,
                      np.ascontiguousarray(q[owned]).ravel(), np.ascontiguousarray(mu[owned]))
-
-
-@njit(cache=True)
-def _natural_map_terms(r, u, mu, dim):
-    """‖F_α‖² per owned contact, each term computed exactly as in nlgs.natural_map_2d/3d."""
-    n = mu.shape[0]
-    t = np.empty(n)
-    for a in range(n):
-        m = mu[a]
-        if dim == 2:
-            p0, p1 = _proj_cone2(r[2 * a] - (u[2 * a] + m * abs(u[2 * a + 1])), r[2 * a + 1] - u[2 * a + 1], m)
-            f0 = r[2 * a] - p0
-            f1 = r[2 * a + 1] - p1
-            t[a] = f0 * f0 + f1 * f1
-        else:
-            u1 = u[3 * a + 1]
-            u2 = u[3 * a + 2]
-            p0, p1, p2 = _proj_cone3(r[3 * a] - (u[3 * a] + m * np.sqrt(u1 * u1 + u2 * u2)),
-                                     r[3 * a + 1] - u1, r[3 * a + 2] - u2, m)
-            f0 = r[3 * a] - p0
-            f1 = r[3 * a + 1] - p1
-            f2 = r[3 * a + 2] - p2
-            t[a] = f0 * f0 + f1 * f1 + f2 * f2
-    return t
 
 
 @njit(cache=True)
@@ -207,7 +182,7 @@ class DistSweep:
     def _global_residual(self, u, mode: str):
         """‖F‖/‖q‖ over all contacts (same value on every rank)."""
         rows, comm = self.rows, self.comm
-        t = _natural_map_terms(self.r, u, rows.mu, self.d)
+        t = nlgs.natural_map_terms(self.r, u, rows.mu, self.d)
         if mode == "allreduce":
             s = comm.allreduce(float(np.sum(t)))
             return float(np.sqrt(s)) / self._qnorm[mode]

@@ -154,34 +154,59 @@ def _sweep(indptr, indices, blocks, diag_pos, q, mu, r, order, omega):
     return dr2, r2
 
 
+@njit(cache=True, inline="always")
+def _natural_map_term_2d(r, u, mu, a):
+    """‖F_α‖² of the 2D natural map (one contact's term of natural_map_2d)."""
+    m = mu[a]
+    p0, p1 = _proj_cone2(r[2 * a] - (u[2 * a] + m * abs(u[2 * a + 1])), r[2 * a + 1] - u[2 * a + 1], m)
+    f0 = r[2 * a] - p0
+    f1 = r[2 * a + 1] - p1
+    return f0 * f0 + f1 * f1
+
+
+@njit(cache=True, inline="always")
+def _natural_map_term_3d(r, u, mu, a):
+    """‖F_α‖² of the 3D natural map (one contact's term of natural_map_3d)."""
+    u1 = u[3 * a + 1]
+    u2 = u[3 * a + 2]
+    p0, p1, p2 = _proj_cone3(r[3 * a] - (u[3 * a] + mu[a] * np.sqrt(u1 * u1 + u2 * u2)),
+                             r[3 * a + 1] - u1, r[3 * a + 2] - u2, mu[a])
+    f0 = r[3 * a] - p0
+    f1 = r[3 * a + 1] - p1
+    f2 = r[3 * a + 2] - p2
+    return f0 * f0 + f1 * f1 + f2 * f2
+
+
 @njit(cache=True)
 def natural_map_2d(r, u, mu):
-    """‖F‖_2 with F_α = r_α - P_K(r_α - (u_α + [mu |u_T|, 0])) (2D Coulomb cone K)."""
+    """‖F‖_2 with F_α = r_α - P_K(r_α - (u_α + [mu |u_T|, 0])) (2D Coulomb cone K): sqrt(Σ_α ‖F_α‖²), the terms
+    added in contact order from 0.0."""
     n = mu.shape[0]
     s = 0.0
     for a in range(n):
-        m = mu[a]
-        p0, p1 = _proj_cone2(r[2 * a] - (u[2 * a] + m * abs(u[2 * a + 1])), r[2 * a + 1] - u[2 * a + 1], m)
-        f0 = r[2 * a] - p0
-        f1 = r[2 * a + 1] - p1
-        s += f0 * f0 + f1 * f1
+        s += _natural_map_term_2d(r, u, mu, a)
     return np.sqrt(s)
 
 
 @njit(cache=True)
 def natural_map_3d(r, u, mu):
-    """‖F‖_2 with F_α = r_α - P_K(r_α - (u_α + [mu ‖u_T‖, 0, 0])) (3D Coulomb cone K)."""
+    """‖F‖_2 with F_α = r_α - P_K(r_α - (u_α + [mu ‖u_T‖, 0, 0])) (3D Coulomb cone K), summed as natural_map_2d."""
     s = 0.0
     for a in range(mu.shape[0]):
-        u1 = u[3 * a + 1]
-        u2 = u[3 * a + 2]
-        p0, p1, p2 = _proj_cone3(r[3 * a] - (u[3 * a] + mu[a] * np.sqrt(u1 * u1 + u2 * u2)),
-                                 r[3 * a + 1] - u1, r[3 * a + 2] - u2, mu[a])
-        f0 = r[3 * a] - p0
-        f1 = r[3 * a + 1] - p1
-        f2 = r[3 * a + 2] - p2
-        s += f0 * f0 + f1 * f1 + f2 * f2
+        s += _natural_map_term_3d(r, u, mu, a)
     return np.sqrt(s)
+
+
+@njit(cache=True)
+def natural_map_terms(r, u, mu, dim):
+    """The terms ‖F_α‖², α = 0..n-1 (n = len(mu)), of the FCLIB natural map for dim = 2 or 3: each computed with
+    the arithmetic of natural_map_2d/3d, so that Σ_α in contact order from 0.0 (then sqrt) is natural_map(r, u, mu,
+    dim) bitwise, and an exact sum of them (distributed.exact) is the same whatever the order or the ranks."""
+    n = mu.shape[0]
+    t = np.empty(n)
+    for a in range(n):
+        t[a] = _natural_map_term_2d(r, u, mu, a) if dim == 2 else _natural_map_term_3d(r, u, mu, a)
+    return t
 
 
 @njit(cache=True)
@@ -946,58 +971,65 @@ def residual_scale(indptr, indices, blocks, a, kNA, kTA, h, theta):
     return 1.0 + g if g > 0.0 else 1.0
 
 
+@njit(cache=True, inline="always")
+def _natural_map_cohesive_term3(indptr, indices, blocks, q, u, mu, r, law, par, st, trial, ueff, area, h, theta, a):
+    """‖F_α‖² of the 3D transformed problem (one contact's term of _natural_map_cohesive3), u = W r on the rows."""
+    v0 = u[3 * a] + q[3 * a]
+    v1 = u[3 * a + 1] + q[3 * a + 1]
+    v2 = u[3 * a + 2] + q[3 * a + 2]
+    p0 = r[3 * a]
+    p1 = r[3 * a + 1]
+    p2 = r[3 * a + 2]
+    m = mu[a]
+    sig = 1.0
+    if law[a] != 0:
+        uN = ueff[a, 0] + h * theta * v0
+        kN, kT, fN, fT, m = _linear_part(law[a], par[a], st[a], trial[a], uN > 0.0)
+        p0 += h * area[a] * (kN * uN + fN)
+        p1 += h * area[a] * kT * (ueff[a, 1] + h * theta * v1)
+        p2 += h * area[a] * kT * (ueff[a, 2] + h * theta * v2)
+        sig = residual_scale(indptr, indices, blocks, a, kN * area[a], kT * area[a], h, theta)
+        if uN <= 0.0:
+            kc = _kcomp(law[a], par[a]) * area[a]
+            if kc > 0.0:
+                v0 += p0 / (h * h * theta * kc)
+    p0 /= sig  # impulse components relative to their gain ∂P̃/∂P (docs/laws.md, "Residual")
+    p1 /= sig
+    p2 /= sig
+    capP = h * _cap_stress(par[a], st[a]) * area[a] / sig
+    if capP > 0.0 and par[a, _P_CSS] > 0.0:
+        y0, y1, y2 = ellcone_proj3(p0 - v0, p1 - v1, p2 - v2, capP, par[a, _P_CSS], m)
+    elif capP > 0.0:
+        y0 = min(max(p0 - v0, 0.0), capP)
+        x1 = p1 - v1
+        x2 = p2 - v2
+        nx = np.sqrt(x1 * x1 + x2 * x2)
+        lim = m * y0
+        if nx > lim:
+            x1 *= lim / nx
+            x2 *= lim / nx
+        y1, y2 = x1, x2
+    else:
+        y0, y1, y2 = _proj_cone3(p0 - (v0 + m * np.sqrt(v1 * v1 + v2 * v2)), p1 - v1, p2 - v2, m)
+    f0 = p0 - y0
+    f1 = p1 - y1
+    f2 = p2 - y2
+    return f0 * f0 + f1 * f1 + f2 * f2
+
+
 @njit(cache=True)
 def _natural_map_cohesive3(indptr, indices, blocks, q, mu, r, law, par, st, trial, ueff, area, h, theta):
     """3D ‖F‖ of the transformed problem: F = P̃/σ - P_K(P̃/σ - (v + [μ‖v_T‖, 0, 0])), P̃ = P + P_adh(u(v)), σ the
     contact's gain (residual_scale); at a cap
     the Alart–Curnier residual (ρ = 1) with the normal projection onto [0, h f_c A] and the tangential one onto the
-    disk of radius μ times it (zero exactly at the solutions)."""
+    disk of radius μ times it (zero exactly at the solutions). sqrt of Σ_α ‖F_α‖² added in contact order from 0.0."""
     n = mu.shape[0]
     u = np.empty_like(q)
     matvec_bcsr(indptr, indices, blocks, r, u)
     s = 0.0
     for a in range(n):
-        v0 = u[3 * a] + q[3 * a]
-        v1 = u[3 * a + 1] + q[3 * a + 1]
-        v2 = u[3 * a + 2] + q[3 * a + 2]
-        p0 = r[3 * a]
-        p1 = r[3 * a + 1]
-        p2 = r[3 * a + 2]
-        m = mu[a]
-        sig = 1.0
-        if law[a] != 0:
-            uN = ueff[a, 0] + h * theta * v0
-            kN, kT, fN, fT, m = _linear_part(law[a], par[a], st[a], trial[a], uN > 0.0)
-            p0 += h * area[a] * (kN * uN + fN)
-            p1 += h * area[a] * kT * (ueff[a, 1] + h * theta * v1)
-            p2 += h * area[a] * kT * (ueff[a, 2] + h * theta * v2)
-            sig = residual_scale(indptr, indices, blocks, a, kN * area[a], kT * area[a], h, theta)
-            if uN <= 0.0:
-                kc = _kcomp(law[a], par[a]) * area[a]
-                if kc > 0.0:
-                    v0 += p0 / (h * h * theta * kc)
-        p0 /= sig  # impulse components relative to their gain ∂P̃/∂P (docs/laws.md, "Residual")
-        p1 /= sig
-        p2 /= sig
-        capP = h * _cap_stress(par[a], st[a]) * area[a] / sig
-        if capP > 0.0 and par[a, _P_CSS] > 0.0:
-            y0, y1, y2 = ellcone_proj3(p0 - v0, p1 - v1, p2 - v2, capP, par[a, _P_CSS], m)
-        elif capP > 0.0:
-            y0 = min(max(p0 - v0, 0.0), capP)
-            x1 = p1 - v1
-            x2 = p2 - v2
-            nx = np.sqrt(x1 * x1 + x2 * x2)
-            lim = m * y0
-            if nx > lim:
-                x1 *= lim / nx
-                x2 *= lim / nx
-            y1, y2 = x1, x2
-        else:
-            y0, y1, y2 = _proj_cone3(p0 - (v0 + m * np.sqrt(v1 * v1 + v2 * v2)), p1 - v1, p2 - v2, m)
-        f0 = p0 - y0
-        f1 = p1 - y1
-        f2 = p2 - y2
-        s += f0 * f0 + f1 * f1 + f2 * f2
+        s += _natural_map_cohesive_term3(indptr, indices, blocks, q, u, mu, r, law, par, st, trial, ueff, area, h,
+                                         theta, a)
     return np.sqrt(s)
 
 
@@ -1019,10 +1051,50 @@ def _check_cohesive3(n, r, law, par, st, ueff, area):
         raise InputError(f"area: expected {n} tributary areas, got shape {np.shape(area)}")
 
 
+@njit(cache=True, inline="always")
+def _natural_map_cohesive_term2(indptr, indices, blocks, q, u, mu, r, law, par, st, trial, ueff, area, h, theta, a):
+    """‖F_α‖² of the 2D transformed problem (one contact's term of natural_map_cohesive), u = W r on the rows."""
+    v0 = u[2 * a] + q[2 * a]
+    v1 = u[2 * a + 1] + q[2 * a + 1]
+    p0 = r[2 * a]
+    p1 = r[2 * a + 1]
+    m = mu[a]
+    sig = 1.0
+    if law[a] != 0:
+        uN = ueff[a, 0] + h * theta * v0
+        uT = ueff[a, 1] + h * theta * v1
+        kN, kT, fN, fT, m = _linear_part(law[a], par[a], st[a], trial[a], uN > 0.0)
+        p0 += h * area[a] * (kN * uN + fN)
+        p1 += h * area[a] * (kT * uT + fT)
+        sig = residual_scale(indptr, indices, blocks, a, kN * area[a], kT * area[a], h, theta)
+    if law[a] != 0 and v0 * h * theta + ueff[a, 0] <= 0.0:
+        kc = _kcomp(law[a], par[a]) * area[a]
+        if kc > 0.0:
+            v0 += p0 / (h * h * theta * kc)
+    p0 /= sig  # impulse components relative to their gain ∂P̃/∂P (docs/laws.md, "Residual")
+    p1 /= sig
+    capP = h * _cap_stress(par[a], st[a]) * area[a] / sig
+    if capP > 0.0 and par[a, _P_CSS] > 0.0:  # elliptic cap: Π of the Alart–Curnier function (ρ = 1)
+        y0, y1, j0, j1, j2, j3, reg = ellcone_proj2(p0 - v0, p1 - v1, 1.0, 1.0, capP, par[a, _P_CSS], m)
+        return (p0 - y0) ** 2 + (p1 - y1) ** 2
+    if capP > 0.0:  # capped cone: Alart–Curnier residual (rho = 1), zero exactly at the solutions
+        y0 = min(max(p0 - v0, 0.0), capP)
+        lim = m * y0
+        y1 = min(max(p1 - v1, -lim), lim)
+        f0 = p0 - y0
+        f1 = p1 - y1
+        return f0 * f0 + f1 * f1
+    y0, y1 = _proj_cone2(p0 - (v0 + m * abs(v1)), p1 - v1, m)
+    f0 = p0 - y0
+    f1 = p1 - y1
+    return f0 * f0 + f1 * f1
+
+
 @njit(cache=True)
 def natural_map_cohesive(indptr, indices, blocks, q, mu, r, law, par, st, trial, ueff, area, h, theta):
     """‖F‖ of the transformed problem: F = P̃/σ - P_K(P̃/σ - (v + [μ|v_T|, 0])), P̃ = P + P_adh(u(v)), σ the contact's
-    gain (residual_scale; 1 for Coulomb contacts) (2D or 3D by the block size)."""
+    gain (residual_scale; 1 for Coulomb contacts) (2D or 3D by the block size): sqrt of Σ_α ‖F_α‖² added in contact
+    order from 0.0 (the terms: natural_map_cohesive_terms)."""
     if blocks.shape[1] == 3:
         return _natural_map_cohesive3(indptr, indices, blocks, q, mu, r, law, par, st, trial, ueff, area, h, theta)
     n = mu.shape[0]
@@ -1030,43 +1102,31 @@ def natural_map_cohesive(indptr, indices, blocks, q, mu, r, law, par, st, trial,
     matvec_bcsr(indptr, indices, blocks, r, u)
     s = 0.0
     for a in range(n):
-        v0 = u[2 * a] + q[2 * a]
-        v1 = u[2 * a + 1] + q[2 * a + 1]
-        p0 = r[2 * a]
-        p1 = r[2 * a + 1]
-        m = mu[a]
-        sig = 1.0
-        if law[a] != 0:
-            uN = ueff[a, 0] + h * theta * v0
-            uT = ueff[a, 1] + h * theta * v1
-            kN, kT, fN, fT, m = _linear_part(law[a], par[a], st[a], trial[a], uN > 0.0)
-            p0 += h * area[a] * (kN * uN + fN)
-            p1 += h * area[a] * (kT * uT + fT)
-            sig = residual_scale(indptr, indices, blocks, a, kN * area[a], kT * area[a], h, theta)
-        if law[a] != 0 and v0 * h * theta + ueff[a, 0] <= 0.0:
-            kc = _kcomp(law[a], par[a]) * area[a]
-            if kc > 0.0:
-                v0 += p0 / (h * h * theta * kc)
-        p0 /= sig  # impulse components relative to their gain ∂P̃/∂P (docs/laws.md, "Residual")
-        p1 /= sig
-        capP = h * _cap_stress(par[a], st[a]) * area[a] / sig
-        if capP > 0.0 and par[a, _P_CSS] > 0.0:  # elliptic cap: Π of the Alart–Curnier function (ρ = 1)
-            y0, y1, j0, j1, j2, j3, reg = ellcone_proj2(p0 - v0, p1 - v1, 1.0, 1.0, capP, par[a, _P_CSS], m)
-            s += (p0 - y0) ** 2 + (p1 - y1) ** 2
-            continue
-        if capP > 0.0:  # capped cone: Alart–Curnier residual (rho = 1), zero exactly at the solutions
-            y0 = min(max(p0 - v0, 0.0), capP)
-            lim = m * y0
-            y1 = min(max(p1 - v1, -lim), lim)
-            f0 = p0 - y0
-            f1 = p1 - y1
-            s += f0 * f0 + f1 * f1
-            continue
-        y0, y1 = _proj_cone2(p0 - (v0 + m * abs(v1)), p1 - v1, m)
-        f0 = p0 - y0
-        f1 = p1 - y1
-        s += f0 * f0 + f1 * f1
+        s += _natural_map_cohesive_term2(indptr, indices, blocks, q, u, mu, r, law, par, st, trial, ueff, area, h,
+                                         theta, a)
     return np.sqrt(s)
+
+
+@njit(cache=True)
+def natural_map_cohesive_terms(indptr, indices, blocks, q, mu, r, law, par, st, trial, ueff, area, h, theta):
+    """The terms ‖F_α‖² of natural_map_cohesive (2D or 3D by the block size), one per block row α = 0..n-1,
+    n = len(indptr) - 1, each computed with its arithmetic: Σ_α in row order from 0.0, then sqrt, is
+    natural_map_cohesive bitwise. The rows may be a subset (a rank's owned contacts, numbered first): r holds the
+    impulses of every column index (d per column, owned rows first: r_α is the row's own impulse), q, mu, law, par,
+    st, trial, ueff, area at least the n rows' entries; the matrix need not be square."""
+    n = indptr.shape[0] - 1
+    dd = blocks.shape[1]
+    u = np.empty(dd * n)
+    matvec_bcsr(indptr, indices, blocks, r, u)
+    t = np.empty(n)
+    for a in range(n):
+        if dd == 3:
+            t[a] = _natural_map_cohesive_term3(indptr, indices, blocks, q, u, mu, r, law, par, st, trial, ueff, area,
+                                               h, theta, a)
+        else:
+            t[a] = _natural_map_cohesive_term2(indptr, indices, blocks, q, u, mu, r, law, par, st, trial, ueff, area,
+                                               h, theta, a)
+    return t
 
 
 @njit(cache=True)
