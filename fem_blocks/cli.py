@@ -63,20 +63,26 @@ def _run_script(path: str, out: str, quick: bool = False, extra=()) -> int:
     return 0
 
 
+def _world():
+    """MPI.COMM_WORLD when this process is one of N > 1 ranks (`mpirun -n N fem-blocks run ...`), else None."""
+    from mpi4py import MPI
+    return MPI.COMM_WORLD if MPI.COMM_WORLD.Get_size() > 1 else None
+
+
 def _run(case_path: str, out: str, quiet: bool, quick: bool = False, resume: bool = False,
-         force: bool = False) -> int:
+         force: bool = False, comm=None) -> int:
     from .case import load_case
     from .case import quick as make_quick
     from .lab import load_lab, run_lab
     lab = load_lab(case_path)  # a [lab] file: a standard test, one generated case per specimen (fem_blocks/lab)
     if lab is not None:
-        return run_lab(lab, out, quick=quick, quiet=quiet, resume=resume, force=force)
+        return run_lab(lab, out, quick=quick, quiet=quiet, resume=resume, force=force, comm=comm)
     case = load_case(case_path)  # validate before importing the heavy stages
     if quick:
         case = make_quick(case)
     from .runner import RunStopped, convergence_line, run_case
     try:
-        summary = run_case(case, out, progress=not quiet, resume=resume, force=force)
+        summary = run_case(case, out, progress=not quiet, resume=resume, force=force, comm=comm)
     except InputError as e:  # found while building or starting the model (overlaps, meshes): name the case file
         msg = str(e)
         raise InputError(msg if msg.startswith(case.source) else f"{case.source}: {msg}") from None
@@ -84,7 +90,8 @@ def _run(case_path: str, out: str, quiet: bool, quick: bool = False, resume: boo
         print(f"fem-blocks: run stopped: {e}", file=sys.stderr)
         return e.code
     pv = summary["outputs"].get("paraview")
-    print(f"fem-blocks: {case.name}: {summary['steps']} steps in {summary['wall_time']:.1f} s")
+    ranks = f" on {comm.Get_size()} MPI ranks" if comm is not None else ""
+    print(f"fem-blocks: {case.name}: {summary['steps']} steps in {summary['wall_time']:.1f} s{ranks}")
     if pv:
         print(f"ParaView files: {os.path.join(os.path.abspath(out), pv)}")
     print(f"history: {os.path.join(os.path.abspath(out), 'history.csv')}; "
@@ -116,6 +123,37 @@ def _check(case_path: str, quick: bool = False) -> int:
 
 
 def main(argv=None) -> int:
+    """The command line. Under `mpirun -n N` (N > 1) `run` and `demo` run on the N ranks (runner.run_case(comm=)):
+    rank 0 prints and writes; the other ranks print nothing, and every rank exits with the same status. An error
+    that is not one of the run's own (input, stop, convergence, arithmetic) stops every rank through MPI_Abort."""
+    if argv is None and len(sys.argv) > 1 and sys.argv[1] in ("run", "demo") and "--list" not in sys.argv:
+        comm = _world()
+        if comm is not None:
+            return _main_ranks(comm)
+    return _main(argv)
+
+
+def _main_ranks(comm) -> int:
+    """main() on one of N > 1 ranks: ranks other than 0 are silent; an unexpected error aborts all ranks."""
+    err = sys.stderr
+    if comm.Get_rank() > 0:
+        sys.stdout = open(os.devnull, "w")
+        sys.stderr = open(os.devnull, "w")
+    try:
+        return _main(None, comm)
+    except SystemExit:
+        raise
+    except BaseException as e:  # noqa: BLE001 - a rank that fails alone would leave the others waiting
+        import traceback
+        print(f"fem-blocks: rank {comm.Get_rank()} of {comm.Get_size()}: run failed: {type(e).__name__}: {e}",
+              file=err)
+        traceback.print_exc(file=err)
+        err.flush()
+        comm.Abort(1)
+        return 1
+
+
+def _main(argv=None, comm=None) -> int:
     p = argparse.ArgumentParser(prog="fem-blocks", description="Deformable-block masonry simulator (NSCD).")
     p.add_argument("--version", action="version", version=f"fem-blocks {__version__}")
     sub = p.add_subparsers(dest="command")
@@ -146,7 +184,7 @@ def main(argv=None) -> int:
         if args.command == "run":
             if args.force and not args.resume:
                 raise InputError("--force: only meaningful with --resume")
-            return _run(args.case, args.out, args.quiet, args.quick, args.resume, args.force)
+            return _run(args.case, args.out, args.quiet, args.quick, args.resume, args.force, comm)
         if args.command == "check":
             return _check(args.case, args.quick)
         demos = list_demos()
@@ -159,10 +197,13 @@ def main(argv=None) -> int:
             raise InputError(f"demo {name!r} not found; expected one of {sorted(demos)} (fem-blocks demo --list)")
         out = args.out or os.path.join("out", f"demo-{name}")
         if demos[name].endswith(".py"):
+            if comm is not None:
+                raise InputError(f"demo {name}: a Python script runs on one process; expected no mpirun (or a case "
+                                 "file demo)")
             return _run_script(demos[name], out, args.quick, extra)
         if extra:
             raise InputError(f"demo {name}: unrecognized arguments {' '.join(extra)}")
-        return _run(demos[name], out, args.quiet, args.quick)
+        return _run(demos[name], out, args.quiet, args.quick, comm=comm)
     except InputError as e:
         print(f"fem-blocks: error: {e}", file=sys.stderr)
         return 2

@@ -776,8 +776,37 @@ def _step_adaptive(sim: Simulation, model: Model, run: dict, max_level: int, mak
     return info, deepest
 
 
-def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = False, force: bool = False) -> dict:
+class _NoHistory:
+    """The history of a rank other than 0 on N > 1 MPI ranks: rank 0 writes history.csv."""
+
+    def write(self, row):
+        pass
+
+    def flush(self):
+        pass
+
+    def close(self):
+        pass
+
+
+def _collective_signal(comm, received):
+    """The signal that stops the run at this step: on N > 1 ranks, the largest one any rank received (every rank
+    stops at the same step)."""
+    if comm is None:
+        return received
+    from mpi4py import MPI
+    got = comm.allreduce(int(received or 0), op=MPI.MAX)
+    return got or None
+
+
+def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = False, force: bool = False,
+             comm=None) -> dict:
     """Run every stage of `case`, writing outputs in `out_dir` as it goes; returns the summary dict.
+
+    comm: an mpi4py communicator of N > 1 ranks running this same call (`mpirun -n N fem-blocks run`). Every rank
+    builds the model and steps it; the contact solve is shared (contact/step.py ContactStep.use_comm: the
+    Gauss–Seidel sweeps split by contact owner, in colour order); rank 0 writes every output and checkpoint; every
+    rank returns the same summary (and raises the same RunStopped).
 
     resume=True continues from the newest valid checkpoint in `out_dir` (refused if the case file or its meshes
     changed since, unless force=True); history.csv and the .pvd series are cut back to the checkpoint and
@@ -786,11 +815,26 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
     from .case import fingerprint
     from .output.checkpoint import latest_checkpoint
     t_start = _time.perf_counter()
-    os.makedirs(out_dir, exist_ok=True)
+    comm = comm if comm is not None and comm.Get_size() > 1 else None
+    root = comm is None or comm.Get_rank() == 0
+    if root:
+        os.makedirs(out_dir, exist_ok=True)
     fp = fingerprint(case)
     ck = None
     if resume:
-        ck_path, ck = latest_checkpoint(out_dir)
+        if comm is None:
+            ck_path, ck = latest_checkpoint(out_dir)
+        else:  # rank 0 chooses the checkpoint, every rank reads it
+            from .output.checkpoint import read_checkpoint
+            found = None
+            try:
+                found = latest_checkpoint(out_dir)[0] if root else None
+            except InputError as e:
+                found = e
+            found = comm.bcast(found, root=0)
+            if isinstance(found, Exception):
+                raise found
+            ck_path, ck = found, read_checkpoint(found)
         if str(ck["case_hash"]) != fp and not force:
             raise InputError(f"{ck_path}: the case file {case.source} (or a base or mesh file it names, or --quick) "
                              "changed since this checkpoint was written; run without --resume to start again, or add "
@@ -801,6 +845,8 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
     st0 = case.stages[0]
     sim = Simulation(model.bodies, h=st0.h, theta=st0.theta, gravity=model.gravity,
                      velocity_reset=st0.velocity_reset, contact=model.contact)
+    if model.contact is not None and comm is not None:
+        model.contact.use_comm(comm)
     from .model import groups_without_interface
     start_warnings = list(case.warnings) + groups_without_interface(case, model, sim)
     for w in start_warnings:  # one line each; also in summary.json "warnings"
@@ -825,11 +871,11 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
     t_resume = float(ck["sim.time"]) if ck is not None else None
     Bodies = BodiesWriter if case.dimension == 2 else BodiesWriter3D
     pv = Bodies(sim, pdir, stress=case.output["stress"], append=resume, keep_until_time=t_resume) \
-        if case.output["paraview"] else None
+        if case.output["paraview"] and root else None
     pc = ContactsWriter(pdir, case.dimension, locate=model.contact.contact_points if case.dimension == 2 else None,
                         append=resume, keep_until_time=t_resume, joints=_joints_writer(case, model, pdir, resume,
                                                                                        t_resume)) \
-        if case.output["paraview"] and model.contact is not None else None
+        if case.output["paraview"] and model.contact is not None and root else None
     ckpt_every = case.output.get("checkpoint_every", default_of(OutputSpec, "checkpoint_every"))
     cv = case.output.get("curve")
     curve_body = model.bodies[model.index(cv["body"])] if cv else None
@@ -841,7 +887,9 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
     gauge_ids = gauge_points(case, model)  # [output] gauges
     cols = history_columns(model, rot_ids, joint_ids, gauge_ids)
     hpath = os.path.join(out_dir, "history.csv")
-    if ck is not None and os.path.exists(hpath):
+    if not root:
+        hist = _NoHistory()
+    elif ck is not None and os.path.exists(hpath):
         # the rows before the checkpoint: read once from the file the run wrote (cut back to the checkpoint's
         # step), rather than copied into every checkpoint
         hist = HistoryWriter.resume(hpath, int(ck["sim.step"]), columns=cols, flush_every=50, keep=True)
@@ -854,7 +902,7 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
     run["rotation"] = watch.state
     missed = _MissedContactWatch(model, names, run.get("missed_contacts"))  # contacts missed by fast bodies
     run["missed_contacts"] = missed.state
-    bar = Progress(progress)
+    bar = Progress(progress and root)
     info = sim.info()
     if ck is None:
         hist.write(history_row(model, info, 0, sim, rotations=rot_ids, joints=joint_ids, gauges=gauge_ids))
@@ -866,10 +914,26 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
         run["e0"] = (info.kinetic, info.elastic, info.gravity_potential)
 
     def checkpoint(arrays=None):
+        if not root:  # N ranks: rank 0 holds the same state and writes it
+            return
         hist.flush()  # the history must hold every step up to the checkpoint
         write_checkpoint(out_dir, arrays if arrays is not None else _snapshot(sim, model, run))
 
     def finish(status: str, code: int | None = None) -> dict:
+        if comm is not None:  # rank 0 writes the summary and figures; every rank returns them (or raises)
+            out = None
+            if root:
+                try:
+                    out = _finish(status, code)
+                except Exception as e:  # noqa: BLE001 - raised on every rank below
+                    out = e
+            out = comm.bcast(out, root=0)
+            if isinstance(out, Exception):
+                raise out
+            return out
+        return _finish(status, code)
+
+    def _finish(status: str, code: int | None = None) -> dict:
         conv = convergence_report(case, run["cstats"], model.contact is not None)
         if status == "completed" and conv["unconverged_steps"]:
             status = "completed with unconverged steps"
@@ -883,6 +947,8 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
         conv["rotation_warning"] = watch.message()  # printed by the CLI before its last line (convergence_line)
         summary["convergence"] = conv
         summary["exit_status"] = conv["exit_status"] if code is None else code
+        if comm is not None:
+            summary["mpi_ranks"] = comm.Get_size()
         summary.update(_figures(case, sim, model, out_dir, hist.columns_dict(), conv, summary.get("stages")))
         write_summary(os.path.join(out_dir, "summary.json"), summary)
         return summary
@@ -985,7 +1051,8 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
                         if k >= min_steps and pk > 0 and f < (1 - drop) * pk:
                             reason = f"force dropped by {drop:.0%} after its peak {pk:.6g} N ({k} steps)"
                     last = k == n_steps or at_eq or reason is not None
-                    interrupted = sig.received is not None
+                    received = _collective_signal(comm, sig.received)  # (N ranks: one decision for all)
+                    interrupted = received is not None
                     if pv and (k % st.output_every == 0 or last or interrupted):
                         pv.write(sim.time)
                         if pc:
@@ -1016,15 +1083,16 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
                                                        **({"warnings": cut} if cut else {})))
                         run["stage_done"] = True
                         hist.flush()
-                        _inertia_report(run["stages_done"][-1], hist.columns_dict(), si, st)
+                        if root:
+                            _inertia_report(run["stages_done"][-1], hist.columns_dict(), si, st)
                         if n_unconv:
                             print(_stage_warning(st, stage_bad), file=sys.stderr)
                     if last or interrupted or (ckpt_every and sim.step_count % ckpt_every == 0):
                         checkpoint()
                     if interrupted:
                         import signal
-                        code = 130 if sig.received == signal.SIGINT else 143
-                        raise RunStopped(f"interrupted by signal {sig.received} at stage {st.name!r}, step {k} "
+                        code = 130 if received == signal.SIGINT else 143
+                        raise RunStopped(f"interrupted by signal {received} at stage {st.name!r}, step {k} "
                                          f"(t = {sim.time:.6g} s); checkpoint and outputs written in {out_dir}; "
                                          f"continue with: fem-blocks run {case.source} --out {out_dir} --resume",
                                          code)

@@ -349,8 +349,9 @@ class SolverOptions:
     max_sweeps: int = spec(2000, doc="NLGS: most Gauss-Seidel sweeps per step; Newton: most fallback sweeps", lo=1)
     omega: float = spec(1.0, doc="NLGS relaxation r <- omega r_local + (1 - omega) r", lo=0.0, hi=2.0, lo_open=True,
                         hi_open=True)
-    order: str = spec("given", doc="contact order of the sweeps (shuffled: seeded by seed + step count)",
-                      choices=("given", "reversed", "shuffled"))
+    order: str = spec("given", doc="contact order of the sweeps (shuffled: seeded by seed + step count; colours: "
+                      "greedy colours of the contact graph in turn, the order of a run on several MPI ranks)",
+                      choices=("given", "reversed", "shuffled", "colours"))
     seed: int = spec(0, doc="seed of order = 'shuffled' (the contact step adds its step count)", lo=0)
     criterion: str = spec("change", doc="'change': |dP|/|P| between sweeps; 'residual': natural-map residual |F|/|q|",
                           choices=("change", "residual"))

@@ -90,6 +90,10 @@ class ContactStep:
         self.steps = 0
         self.friction_total = 0.0  # frictional dissipation of every step so far [J] (contact/friction.py)
         self.timers = dict(detection=0.0, delassus=0.0, nlgs=0.0, correction=0.0, local=0.0)
+        self.comm = None  # MPI ranks sharing the contact solve (use_comm); None: this process alone
+        self.body_owner = None  # N > 1 ranks: the rank of each body (distributed/partition.partition_graph)
+        self._colours = None  # order = "colours": the colour solver of the current Delassus operator
+        self._linear, self._linear_W = None, None  # N > 1 ranks, Newton: the distributed linear solve and its W
 
     # ------------------------------------------------------------------ set-up
     def on_step_change(self, sim):
@@ -100,7 +104,60 @@ class ContactStep:
 
     def set_options(self, opts: ContactOptions):
         """Take new solver options (a stage's tol/max_sweeps: ContactOptions.for_stage) from the next step on."""
-        self.opts = opts
+        self.opts = self._on_ranks(opts)
+
+    def use_comm(self, comm):
+        """Share the contact solve among the MPI ranks of `comm` (every rank runs the same model and steps; the
+        Gauss–Seidel sweeps are split by contact owner, distributed/colour.py). On N > 1 ranks a Gauss–Seidel
+        solver sweeps in colour order (`order = "colours"`, the same iterates on any N); the Newton solver, the
+        fallback and the coarse correction run on every rank alike, the Newton iterations' linear solves shared
+        (distributed/linear.py: the same iterates within the linear solver's rounding)."""
+        self.comm = comm if comm is not None and comm.Get_size() > 1 else None
+        self.opts = self._on_ranks(self.opts)
+
+    def _on_ranks(self, opts: ContactOptions) -> ContactOptions:
+        if (getattr(self, "comm", None) is not None and opts.solver == "nlgs" and opts.fallback == "none"
+                and opts.coarse == "none" and opts.order != "colours"):
+            return dataclasses.replace(opts, order="colours")
+        return opts
+
+    def _owner(self) -> np.ndarray:
+        """N > 1 ranks: the rank of each contact, that of its candidate body (bodies partitioned once by PT-Scotch
+        on the body-contact graph, distributed/partition.py, or restored from the checkpoint)."""
+        if self.body_owner is None or len(self.body_owner) != self.scene.nb:
+            from ..distributed.partition import body_graph, partition_graph
+            g = body_graph(self.scene.nb, np.zeros((0, 2), dtype=np.int64), self.cs.cand_body, self.cs.ant_body)
+            self.body_owner = partition_graph(*g, self.comm)
+        return self.body_owner[self.cs.cand_body]
+
+    def _linear_solver(self):
+        """N > 1 ranks and a Newton solver: the distributed solve of J Δr = -F on the Delassus operator's pattern
+        (distributed/linear.DistBlockSolver: PETSc block matrix, rows of the owned contacts, MUMPS)."""
+        if self.comm is None or not (self.opts.solver == "newton" or self.opts.fallback == "newton"):
+            return None
+        if self._linear is not None and self._linear_W is self.Wdel:
+            return self._linear
+        from ..distributed.linear import DistBlockSolver
+        if self._linear is not None:
+            self._linear.destroy()
+        W = self.Wdel
+        self._linear, self._linear_W = DistBlockSolver(W.indptr, W.indices, W.dim, self._owner(), self.comm), W
+        return self._linear
+
+    def _colour_solver(self):
+        """order = "colours": the colour solver of the current Delassus operator (rebuilt with it); on N > 1
+        ranks each contact is owned by the rank of its candidate body."""
+        if self.opts.order != "colours":
+            return None
+        if self._colours is not None and self._colours.W is self.Wdel:
+            return self._colours
+        from ..distributed.colour import ColourSolver
+        if self._colours is not None:
+            self._colours.destroy()
+        owner = self._owner() if self.comm is not None else None
+        self._colours = ColourSolver(self.Wdel, owner, self.comm,
+                                     bodies=(self.cs.cand_body, self.cs.ant_body, self.scene.nb))
+        return self._colours
 
     def mark_W_dirty(self):
         """The Delassus operator must be rebuilt (new h, drivers changed): rigid W from the current orientation."""
@@ -316,6 +373,8 @@ class ContactStep:
             d["contact.h_last"] = np.float64(self.h_last)
             if self.P_prev is not None:
                 d["contact.P_prev"], d["contact.h_prev"] = self.P_prev, np.float64(self.h_prev)
+        if self.body_owner is not None:  # N > 1 ranks: the partition in use (PT-Scotch's differs from run to run)
+            d["contact.body_owner"] = self.body_owner
         if getattr(self, "gap_ref", None) is not None:
             d["contact.gap_ref"] = self.gap_ref
         if self.g_built is not None:
@@ -349,6 +408,9 @@ class ContactStep:
         self.gap_ref = np.array(d["contact.gap_ref"]) if "contact.gap_ref" in d else None
         self.g_built = (np.array(d["contact.g_built"]) if "contact.g_built" in d
                         else np.zeros(len(self.cs.gap)) if self.opts.geometry == "updated" else None)
+        owner = np.array(d["contact.body_owner"]) if "contact.body_owner" in d else None
+        self.body_owner = (owner if owner is not None and self.comm is not None and len(owner) == self.scene.nb
+                           and owner.max(initial=0) < self.comm.Get_size() else None)  # else partitioned again
         self.W_dirty = True  # rebuilt at the next step (new scene); 3D: with the rigid W in use at the export
         self._rigid_W_restored = (np.array(d["contact.rigid_W"]) if "contact.rigid_W" in d
                                   and not bool(d["contact.W_dirty"]) else None)
@@ -426,7 +488,7 @@ class ContactStep:
             coarse = self._coarse
         res = solve(ContactProblem(self.Wdel, q.ravel(), self.mu, laws=laws),
                     dataclasses.replace(self.opts, seed=self.opts.seed + self.steps), r0=self.warm_start(h).ravel(),
-                    coarse=coarse)
+                    coarse=coarse, colours=self._colour_solver(), linear=self._linear_solver())
         if self.cohesive:
             from ..laws import commit_step  # crushing at the cap, then the laws' commit (any dimension)
             commit_step(self.law, self.par, self.state, res.trial, ueff, res.r, res.u, cs.area, h, th)

@@ -118,15 +118,18 @@ def parse_lab(data: dict, source) -> LabCase:
 
 
 def run_lab(lab: LabCase, out: str, quick: bool = False, quiet: bool = False, resume: bool = False,
-            force: bool = False) -> int:
+            force: bool = False, comm=None) -> int:
     """Run every specimen (runner.run_case into OUT/LABEL), read the test out, write OUT/summary.json and
-    OUT/TEST.png; return the exit status (the worst of the specimens')."""
+    OUT/TEST.png; return the exit status (the worst of the specimens'). comm: N > 1 MPI ranks running this same
+    call (each specimen runs on all of them, runner.run_case; rank 0 writes the report)."""
     from ..case import quick as make_quick
     from ..output.checkpoint import NAME as CK_NAME
     from ..output.checkpoint import PREV as CK_PREV
     from ..output.history import read_history
     from ..runner import RunStopped, convergence_line, run_case
-    os.makedirs(out, exist_ok=True)
+    root = comm is None or comm.Get_rank() == 0
+    if root:
+        os.makedirs(out, exist_ok=True)
     runs, status = [], 0
     for label, case, info in lab.specimens:
         if quick:
@@ -134,7 +137,7 @@ def run_lab(lab: LabCase, out: str, quick: bool = False, quiet: bool = False, re
         d = os.path.join(out, label)
         has_ck = resume and any(os.path.exists(os.path.join(d, f)) for f in (CK_NAME, CK_PREV))
         try:
-            summ = run_case(case, d, progress=not quiet, resume=has_ck, force=force)
+            summ = run_case(case, d, progress=not quiet, resume=has_ck, force=force, comm=comm)
             st, line = int(summ.get("exit_status") or 0), convergence_line(summ.get("convergence"))
         except RunStopped as e:
             if e.code in (130, 143):   # SIGINT / SIGTERM: stop the whole test (the checkpoint is written)
@@ -152,7 +155,8 @@ def run_lab(lab: LabCase, out: str, quick: bool = False, quiet: bool = False, re
     png = f"{lab.spec.test}.png"
     try:
         report = lab.module.readout(lab.spec, runs)
-        lab.module.plot(lab.spec, report, runs, os.path.join(out, png), title=lab.name)
+        if root:
+            lab.module.plot(lab.spec, report, runs, os.path.join(out, png), title=lab.name)
     except (ValueError, IndexError, KeyError, ZeroDivisionError) as e:
         if not status:   # a complete set of runs must read out: a bug, not a specimen's failure
             raise
@@ -170,8 +174,9 @@ def run_lab(lab: LabCase, out: str, quick: bool = False, quiet: bool = False, re
                    inputs=dict(lab={k: (list(v) if isinstance(v, tuple) else v) for k, v in vars(lab.spec).items()},
                                units_of_lab="SI", material=lab.inputs["material"], joint=lab.inputs["joint"],
                                units_of_material_and_joint=lab.units))
-    with open(os.path.join(out, "summary.json"), "w") as f:
-        json.dump(summary, f, indent=1, default=float)
+    if root:
+        with open(os.path.join(out, "summary.json"), "w") as f:
+            json.dump(summary, f, indent=1, default=float)
     for k, q in summary["quantities"].items():
         meas = f" (measures {q['measures']}" + (f" = {q['input']:g}" if isinstance(q.get("input"), (int, float))
                                                else "") + ")" if q.get("measures") else ""

@@ -9,6 +9,8 @@ method of `options` (specs.py: SolverOptions), and returns a SolverResult. Dispa
     Coulomb   "newton"        -                 2, 3  newton.solve_newton (20 NLGS sweeps, then Newton)
     laws      "nlgs"          (not used)        2, 3  nlgs.solve_cohesive (staggered internal variables)
     laws      "newton"        -                 2     newton.solve_cohesive_newton (3D: InputError)
+    any       "nlgs", order "colours"  "none"   2, 3  distributed/colour.ColourSolver (colour-order sweeps, serial or on
+                                                      the MPI ranks of `colours`; exact sums in the stopping tests)
 
 `r0` warm-starts the reactions (zeros by default). Newton reads tol, max_sweeps (its budget of fallback
 sweeps) and, with interface laws, max_iterations (its budget of Newton iterations) only; order, omega, seed,
@@ -27,12 +29,27 @@ STALL_FACTOR = 0.5     # fallback: a window that does not bring the residual bel
 NEWTON_MAX_ITER = 200  # fallback: Newton iterations after the hand-over
 
 
-def solve(problem: ContactProblem, options: SolverOptions | None = None, r0=None, coarse=None) -> SolverResult:
+def solve(problem: ContactProblem, options: SolverOptions | None = None, r0=None, coarse=None,
+          colours=None, linear=None) -> SolverResult:
     """Solve `problem` with `options` (default SolverOptions()) from reactions r0; `coarse`: the coarse space of
-    options.coarse = "interfaces" (solver/coarse.py, built by the caller from the contact set). Never raises on
+    options.coarse = "interfaces" (solver/coarse.py, built by the caller from the contact set); `colours`: the
+    colour solver of options.order = "colours" (distributed/colour.ColourSolver for problem.W, serial or
+    distributed; None: a serial one is built here); `linear`: the solver of the Newton iterations' J Δr = -F
+    (distributed/linear.DistBlockSolver on W's pattern; None: the serial block LU / LU). Never raises on
     non-convergence: see `converged`."""
     o = options if options is not None else SolverOptions()
     W, q, mu, L = problem.W, problem.q, problem.mu, problem.laws
+    if o.order == "colours":
+        if o.solver != "nlgs" or o.fallback != "none" or o.coarse != "none":
+            raise InputError("order = 'colours': the colour-order sweep is a Gauss-Seidel solver on its own; expected "
+                             "solver = 'nlgs', fallback = 'none' and coarse = 'none'")
+        if colours is None:
+            from ..distributed.colour import ColourSolver
+            colours = ColourSolver(W)
+        if colours.W is not W:
+            raise InputError("colours: built for another Delassus operator than problem.W")
+        return colours.solve(q, mu, r0=r0, tol=o.tol, max_sweeps=o.max_sweeps, omega=o.omega, criterion=o.criterion,
+                             check_every=o.check_every, laws=L)
     if o.coarse != "none" and coarse is None:
         raise InputError(f"coarse = None: options.coarse = {o.coarse!r} needs the coarse space (solver/coarse.py)")
     if coarse is not None and (L is not None or o.solver != "nlgs" or o.fallback != "none"):
@@ -42,7 +59,7 @@ def solve(problem: ContactProblem, options: SolverOptions | None = None, r0=None
         if o.solver == "newton":
             res, trial = newton.solve_cohesive_newton(W, q, mu, L.law, L.par, L.state, L.ueff, L.area, L.h, L.theta,
                                                       r0=r0, tol=o.tol, max_sweeps_total=o.max_sweeps,
-                                                      max_total_iter=o.max_iterations)
+                                                      max_total_iter=o.max_iterations, linear=linear)
         else:
             res, trial = nlgs.solve_cohesive(W, q, mu, L.law, L.par, L.state, L.ueff, L.area, L.h, L.theta, r0=r0,
                                              tol=o.tol, max_sweeps=o.max_sweeps, omega=o.omega, order=o.order,
@@ -50,15 +67,16 @@ def solve(problem: ContactProblem, options: SolverOptions | None = None, r0=None
         res.trial = trial
         return res
     if o.solver == "newton":
-        return newton.solve_newton(W, q, mu, r0=r0, tol=o.tol, max_sweeps_total=o.max_sweeps)
+        return newton.solve_newton(W, q, mu, r0=r0, tol=o.tol, max_sweeps_total=o.max_sweeps, linear=linear)
     if o.fallback == "newton":
-        return nlgs_then_newton(problem, o, r0)
+        return nlgs_then_newton(problem, o, r0, linear=linear)
     return nlgs.solve_block_csr(W, q, mu, r0=r0, tol=o.tol, max_sweeps=o.max_sweeps, omega=o.omega, order=o.order,
                                 seed=o.seed, criterion=o.criterion, check_every=o.check_every, coarse=coarse)
 
 
 def nlgs_then_newton(problem: ContactProblem, options: SolverOptions, r0=None, stall_sweeps: int = STALL_SWEEPS,
-                     stall_factor: float = STALL_FACTOR, newton_max_iter: int = NEWTON_MAX_ITER) -> SolverResult:
+                     stall_factor: float = STALL_FACTOR, newton_max_iter: int = NEWTON_MAX_ITER,
+                     linear=None) -> SolverResult:
     """NLGS with the residual criterion in windows of `stall_sweeps` sweeps; when a window does not reduce the
     residual below `stall_factor` times its value at the window's start (stagnation: slow convergence or a cycle),
     or options.max_sweeps is spent, the global semismooth Newton (solver/newton.py, `newton_max_iter` iterations,
@@ -99,7 +117,7 @@ def nlgs_then_newton(problem: ContactProblem, options: SolverOptions, r0=None, s
         res.message = f"converged in {total} sweeps (Gauss-Seidel alone)"
         res.local_cases = cases
         return res
-    nt = newton.solve_newton(W, q, mu, r0=res.r, tol=tol, max_iter=int(newton_max_iter), gs_sweeps=0)
+    nt = newton.solve_newton(W, q, mu, r0=res.r, tol=tol, max_iter=int(newton_max_iter), gs_sweeps=0, linear=linear)
     nt.message = (f"Gauss-Seidel stagnated at residual {res.residual:.3g} after {total} sweeps, then Newton: "
                   f"{nt.message}")
     nt.sweeps += total

@@ -1,0 +1,136 @@
+"""Time steps of a running-bond wall on N MPI ranks (issue #24): the contact solve shared by the ranks.
+
+The wall of bench_wall.py / bench_partition.py (bricks 0.25 x 0.06 m, Q1 0.03 m, about twice as wide as high, dry
+joints μ = 0.7 on a rigid floor) as a case file, quasi-static steps (θ = 1, velocity reset, h = 1e-3 s), NLGS in
+colour order (`[contact] order = "colours"`) to a change of 1e-4, at most 1000 sweeps per step. Every rank builds
+the model (build_model) and steps it (dynamics.Simulation); the contact step shares its sweeps with the other ranks
+(ContactStep.use_comm, distributed/colour.py). The first `--warm` steps (the colouring, the partition and the PETSc
+scatters are set up in the first) are not timed; then `--steps` steps are.
+
+Rank 0 prints one markdown row per wall: ranks, bricks, contacts, colours, contacts per rank (min–max), setup [s]
+(model build + first steps, max over ranks), ms per step, sweeps per step, ms per sweep in the contact solve (NLGS
+timer / sweeps), of which in the per-colour exchanges (max over ranks), bytes sent / received per sweep per rank
+(max), messages per sweep per rank (max), peak RSS per rank [MB] (max), and the sha1 of the floor's reaction and
+the sweep counts of the timed steps (equal sha1 on any N: the same iterates).
+
+Usage: mpirun -n N .venv/bin/python bench/bench_dist.py [n_bricks ...] [--steps S] [--warm W]
+"""
+import argparse
+import hashlib
+import os
+import resource
+import sys
+import tempfile
+import time
+
+import numpy as np
+
+sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
+from fem_blocks.case import load_case  # noqa: E402
+from fem_blocks.dynamics import Simulation  # noqa: E402
+from fem_blocks.expand import expand  # noqa: E402
+from fem_blocks.model import build_model  # noqa: E402
+
+CASE = """name = "wall_{n}"
+gravity = [0.0, -9.81]
+[materials.brick]
+E = 5e9
+nu = 0.2
+rho = 1800.0
+thickness = 0.12
+[wall]
+type = "running_bond"
+material = "brick"
+brick_length = 0.25
+brick_height = 0.06
+courses = {courses}
+bricks_per_course = {per}
+mesh_size = 0.03
+cell = "quad"
+group = "bricks"
+[wall.foundation]
+depth = 0.2
+overhang = 0.1
+[[interfaces]]
+name = "j"
+between = ["bricks", "bricks"]
+mu = 0.7
+[[interfaces]]
+name = "f"
+between = ["bricks", "foundation"]
+mu = 0.7
+[contact]
+order = "colours"
+tol = 1e-4
+max_sweeps = 1000
+[[stages]]
+name = "g"
+duration = 1.0
+h = 1e-3
+theta = 1.0
+velocity_reset = true
+"""
+
+
+def run(n_bricks, comm, steps, warm, show=True):
+    per = max(2, int(round(np.sqrt(n_bricks * 0.25 / 0.5))))  # as bench_wall.build
+    courses = max(1, int(round(n_bricks / per)))
+    with tempfile.TemporaryDirectory() as d:
+        path = os.path.join(d, "wall.toml")
+        with open(path, "w") as f:
+            f.write(CASE.format(n=n_bricks, courses=courses, per=per))
+        comm.Barrier()
+        c = time.perf_counter()
+        model = build_model(expand(load_case(path)))
+    sim = Simulation(model.bodies, h=1e-3, theta=1.0, gravity=model.gravity, velocity_reset=True,
+                     contact=model.contact)
+    cs = model.contact
+    cs.use_comm(comm)
+    for _ in range(warm):
+        sim.step()
+    comm.Barrier()
+    t_setup = time.perf_counter() - c
+    t_nlgs0 = cs.timers["nlgs"]
+    sweeps, reac = [], []
+    floor = next(i for i, b in enumerate(model.bodies) if b.kind == 1)
+    c = time.perf_counter()
+    for _ in range(steps):
+        info = sim.step()
+        sweeps.append(info.contact["sweeps"])
+        reac.append(model.bodies[floor].reaction.copy())
+    t_steps = time.perf_counter() - c
+    t_nlgs = cs.timers["nlgs"] - t_nlgs0
+    comm.Barrier()
+    col = cs._colours
+    dist = col.dist
+    rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    mine = (col.n_owned, t_setup, t_steps, t_nlgs, 8 * dist.entries_sent if dist else 0,
+            8 * dist.entries_recv if dist else 0, dist.messages if dist else 0, rss)
+    rows = np.array(comm.gather(mine), dtype=float) if comm.size > 1 else np.array([mine], dtype=float)
+    if comm.rank == 0 and show:
+        nsw = sum(sweeps)
+        h = hashlib.sha1(np.array(reac).tobytes() + np.array(sweeps).tobytes()).hexdigest()[:12]
+        print(f"| {comm.size} | {n_bricks} ({len(model.bodies) - 1}) | {len(cs.cs.gap)} | {col.n_colours} | "
+              f"{rows[:, 0].min():.0f}–{rows[:, 0].max():.0f} | {rows[:, 1].max():.1f} | "
+              f"{1e3 * rows[:, 2].max() / steps:.1f} | {nsw / steps:.1f} | {1e3 * rows[:, 3].max() / max(nsw, 1):.3f} | "
+              f"{rows[:, 4].max():.0f} / {rows[:, 5].max():.0f} | {rows[:, 6].max():.0f} | {rows[:, 7].max():.0f} | "
+              f"{h} |", flush=True)
+    col.destroy()
+
+
+if __name__ == "__main__":
+    from mpi4py import MPI
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("sizes", nargs="*", type=int, default=[1000])
+    ap.add_argument("--steps", type=int, default=20)
+    ap.add_argument("--warm", type=int, default=2)
+    a = ap.parse_args()
+    comm = MPI.COMM_WORLD
+    if comm.rank == 0:
+        print(f"{a.warm} untimed steps, then {a.steps} timed steps\n\n| ranks | bricks (bodies) | contacts | colours | "
+              "contacts per rank | setup [s] | ms/step | sweeps/step | ms/sweep (NLGS) | bytes sent / received per "
+              "sweep per rank | messages per sweep per rank | peak RSS per rank [MB] | sha1 (reactions, sweeps) |\n"
+              "|---|---|---|---|---|---|---|---|---|---|---|---|---|", flush=True)
+    run(20, comm, 2, 1, show=False)  # warm-up: numba caches outside the timed runs
+    for n in a.sizes:
+        run(n, comm, a.steps, a.warm)

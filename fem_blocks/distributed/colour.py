@@ -1,0 +1,320 @@
+"""Nonlinear Gauss–Seidel in colour order, on one process or on N MPI ranks with the same iterates (`[contact] order =
+"colours"`).
+
+Problem (solver/problem.py; d = 2 or 3 entries per contact, normal first): u = W r + q with Signorini–Coulomb or an
+interface law per contact (the transformed impulse P̃ = P + h A r_adh(u) of docs/laws.md).
+
+Colours. Two contacts α, β are coupled when W_αβ ≠ 0 or W_βα ≠ 0 (they share a body). Contacts are grouped by
+their (candidate, antagonist) body pair; two groups are coupled when they share a body. The greedy colouring of the
+group graph (groups in increasing (candidate, antagonist) order, `colour_groups`) gives colours c = 0, 1, ... whose
+groups share no body, hence whose contacts of different groups are uncoupled. A sweep visits the colours in turn
+and the contacts of colour c in increasing contact number; for each contact α it computes
+v_α = q_α + Σ_{β≠α} W_αβ r_β and the exact local solve of solver/nlgs.py (the same numba kernels: `_sweep`,
+`_sweep3`, `_sweep_cohesive`, `_sweep_cohesive3`). The contacts of one group are swept one after the other (they
+are coupled); a contact reads no impulse of another group of its colour, so how the groups of a colour interleave
+does not matter: this is the serial Gauss–Seidel sweep in colour order. (Without the body pairs, `ColourSolver`
+colours the contacts themselves, solver/parallel.colour_contacts: pairwise uncoupled contacts per colour. A
+deformable brick couples all its contact points through its W_bb, so that needs about 10x more colours than the
+groups on a running-bond wall, 200 against about 20, and every colour is one exchange between ranks.)
+
+Distribution (comm with N > 1 ranks; distributed/sweep.py). Rank p owns the contacts `owner == p` (the time
+stepper: the rank of the contact's candidate body, distributed/partition.py; with groups, one group's contacts
+must have one owner) and holds their rows of W (column order
+of the global row kept, so every v_α is summed exactly as serially), q_α, μ_α, the law data and the impulses of its
+contacts and of the *ghost* contacts its rows couple to. After colour c, one PETSc scatter carries the new impulses of
+colour c to the ranks that hold them as ghosts (neighbour ranks only). The iterates are the serial ones, bitwise,
+for any N and any ownership.
+
+Stopping tests, as solver/nlgs.py's `_run` / `_run_cohesive` / `solve_cohesive`, with every sum over contacts exact
+(distributed/exact.py: correctly rounded, independent of the order of the terms and of how they are split among
+ranks), so the decisions, the sweep count and the reported change and residual are bitwise the same on any N:
+
+    change    = sqrt(Σ (r_new - r_old)² / Σ r_new²) over a sweep (sqrt(Σ (r_new - r_old)²) when r_new = 0),
+    residual  = sqrt(Σ_α ‖F_α‖²) / ‖q‖,  F_α the FCLIB natural map (Coulomb) or the transformed problem's map
+                (interface laws, nlgs.natural_map_cohesive_terms), ‖q‖ = sqrt(Σ q_i²),
+    interface laws: staggered passes at fixed internal variables x, then x from the converged jumps
+                (nlgs._update_internal) until max_α |Δx_α| <= 1e-12 (the max is order-independent).
+
+These sums are not the running sums of solver/nlgs.py (which add in sweep order), so "colours" is its own order:
+its results are compared with itself across N, and with the "given" order within the solver's tolerance.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from numba import njit
+
+from ..errors import InputError
+from ..linalg import BlockCSR, matvec_bcsr
+from ..solver import nlgs
+from ..solver.parallel import colour_contacts
+from ..solver.problem import SolverResult
+from .exact import exact_sums
+
+MAX_OUTER = 100      # interface laws: most staggered passes (solver/nlgs.solve_cohesive's max_outer)
+X_TOL = 1e-12        # interface laws: the internal variables have stopped changing
+
+
+@njit(cache=True)
+def _greedy_groups(g_cand, g_ant, b_ptr, b_groups):
+    ng = g_cand.shape[0]
+    colour = -np.ones(ng, dtype=np.int64)
+    used = np.full(ng + 1, -1, dtype=np.int64)  # used[c] == g: colour c is taken by a group sharing a body with g
+    for g in range(ng):
+        for b in (g_cand[g], g_ant[g]):
+            for k in range(b_ptr[b], b_ptr[b + 1]):
+                h = b_groups[k]
+                if colour[h] >= 0:
+                    used[colour[h]] = g
+        c = 0
+        while used[c] == g:
+            c += 1
+        colour[g] = c
+    return colour
+
+
+def colour_groups(cand, ant, nb: int) -> np.ndarray:
+    """Colour per contact: contacts grouped by (candidate, antagonist) body pair; groups sharing a body get
+    different colours (greedy, groups in increasing (candidate, antagonist) order); every contact takes its
+    group's colour."""
+    cand = np.asarray(cand, dtype=np.int64)
+    ant = np.asarray(ant, dtype=np.int64)
+    if cand.size == 0:
+        return np.zeros(0, dtype=np.int64)
+    keys, group = np.unique(cand * nb + ant, return_inverse=True)
+    g_cand, g_ant = keys // nb, keys % nb
+    body = np.concatenate([g_cand, g_ant])
+    gid = np.concatenate([np.arange(keys.size), np.arange(keys.size)])
+    o = np.argsort(body, kind="stable")
+    b_ptr = np.zeros(nb + 1, dtype=np.int64)
+    np.add.at(b_ptr, body + 1, 1)
+    colour = _greedy_groups(g_cand, g_ant, np.cumsum(b_ptr), gid[o].astype(np.int64))
+    return colour[group]
+
+
+class ColourSolver:
+    """The colour-order NLGS for one Delassus operator W (set up once per W; collective when `comm` has N > 1
+    ranks). contact_owner: (nc,) rank of each contact (N > 1); comm: an mpi4py communicator or None (serial);
+    bodies: (cand, ant, nb) the contacts' body pairs and the number of bodies (colours of body-pair groups,
+    `colour_groups`; every group must have one owner), or None (contacts coloured one by one)."""
+
+    def __init__(self, W: BlockCSR, contact_owner=None, comm=None, bodies=None):
+        self.W = W
+        self.d = W.dim
+        n = W.n
+        self.comm = comm if comm is not None and comm.Get_size() > 1 else None
+        if bodies is not None:
+            cand, ant, nb = bodies
+            if len(cand) != n or len(ant) != n:
+                raise InputError(f"bodies: expected the body pairs of {n} contacts")
+            colour = colour_groups(cand, ant, int(nb))
+        else:
+            colour = colour_contacts(W) if n else np.zeros(0, dtype=np.int64)
+        self.colour = colour
+        self.n_colours = int(colour.max()) + 1 if n else 0
+        self.dist = None
+        if self.comm is None:
+            self.owned = np.arange(n, dtype=np.int64)
+            self.ghost = np.zeros(0, dtype=np.int64)
+            self.rows = (W.indptr, W.indices, W.blocks, W.diag_pos)
+            self.order = [np.ascontiguousarray(np.flatnonzero(colour == c), dtype=np.int64)
+                          for c in range(self.n_colours)]
+            self.r = np.zeros(self.d * n)
+            return
+        from .sweep import DistSweep, local_rows
+        owner = np.asarray(contact_owner, dtype=np.int64)
+        if owner.shape != (n,):
+            raise InputError(f"contact_owner: expected {n} ranks (one per contact), got shape {owner.shape}")
+        rank = self.comm.Get_rank()
+        lr = local_rows(W, np.zeros(self.d * n), np.zeros(n), np.flatnonzero(owner == rank))
+        self.owned, self.ghost = lr.owned, lr.ghost
+        self.rows = (lr.indptr, lr.indices, lr.blocks, lr.diag_pos)
+        self.dist = DistSweep(lr, colour[np.concatenate([lr.owned, lr.ghost])], self.n_colours, self.comm)
+        self.order = self.dist.order
+        self.r = self.dist.r  # owned then ghost impulses; the owned part is the PETSc vector's array
+        counts = np.array(self.comm.allgather(lr.owned.size), dtype=np.int64)
+        self._counts = counts
+        self._displs = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
+        self._ids = np.concatenate(self.comm.allgather(lr.owned))  # gathered owned contacts, in rank order
+
+    @property
+    def n_owned(self) -> int:
+        return int(self.owned.size)
+
+    def destroy(self):
+        if self.dist is not None:
+            self.dist.destroy()
+            self.dist = None
+
+    # ------------------------------------------------------------------ helpers
+    def _exchange(self, c: int):
+        if self.dist is not None:
+            self.dist.scatters[c].scatter(self.dist.vec, self.dist.gvec)
+
+    def _gather(self, x_own: np.ndarray, width: int) -> np.ndarray:
+        """The owned rows' values (n_own, width) of every rank, as one (n, width) array in contact order."""
+        if self.comm is None:
+            return x_own.reshape(-1, width).copy()
+        from mpi4py import MPI
+        n = self.W.n
+        buf = np.empty(n * width, dtype=x_own.dtype)
+        mt = MPI.DOUBLE if x_own.dtype == np.float64 else MPI.INT64_T
+        self.comm.Allgatherv(np.ascontiguousarray(x_own).ravel(),
+                             [buf, self._counts * width, self._displs * width, mt])
+        out = np.empty((n, width), dtype=x_own.dtype)
+        out[self._ids] = buf.reshape(-1, width)
+        return out
+
+    def _max(self, x: float) -> float:
+        if self.comm is None:
+            return x
+        from mpi4py import MPI
+        return self.comm.allreduce(x, op=MPI.MAX)
+
+    def _sum_int(self, x: np.ndarray) -> np.ndarray:
+        if self.comm is None:
+            return x
+        from mpi4py import MPI
+        out = np.empty_like(x)
+        self.comm.Allreduce(x, out, op=MPI.SUM)
+        return out
+
+    # ------------------------------------------------------------------ the solve
+    def solve(self, q, mu, r0=None, tol: float = 1e-8, max_sweeps: int = 10000, omega: float = 1.0,
+              criterion: str = "change", check_every: int = 10, laws=None) -> SolverResult:
+        """Colour-order NLGS from r0 (global, the same on every rank; zeros by default). laws: an
+        solver.problem.InterfaceLaws (interface laws) or None (Signorini–Coulomb). Returns the global r and
+        u = W r + q on every rank (SolverResult; with laws, `trial` the internal variables to commit)."""
+        if criterion not in ("change", "residual"):
+            raise InputError(f"criterion = {criterion!r}: expected 'change' or 'residual'")
+        d, n = self.d, self.W.n
+        q = np.ascontiguousarray(q, dtype=np.float64).ravel()
+        mu = np.ascontiguousarray(np.broadcast_to(np.asarray(mu, dtype=np.float64).ravel(), (n,)))
+        if q.size != d * n:
+            raise InputError(f"q: expected {d * n} entries ({d} per contact), got {q.size}")
+        if not (tol > 0) or int(max_sweeps) < 1 or not (0 < omega <= 2) or int(check_every) < 1:
+            raise InputError("expected tol > 0, max_sweeps >= 1, 0 < omega <= 2, check_every >= 1")
+        r0 = np.zeros(d * n) if r0 is None else np.asarray(r0, dtype=np.float64).ravel()
+        if r0.size != d * n or not np.all(np.isfinite(r0)):
+            raise InputError(f"r0: expected {d * n} finite entries")
+        own, gh = self.owned, self.ghost
+        no = own.size
+        R0 = r0.reshape(-1, d)
+        self.r[:d * no] = R0[own].ravel()
+        self.r[d * no:] = R0[gh].ravel()
+        qo = np.ascontiguousarray(q.reshape(-1, d)[own]).ravel()
+        muo = np.ascontiguousarray(mu[own])
+        coh = None
+        if laws is not None:
+            from ..laws import step_start
+            law = np.ascontiguousarray(laws.law, dtype=np.int64)
+            par = np.ascontiguousarray(laws.par, dtype=np.float64)
+            st = np.ascontiguousarray(laws.state, dtype=np.float64)
+            trial = np.ascontiguousarray(step_start(law, par, st, float(laws.h)))  # committed x (or IMPL-EX)
+            coh = dict(law=np.ascontiguousarray(law[own]), par=np.ascontiguousarray(par[own]),
+                       st=np.ascontiguousarray(st[own]), trial=np.ascontiguousarray(trial[own]),
+                       ueff=np.ascontiguousarray(np.asarray(laws.ueff, dtype=np.float64)[own]),
+                       area=np.ascontiguousarray(np.asarray(laws.area, dtype=np.float64)[own]),
+                       h=float(laws.h), theta=float(laws.theta))
+        qnorm = float(np.sqrt(exact_sums([qo * qo], self.comm)[0])) or 1.0
+        cases = np.zeros(6, dtype=np.int64)
+        u = np.empty(d * no)
+        if coh is None:
+            sweeps, change, converged = self._run(qo, muo, tol, int(max_sweeps), float(omega), criterion,
+                                                  int(check_every), qnorm, cases, u, None)
+        else:
+            sweeps, converged, change = 0, False, np.inf
+            for _ in range(MAX_OUTER):
+                s, change, converged = self._run(qo, muo, tol, int(max_sweeps) - sweeps, float(omega), criterion,
+                                                 int(check_every), qnorm, cases, u, coh)
+                sweeps += s
+                self._u(qo, u)
+                dx = self._max(nlgs._update_internal(coh["law"], coh["par"], coh["st"], coh["ueff"], u, coh["h"],
+                                                     coh["theta"], coh["trial"]))
+                if dx <= X_TOL or sweeps >= max_sweeps:
+                    converged = converged and dx <= X_TOL
+                    break
+        self._u(qo, u)
+        res_abs = float(np.sqrt(self._residual2(qo, muo, u, coh)))
+        res = res_abs / qnorm
+        cases = self._sum_int(cases)
+        if converged:
+            msg = f"converged in {sweeps} sweeps (colour order, {self.n_colours} colours)"
+        else:
+            msg = (f"not converged after {sweeps} sweeps (colour order; change {change:.3g}, residual {res:.3g}, "
+                   f"tolerance {tol:g} on the {criterion})")
+        if d == 3 and cases[0]:
+            msg += f"; {cases[0]} local solves without a positive diagonal block"
+        r_all = self._gather(self.r[:d * no], d).ravel()
+        u_all = self._gather(u, d).ravel()
+        out = SolverResult(r_all, u_all, int(sweeps), bool(converged), float(change), res, res_abs, msg,
+                           cases if d == 3 else None)
+        if coh is not None:
+            out.trial = self._gather(coh["trial"], 1).ravel()
+        return out
+
+    def _u(self, qo, u):
+        """u = W r + q on the owned rows."""
+        ip, ix, bl, _ = self.rows
+        matvec_bcsr(ip, ix, bl, self.r, u)
+        u += qo
+
+    def _residual2(self, qo, muo, u, coh) -> float:
+        """Σ_α ‖F_α‖² over all contacts (exact sum), u = W r + q on the owned rows."""
+        if coh is None:
+            t = nlgs.natural_map_terms(self.r, u, muo, self.d)
+        else:
+            ip, ix, bl, _ = self.rows
+            t = nlgs.natural_map_cohesive_terms(ip, ix, bl, qo, muo, self.r, coh["law"], coh["par"], coh["st"],
+                                                coh["trial"], coh["ueff"], coh["area"], coh["h"], coh["theta"])
+        return exact_sums([t], self.comm)[0]
+
+    def _run(self, qo, muo, tol, max_sweeps, omega, criterion, check_every, qnorm, cases, u, coh):
+        """Sweeps until the criterion holds or max_sweeps (nlgs._run / nlgs._run_cohesive)."""
+        d, no = self.d, self.owned.size
+        ip, ix, bl, dp = self.rows
+        r = self.r
+        J = np.empty((3, 3))
+        wl = np.zeros((2, 3, 3))
+        use_residual = criterion == "residual"
+        change, sweeps, converged = np.inf, 0, False
+        while sweeps < max_sweeps:
+            r_old = r[:d * no].copy()
+            for c in range(self.n_colours):
+                o = self.order[c]
+                if coh is None:
+                    if d == 2:
+                        nlgs._sweep(ip, ix, bl, dp, qo, muo, r, o, omega)
+                    else:
+                        nlgs._sweep3(ip, ix, bl, dp, qo, muo, r, o, omega, J, cases)
+                elif d == 2:
+                    nlgs._sweep_cohesive(ip, ix, bl, dp, qo, muo, r, o, omega, coh["law"], coh["par"], coh["st"],
+                                         coh["trial"], coh["ueff"], coh["area"], coh["h"], coh["theta"])
+                else:
+                    nlgs._sweep_cohesive3(ip, ix, bl, dp, qo, muo, r, o, omega, coh["law"], coh["par"], coh["st"],
+                                          coh["trial"], coh["ueff"], coh["area"], coh["h"], coh["theta"], wl, J,
+                                          cases)
+                self._exchange(c)
+            sweeps += 1
+            dr = r[:d * no] - r_old
+            rn = r[:d * no]
+            dr2, r2 = exact_sums([dr * dr, rn * rn], self.comm)
+            change = float(np.sqrt(dr2 / r2)) if r2 > 0.0 else float(np.sqrt(dr2))
+            if use_residual:
+                if sweeps % check_every == 0 or sweeps == max_sweeps or (coh is None and change == 0.0):
+                    self._u(qo, u)
+                    res = float(np.sqrt(self._residual2(qo, muo, u, coh))) / qnorm
+                    if coh is None:
+                        if res <= tol:
+                            converged = True
+                            break
+                        if change == 0.0 and sweeps > 1:  # stationary: a solution when the local solve is exact
+                            converged = d == 2
+                            break
+                    elif res <= tol or (change == 0.0 and sweeps > 1):
+                        converged = True
+                        break
+            elif change <= tol and (coh is None or sweeps > 1):
+                converged = True
+                break
+        return sweeps, change, converged
