@@ -185,6 +185,18 @@ MUTATIONS = [
              "    key = key * SLOTS - _body_slots(ovl_pl & (pk < 2), node_idx, bedge_body[ae], bedge_body[ce])",
              "    key = key * SLOTS",
              ("tests/test_placement.py",)),
+    Mutation("colour_exchange_wrong", "distributed sweep: after each colour, the impulses of colour 0 are exchanged",
+             "fem_blocks/distributed/colour.py",
+             "                self._exchange(c)", "                self._exchange(0)",
+             ("tests/test_dist_run.py",)),
+    Mutation("groups_uncoupled", "colour groups: coupled groups may share a colour (the group graph without W)",
+             "fem_blocks/distributed/colour.py",
+             "    S = (P.T @ (A + A.T) @ P).tocsr()", "    S = (P.T @ P).tocsr()",
+             ("tests/test_dist_run.py",)),
+    Mutation("every_rank_writes_history", "N ranks: every rank writes history.csv, not rank 0 alone",
+             "fem_blocks/runner.py",
+             "    if not root:\n        hist = _NoHistory()", "    if False:\n        hist = _NoHistory()",
+             ("tests/test_dist_run.py",)),
 ]
 
 IGNORE = shutil.ignore_patterns(".git", "__pycache__", ".venv", "*.pyc", ".pytest_cache", "out", "*.egg-info")

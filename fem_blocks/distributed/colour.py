@@ -4,18 +4,20 @@
 Problem (solver/problem.py; d = 2 or 3 entries per contact, normal first): u = W r + q with Signorini–Coulomb or an
 interface law per contact (the transformed impulse P̃ = P + h A r_adh(u) of docs/laws.md).
 
-Colours. Two contacts α, β are coupled when W_αβ ≠ 0 or W_βα ≠ 0 (they share a body). Contacts are grouped by
-their (candidate, antagonist) body pair; two groups are coupled when they share a body. The greedy colouring of the
-group graph (groups in increasing (candidate, antagonist) order, `colour_groups`) gives colours c = 0, 1, ... whose
-groups share no body, hence whose contacts of different groups are uncoupled. A sweep visits the colours in turn
+Colours. Two contacts α, β are coupled when W_αβ ≠ 0 or W_βα ≠ 0 (they share a body that moves). Contacts are
+grouped by their (candidate, antagonist) body pair; two groups are coupled when one of their contacts is coupled
+to one of the other's. The greedy colouring of the group graph (groups in increasing (candidate, antagonist)
+order, `colour_groups`) gives colours c = 0, 1, ... whose contacts of different groups are uncoupled. A sweep visits the colours in turn
 and the contacts of colour c in increasing contact number; for each contact α it computes
 v_α = q_α + Σ_{β≠α} W_αβ r_β and the exact local solve of solver/nlgs.py (the same numba kernels: `_sweep`,
 `_sweep3`, `_sweep_cohesive`, `_sweep_cohesive3`). The contacts of one group are swept one after the other (they
 are coupled); a contact reads no impulse of another group of its colour, so how the groups of a colour interleave
 does not matter: this is the serial Gauss–Seidel sweep in colour order. (Without the body pairs, `ColourSolver`
 colours the contacts themselves, solver/parallel.colour_contacts: pairwise uncoupled contacts per colour. A
-deformable brick couples all its contact points through its W_bb, so that needs about 10x more colours than the
-groups on a running-bond wall, 200 against about 20, and every colour is one exchange between ranks.)
+deformable brick couples all its contact points through its W_bb, so that needs far more colours, and every colour
+is one exchange between ranks: on the running-bond walls of bench/bench_dist.py 200 (10³ bricks) and 641 (10⁴)
+contact colours against 6 group colours. Blocks of zeros count: with them, the contacts on a fixed foundation all
+couple and the groups need 25 and 74 colours.)
 
 Distribution (comm with N > 1 ranks; distributed/sweep.py). Rank p owns the contacts `owner == p` (the time
 stepper: the rank of the contact's candidate body, distributed/partition.py; with groups, one group's contacts
@@ -42,12 +44,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from numba import njit
-
 from ..errors import InputError
 from ..linalg import BlockCSR, matvec_bcsr
 from ..solver import nlgs
-from ..solver.parallel import colour_contacts
+from ..solver.parallel import _greedy_colouring, colour_contacts
 from ..solver.problem import SolverResult
 from .exact import exact_sums
 
@@ -55,41 +55,26 @@ MAX_OUTER = 100      # interface laws: most staggered passes (solver/nlgs.solve_
 X_TOL = 1e-12        # interface laws: the internal variables have stopped changing
 
 
-@njit(cache=True)
-def _greedy_groups(g_cand, g_ant, b_ptr, b_groups):
-    ng = g_cand.shape[0]
-    colour = -np.ones(ng, dtype=np.int64)
-    used = np.full(ng + 1, -1, dtype=np.int64)  # used[c] == g: colour c is taken by a group sharing a body with g
-    for g in range(ng):
-        for b in (g_cand[g], g_ant[g]):
-            for k in range(b_ptr[b], b_ptr[b + 1]):
-                h = b_groups[k]
-                if colour[h] >= 0:
-                    used[colour[h]] = g
-        c = 0
-        while used[c] == g:
-            c += 1
-        colour[g] = c
-    return colour
-
-
-def colour_groups(cand, ant, nb: int) -> np.ndarray:
-    """Colour per contact: contacts grouped by (candidate, antagonist) body pair; groups sharing a body get
-    different colours (greedy, groups in increasing (candidate, antagonist) order); every contact takes its
-    group's colour."""
+def colour_groups(W: BlockCSR, cand, ant, nb: int) -> np.ndarray:
+    """Colour per contact: contacts grouped by (candidate, antagonist) body pair; two groups are coupled when a
+    contact of one and a contact of the other have a block W_αβ with a nonzero entry (they share a body that moves:
+    through a body held in every dof, like a fixed foundation, the assembly stores blocks of zeros, which couple
+    nothing: 0·r_β is 0 whatever the ghost copy of r_β holds); coupled groups get different colours (greedy, groups in
+    increasing (candidate, antagonist) order); every contact takes its group's colour."""
+    import scipy.sparse as sp
     cand = np.asarray(cand, dtype=np.int64)
     ant = np.asarray(ant, dtype=np.int64)
-    if cand.size == 0:
+    n = cand.size
+    if n == 0:
         return np.zeros(0, dtype=np.int64)
     keys, group = np.unique(cand * nb + ant, return_inverse=True)
-    g_cand, g_ant = keys // nb, keys % nb
-    body = np.concatenate([g_cand, g_ant])
-    gid = np.concatenate([np.arange(keys.size), np.arange(keys.size)])
-    o = np.argsort(body, kind="stable")
-    b_ptr = np.zeros(nb + 1, dtype=np.int64)
-    np.add.at(b_ptr, body + 1, 1)
-    colour = _greedy_groups(g_cand, g_ant, np.cumsum(b_ptr), gid[o].astype(np.int64))
-    return colour[group]
+    P = sp.csr_matrix((np.ones(n), (np.arange(n), group)), shape=(n, keys.size))
+    nz = np.any(W.blocks != 0.0, axis=(1, 2)).astype(np.float64)  # a block of zeros (through a held body) couples nothing
+    A = sp.csr_matrix((nz, W.indices, W.indptr), shape=(n, n))
+    A.eliminate_zeros()
+    S = (P.T @ (A + A.T) @ P).tocsr()
+    S.sort_indices()
+    return _greedy_colouring(S.indptr.astype(np.int64), S.indices.astype(np.int64))[group]
 
 
 class ColourSolver:
@@ -107,7 +92,7 @@ class ColourSolver:
             cand, ant, nb = bodies
             if len(cand) != n or len(ant) != n:
                 raise InputError(f"bodies: expected the body pairs of {n} contacts")
-            colour = colour_groups(cand, ant, int(nb))
+            colour = colour_groups(W, cand, ant, int(nb))
         else:
             colour = colour_contacts(W) if n else np.zeros(0, dtype=np.int64)
         self.colour = colour
