@@ -193,9 +193,10 @@ MUTATIONS = [
              "fem_blocks/distributed/colour.py",
              "    S = (P.T @ (A + A.T) @ P).tocsr()", "    S = (P.T @ P).tocsr()",
              ("tests/test_dist_run.py",)),
-    Mutation("every_rank_writes_history", "N ranks: every rank writes history.csv, not rank 0 alone",
+    Mutation("signal_per_rank", "N ranks: each rank stops on its own signal, not on the ranks' common decision",
              "fem_blocks/runner.py",
-             "    if not root:\n        hist = _NoHistory()", "    if False:\n        hist = _NoHistory()",
+             "                    received = _collective_signal(comm, sig.received)  # (N ranks: one decision for all)",
+             "                    received = sig.received",
              ("tests/test_dist_run.py",)),
 ]
 

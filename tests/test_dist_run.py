@@ -147,3 +147,32 @@ def test_resume_after_sigkill_of_one_rank_is_bitwise_the_uninterrupted_run(runs)
     assert json.loads((d / "codes.2.resume.json").read_text())["long"] == [serial["long"]] * 2, \
         (r.stdout + r.stderr)[-3000:]
     assert _history(d, "long", 2) == _history(d, "long", 1)
+
+
+def test_sigterm_to_one_rank_stops_every_rank_at_the_same_step(runs):
+    """SIGTERM reaches one rank only: the ranks decide together, once per step, so every rank finishes the same
+    step, rank 0 writes the checkpoint and every rank exits with 143. Catches each rank acting on its own signal
+    (checked: rank 1 stops, rank 0 waits for it in the next sweep's exchange: the launch hangs and times out)."""
+    d, serial, codes, logs = runs
+    out = d / "long.2"
+    shutil.rmtree(out, ignore_errors=True)
+    p = _mpirun(2, d, "long", wait=False)
+    ck = out / "checkpoint.npz"
+    t0 = time.time()
+    while not ck.exists() and p.poll() is None and time.time() - t0 < 300:
+        time.sleep(0.02)
+    assert p.poll() is None, "the run ended before its first checkpoint"
+    ranks = subprocess.run(["pgrep", "-P", str(p.pid)], capture_output=True, text=True).stdout.split()
+    os.kill(int(ranks[-1]), signal.SIGTERM)
+    try:
+        p.communicate(timeout=60)
+    except subprocess.TimeoutExpired:
+        p.kill()
+        p.communicate()
+        pytest.fail("the ranks did not stop together after SIGTERM to one of them")
+    assert json.loads((d / "codes.2.json").read_text())["long"] == [143, 143]
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["exit_status"] == 143 and "signal 15" in summary["status"]
+    rows = (out / "history.csv").read_bytes()
+    assert rows == _history(d, "long", 1)[:len(rows)]  # the steps done are the serial steps
+
