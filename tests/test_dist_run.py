@@ -254,9 +254,11 @@ def test_paraview_pieces_per_rank_are_the_serial_grid(runs, n, name):
     ranks with bodies (one_brick on 3 ranks: rank 0 has none), which exist; piece p holds the bodies
     [p nb / N, (p + 1) nb / N) and, body by body, the serial file's cells, points, point and cell data BITWISE;
     VTK's parallel reader (ParaView's) reads the .pvtu with the serial number of cells.
-    One-line bugs this catches (checked): every rank writing the piece of all bodies (the union has twice the
-    points); a piece's bodies from gr.members instead of the rank's members (2D: the velocities of another body's
-    rows); rank 0 listing a piece for a rank with no body (one_brick: the Source does not exist)."""
+    One-line bugs this catches (checked): every rank writing the piece of all bodies (piece_bodies returning
+    range(nb): the pieces' bodies overlap); array_info without write_vtu's padding of 2-vectors (the .pvtu declares
+    2 components, the pieces hold 3); rank 0 listing a piece for every rank (one_brick: rank 0 has none).
+    In the resume test: the ranks other than 0 counting frames from 0 after --resume (their pieces overwrite the
+    first frames: frame 0 differs from the serial one)."""
     d, serial, codes, logs = runs
     assert codes[n][name] == [serial[name]] * n, logs[n][-3000:]
     assert not list((d / f"{name}.1" / "paraview").glob("*.pvtu"))  # one process: the serial files
