@@ -850,6 +850,10 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
         model.contact.use_comm(comm)
     from .model import groups_without_interface
     start_warnings = list(case.warnings) + groups_without_interface(case, model, sim)
+    if comm is not None and model.contact is not None and model.contact.opts.order != case.contact.order:
+        start_warnings.append(f"contact.order = {case.contact.order!r}: on {comm.Get_size()} MPI ranks the "
+                              "Gauss-Seidel sweeps run in colour order ('colours': the same results on any number of "
+                              "ranks and on one process with order = 'colours')")
     for w in start_warnings:  # one line each; also in summary.json "warnings"
         print(f"fem-blocks: warning: {w}", file=sys.stderr)
     import json

@@ -369,6 +369,9 @@ class SolverOptions:
         if self.fallback == "newton" and (self.solver != "nlgs" or self.criterion != "residual"):
             raise InputError("contact.fallback = 'newton': expected solver = 'nlgs' and criterion = 'residual' "
                              "(stagnation is measured on the residual)")
+        if self.order == "colours" and (self.solver != "nlgs" or self.fallback != "none" or self.coarse != "none"):
+            raise InputError("contact.order = 'colours': the colour-order sweep is a Gauss-Seidel solver of its own; "
+                             "expected solver = 'nlgs', fallback = 'none' and coarse = 'none'")
         if self.coarse != "none" and (self.solver != "nlgs" or self.fallback != "none"):
             raise InputError(f"contact.coarse = {self.coarse!r}: expected solver = 'nlgs' and fallback = 'none' (the "
                              "coarse correction is a step of the Gauss-Seidel solver)")

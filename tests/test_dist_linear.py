@@ -106,10 +106,9 @@ def _mpirun(n, *args, timeout=300):
 
 
 @needs_mpirun
-@pytest.mark.parametrize("ranks, own, d", [(1, "blocks", 2), (2, "blocks", 3), (2, "cyclic", 2), (3, "cyclic", 3),
-                                            (3, "skip0", 2)])
+@pytest.mark.parametrize("ranks, own, d", [(2, "cyclic", 2), (3, "cyclic", 3), (3, "skip0", 2)])
 def test_mpirun_equals_spsolve_on_every_rank(tmp_path, ranks, own, d):
-    """N = 1, 2, 3 ranks, contiguous blocks / cyclic ownership / rank 0 owning no contact: for a diagonally dominant,
+    """N = 2, 3 ranks (one process: the test above), cyclic ownership / rank 0 owning no contact: for a diagonally dominant,
     an unsymmetric, a singular and again a dominant J (one solver): x = spsolve to 1e-12 relative (measured
     <= 8.1e-16), the same bits on every rank; None on every rank for the singular J, no hang. Catches a wrong
     renumbering (checked: `new = order` instead of its inverse fails the cyclic cases, where the owned contacts are
@@ -152,14 +151,13 @@ def _random_3d(tmp_path, n=60, seed=1):
 
 
 @needs_mpirun
-@pytest.mark.parametrize("case, ranks, own", [("granular", 2, "cyclic"), ("capsules", 2, "blocks"),
-                                              ("random3d", 3, "skip0")])
+@pytest.mark.parametrize("case, ranks, own", [("granular", 2, "cyclic"), ("random3d", 3, "skip0")])
 def test_mpirun_newton_equals_serial_newton(tmp_path, case, ranks, own):
     """solve_newton(..., linear=DistBlockSolver) from r = 0 (gs_sweeps = 0: every step is Newton's), tolerance 1e-8,
     against the serial solve_newton (BlockLU in 2D, SuperLU in 3D):
     - FCLIB fc2d_granularflowonwall_00667_00000 (2D, 667 contacts, W of full rank): 5 iterations both, r within
       1e-12 relative (measured 1.2e-16);
-    - FCLIB Capsules-i97-269 (3D, 216 contacts): 13 iterations both, u = W r + q within 1e-12 (measured 1.0e-16)
+    - (measured once; not in the suite, for time) FCLIB Capsules-i97-269 (3D, 216 contacts): 13 iterations both, u = W r + q within 1e-12 (measured 1.0e-16)
       but r only within 1e-5 (measured 1.6e-6): W has rank 451 of 648, r is not unique, J = D + E (W + ε I) is
       nearly singular along W's null space and r moves there with the rounding of the LU (the serial Newton with
       MUMPS instead of SuperLU, same process, differs from it by 1.3e-6 too);
@@ -197,7 +195,7 @@ def test_mpirun_newton_equals_serial_newton(tmp_path, case, ranks, own):
 
 
 @needs_mpirun
-@pytest.mark.parametrize("case, own", [("random", "cyclic"), ("crack", "blocks")])
+@pytest.mark.parametrize("case, own", [("random", "cyclic")])
 def test_mpirun_cohesive_newton_equals_serial(tmp_path, case, own):
     """solve_cohesive_newton(..., linear=DistBlockSolver) on 2 ranks against the serial solve (tolerance 1e-10), on the
     softening problems of tests/test_newton_softening.py: "random" (30 compliant mixed-mode joints, damage inside:

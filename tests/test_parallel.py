@@ -1,10 +1,6 @@
 """Colour-parallel Gauss–Seidel (solver/parallel.py): valid colouring, identical iterates to the serial sweep in
-colour order, and the same result and residual with `mpirun -n 2` as serially."""
-import os
-import shutil
-import subprocess
-import sys
-
+colour order. (Runs on several ranks: tests/test_dist_sweep.py, which takes solve_parallel(comm=None) as its serial
+reference, and tests/test_dist_run.py.)"""
 import numpy as np
 import pytest
 
@@ -12,8 +8,6 @@ from fem_blocks.solver import nlgs, parallel
 from fem_blocks.linalg import to_block_csr
 
 from test_nlgs import random_problem, random_problem_3d  # noqa: E402
-
-from _paths import ROOT  # noqa: E402
 
 
 def test_colouring_separates_coupled_contacts():
@@ -40,22 +34,3 @@ def test_serial_run_equals_gauss_seidel_in_colour_order(dim):
     for _ in range(res.sweeps):
         nlgs.sweep(B.indptr, B.indices, B.blocks, B.diag_pos, np.ascontiguousarray(q), mu, r, order)
     assert np.array_equal(r, res.r)  # bitwise: the colours' updates are independent
-
-
-@pytest.mark.skipif(shutil.which("mpirun") is None, reason="no mpirun")
-def test_mpirun_two_ranks_reaches_the_serial_result(tmp_path):
-    W, q = random_problem(n=300, seed=7)
-    B = to_block_csr(W, 2)
-    mu = np.full(B.n, 0.5)
-    prob = tmp_path / "p.npz"
-    np.savez(prob, indptr=B.indptr, indices=B.indices, blocks=B.blocks, diag_pos=B.diag_pos, q=q, mu=mu, tol=1e-10)
-    env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1", OMPI_MCA_rmaps_base_oversubscribe="1",
-               OMPI_MCA_btl_vader_single_copy_mechanism="none", PYTHONPATH=ROOT)
-    p = subprocess.run(["mpirun", "-n", "2", sys.executable, "-m", "fem_blocks.solver.parallel", str(prob),
-                        str(tmp_path / "out.npz")], capture_output=True, text=True, cwd=ROOT, env=env, timeout=300)
-    assert p.returncode == 0, p.stdout + p.stderr
-    out = np.load(tmp_path / "out.npz")
-    assert int(out["ranks"]) == 2 and bool(out["converged"]) and float(out["residual"]) <= 1e-10
-    serial = parallel.solve_parallel(B, q, mu, tol=1e-10, max_sweeps=100000)
-    assert int(out["sweeps"]) == serial.sweeps
-    assert np.array_equal(out["r"], serial.r)  # same iterates as the serial colour-ordered sweep, bitwise

@@ -39,10 +39,7 @@ def solve(problem: ContactProblem, options: SolverOptions | None = None, r0=None
     non-convergence: see `converged`."""
     o = options if options is not None else SolverOptions()
     W, q, mu, L = problem.W, problem.q, problem.mu, problem.laws
-    if o.order == "colours":
-        if o.solver != "nlgs" or o.fallback != "none" or o.coarse != "none":
-            raise InputError("order = 'colours': the colour-order sweep is a Gauss-Seidel solver on its own; expected "
-                             "solver = 'nlgs', fallback = 'none' and coarse = 'none'")
+    if o.order == "colours":  # (SolverOptions checks solver = "nlgs", no fallback, no coarse correction)
         if colours is None:
             from ..distributed.colour import ColourSolver
             colours = ColourSolver(W)
