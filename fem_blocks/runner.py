@@ -805,8 +805,9 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
 
     comm: an mpi4py communicator of N > 1 ranks running this same call (`mpirun -n N fem-blocks run`). Every rank
     builds the model and steps it; the contact solve is shared (contact/step.py ContactStep.use_comm: the
-    Gauss–Seidel sweeps split by contact owner, in colour order); rank 0 writes every output and checkpoint; every
-    rank returns the same summary (and raises the same RunStopped).
+    Gauss–Seidel sweeps split by contact owner, in colour order); every rank writes the ParaView piece of its block
+    of bodies (blocks_<frame>_p<rank>.vtu; output/paraview.py), rank 0 the .pvtu/.pvd series and every other
+    output and checkpoint; every rank returns the same summary (and raises the same RunStopped).
 
     resume=True continues from the newest valid checkpoint in `out_dir` (refused if the case file or its meshes
     changed since, unless force=True); history.csv and the .pvd series are cut back to the checkpoint and
@@ -874,8 +875,9 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
     pdir = os.path.join(out_dir, "paraview")
     t_resume = float(ck["sim.time"]) if ck is not None else None
     Bodies = BodiesWriter if case.dimension == 2 else BodiesWriter3D
-    pv = Bodies(sim, pdir, stress=case.output["stress"], append=resume, keep_until_time=t_resume) \
-        if case.output["paraview"] and root else None
+    # (N ranks: every rank writes the piece of its block of bodies, rank 0 also the .pvtu and .pvd; paraview.py)
+    pv = Bodies(sim, pdir, stress=case.output["stress"], append=resume, keep_until_time=t_resume, comm=comm) \
+        if case.output["paraview"] else None
     pc = ContactsWriter(pdir, case.dimension, locate=model.contact.contact_points if case.dimension == 2 else None,
                         append=resume, keep_until_time=t_resume, joints=_joints_writer(case, model, pdir, resume,
                                                                                        t_resume)) \

@@ -110,11 +110,11 @@ def wall(name, courses=3, per=2, joint=DRY, tol=1e-5, max_sweeps=400, policy="wa
 CASES = {
     "dry": wall("dry", paraview="true"),
     "mixed": wall("mixed", joint=MIXED),
-    "wall3d": WALL3D.format(name="wall3d"),
-    "one_brick": wall("one_brick", courses=1, per=1),          # 2 bodies: on 3 ranks one rank owns none
+    "wall3d": WALL3D.format(name="wall3d").replace("paraview = false", "paraview = true"),
+    "one_brick": wall("one_brick", courses=1, per=1, paraview="true"),  # 2 bodies: on 3 ranks one rank owns none
     "fail": wall("fail", max_sweeps=3, policy="fail"),          # stopped by the solver policy: exit 1 on every rank
     "bad": wall("bad").replace("mu = 0.7\n[contact]", "mu = -0.7\n[contact]"),  # invalid: exit 2 on every rank
-    "long": wall("long", ck=2, duration=0.012),                 # checkpoints every 2 steps (the resume test)
+    "long": wall("long", ck=2, duration=0.012, paraview="true"),  # checkpoints every 2 steps (the resume test)
     "newton": wall("newton").replace('order = "colours"', 'solver = "newton"\ncriterion = "residual"')
                             .replace("tol = 1e-05", "tol = 1e-08"),  # the Newton's linear solves shared by the ranks
 }

@@ -8,6 +8,13 @@ Point data: displacement, velocity (global frame). Cell data: Cauchy stress (sxx
 von Mises stress (deformable cells; 0 on rigid polygons), body id, body kind (0 deformable,
 1 rigid). Fields are computed per block type with batched array operations (no per-node loop).
 `BodiesWriter3D`: the same for 3D bodies (Voigt stress (sxx, syy, szz, syz, sxz, sxy), 3D von Mises).
+
+On N MPI ranks (comm given; every rank holds the whole, identical state and calls write at the same steps): rank
+p writes the piece of the bodies [p nb / N, (p + 1) nb / N) (integer division, nb bodies; a rank with no body
+writes no piece) as `blocks_<frame>_p<p>.vtu`, the grid the serial writer makes of those bodies alone (the same
+arrays, per body the same points, cells and values, bitwise); rank 0 writes `blocks_<frame>.pvtu` over the pieces
+and `blocks.pvd` over the .pvtu files (pvd.SeriesWriter). The contact writer (contacts.py) stays whole: rank 0
+writes contacts.pvd alone.
 """
 from __future__ import annotations
 
@@ -15,6 +22,14 @@ import numpy as np
 
 from ..fem_backend import von_mises
 from .pvd import SeriesWriter
+
+
+def piece_bodies(n_bodies: int, comm) -> range:
+    """The bodies whose piece this rank writes: [p nb / N, (p + 1) nb / N) on rank p of N (all on one process)."""
+    if comm is None or comm.Get_size() == 1:
+        return range(n_bodies)
+    p, n = comm.Get_rank(), comm.Get_size()
+    return range(p * n_bodies // n, (p + 1) * n_bodies // n)
 
 # Voigt order of the stresses: 2D (xx, yy, xy), 3D (xx, yy, zz, yz, xz, xy)
 _VOIGT = {2: ((0, 0), (1, 1), (0, 1)), 3: ((0, 0), (1, 1), (2, 2), (1, 2), (0, 2), (0, 1))}
@@ -64,12 +79,14 @@ def _type_fields(bodies, members, offs, block_type, disp, vel, stress: bool):
 
 
 class BodiesWriter(SeriesWriter):
-    """Writes `paraview/blocks.pvd` + one `.vtu` per frame for a `Simulation`."""
+    """Writes `paraview/blocks.pvd` + one `.vtu` per frame for a `Simulation` (comm: one piece per rank, a
+    .pvtu per frame; module docstring)."""
 
     def __init__(self, sim, directory: str, stress: bool = True, append: bool = False,
-                 basename: str = "blocks", keep_until_time: float | None = None):
+                 basename: str = "blocks", keep_until_time: float | None = None, comm=None):
         self.sim, self.stress = sim, stress
-        super().__init__(directory, basename, append, keep_until_time)
+        super().__init__(directory, basename, append, keep_until_time, comm)
+        self.mine = piece_bodies(len(sim.bodies), self.comm)
         self._build_static()
 
     # ---------------------------------------------------------------- static topology
@@ -77,13 +94,17 @@ class BodiesWriter(SeriesWriter):
         sim = self.sim
         pts, blocks_tri, blocks_quad, polys = [], [], [], []
         body_of_cell = {"triangle": [], "quad": [], "polygon": []}
-        self.layout = []  # (group, point offset per member (k,), n_nodes, cell block name, cell offset)
+        self.layout = []  # (group, its members in this piece, point offset per member (k,), n_nodes)
         offset = 0
+        mine = set(self.mine)
         for gr in sim.groups:
             bt = gr.type
             n = bt.n_nodes
             offs = []
-            for b in gr.members:
+            members = [b for b in gr.members if b in mine]
+            if not members:
+                continue
+            for b in members:
                 body = sim.bodies[b]
                 pts.append(body.reference_points)
                 conn = bt.mesh.cells + offset
@@ -91,9 +112,11 @@ class BodiesWriter(SeriesWriter):
                 body_of_cell[bt.mesh.cell_type].append(np.full(len(conn), b))
                 offs.append(offset)
                 offset += n
-            self.layout.append((gr, np.array(offs), n))
+            self.layout.append((gr, members, np.array(offs), n))
         self.rigid_layout = []
         for i in sim.rigid:
+            if i not in mine:
+                continue
             body = sim.bodies[i]
             V = body.center0 + body.vertices_rel
             pts.append(V)
@@ -113,7 +136,8 @@ class BodiesWriter(SeriesWriter):
         if polys:
             self.cells.append(("polygon", polys))
             order.append("polygon")
-        self.cell_body = np.concatenate([np.concatenate(body_of_cell[k]) for k in order]).astype(np.int64)
+        self.cell_body = np.concatenate([np.concatenate(body_of_cell[k]) for k in order]).astype(np.int64) \
+            if order else np.zeros(0, np.int64)
         self.cell_kind = np.array([self.sim.bodies[b].kind for b in self.cell_body], dtype=np.int64)
         self.order = order
         self.n_points = len(self.X)
@@ -125,9 +149,9 @@ class BodiesWriter(SeriesWriter):
         disp = np.zeros((self.n_points, 2))
         vel = np.zeros((self.n_points, 2))
         stress = {k: [] for k in ("triangle", "quad")}
-        for gr, offs, n in self.layout:
+        for gr, members, offs, n in self.layout:
             # from the bodies, not gr.Q: Simulation.set_step (a stage with another h) rebuilds its groups
-            sg = _type_fields(sim.bodies, gr.members, offs, gr.type, disp, vel, self.stress)
+            sg = _type_fields(sim.bodies, members, offs, gr.type, disp, vel, self.stress)
             if sg is not None:
                 stress[gr.type.mesh.cell_type].append(sg.reshape(-1, 3))
         for i, off, nv in self.rigid_layout:
@@ -164,6 +188,8 @@ class BodiesWriter(SeriesWriter):
 
     # ---------------------------------------------------------------- write
     def write(self, time: float) -> str:
+        if not self.cells:  # (N ranks: no body in this rank's piece)
+            return self.write_frame(time, None, None)
         point_data, cell_data = self.fields()
         return self.write_frame(time, self.X, self.cells, point_data, cell_data)
 
@@ -183,9 +209,10 @@ class BodiesWriter3D(SeriesWriter):
     (global frame: R sigma_type R^T, batched per block type), von_mises (0 on rigid faces)."""
 
     def __init__(self, bodies, directory: str, stress: bool = True, append: bool = False,
-                 basename: str = "blocks", keep_until_time: float | None = None):
+                 basename: str = "blocks", keep_until_time: float | None = None, comm=None):
         self.source, self.stress = bodies, stress
-        super().__init__(directory, basename, append, keep_until_time)
+        super().__init__(directory, basename, append, keep_until_time, comm)
+        self.mine = piece_bodies(len(self.bodies), self.comm)
         self._build_static()
 
     @property
@@ -198,7 +225,10 @@ class BodiesWriter3D(SeriesWriter):
         blocks = {k: [] for k in _ORDER_3D}   # cell name -> [(connectivity, body)]
         self.groups = {}                      # id(type) -> (type, [body], [point offset])
         self.rigid_layout = []                # (body, point offset, n points)
+        mine = set(self.mine)
         for b, body in enumerate(bodies):
+            if b not in mine:
+                continue
             if body.kind == 0:
                 m = body.type.mesh
                 X = body.reference_points
@@ -258,5 +288,7 @@ class BodiesWriter3D(SeriesWriter):
         return point_data, cell_data
 
     def write(self, time: float) -> str:
+        if not self.cells:  # (N ranks: no body in this rank's piece)
+            return self.write_frame(time, None, None)
         point_data, cell_data = self.fields()
         return self.write_frame(time, self.X, self.cells, point_data, cell_data)

@@ -2,7 +2,14 @@
 
 A crash leaves a valid series listing every frame added so far. `PvdSeries.open_existing(path,
 keep_until_time)` reloads a series to continue it after a restart: entries with time > keep_until_time
-are dropped (and their .vtu files deleted), so the resumed run appends without duplicate times."""
+are dropped (and their .vtu files deleted; a dropped .pvtu frame with the pieces it lists), so the resumed run
+appends without duplicate times.
+
+Parallel series (SeriesWriter with comm, N ranks): frame f is `BASENAME_<f>.pvtu` (written by rank 0, listing the
+pieces in rank order) over the pieces `BASENAME_<f>_p<rank>.vtu`, each written by its rank (a rank with nothing
+to write writes no piece and is not listed); the .pvd lists the .pvtu files. Rank 0 adds a frame to the .pvd only
+after every rank has written its piece (the gather of the pieces' array layouts), so the series never names an
+incomplete frame."""
 from __future__ import annotations
 
 import math
@@ -12,7 +19,7 @@ from xml.sax.saxutils import quoteattr
 
 from ..errors import InputError
 from .atomic import atomic_write_text
-from .vtu import write_vtu
+from .vtu import array_info, write_pvtu, write_vtu
 
 
 def _read_entries(path: str) -> list:
@@ -74,10 +81,21 @@ class PvdSeries:
             full = os.path.normpath(os.path.join(d, f))
             if full in kept_files or os.path.commonpath([d, full]) != d:
                 continue  # still referenced, or outside the output directory: never delete
-            try:
-                os.unlink(full)
-            except FileNotFoundError:
-                pass
+            files = [full]
+            if full.endswith(".pvtu"):  # a parallel frame: its pieces too
+                try:
+                    src = [p.get("Source") for p in ET.parse(full).getroot().iter("Piece")]
+                except (OSError, ET.ParseError):
+                    src = []
+                base = os.path.dirname(full)
+                files = [os.path.normpath(os.path.join(base, p)) for p in src if p] + files
+            for g in files:
+                if os.path.commonpath([d, g]) != d:
+                    continue
+                try:
+                    os.unlink(g)
+                except FileNotFoundError:
+                    pass
         return s
 
     @property
@@ -111,22 +129,52 @@ class PvdSeries:
 class SeriesWriter:
     """Base of the writers of one `.vtu` per frame listed in `DIR/BASENAME.pvd` (bodies, contact points; 2D
     and 3D). append=True continues an existing series, dropping the frames after keep_until_time
-    (`PvdSeries.open_existing`); `.frame` is the number of the next frame."""
+    (`PvdSeries.open_existing`); `.frame` is the number of the next frame.
+
+    comm (an mpi4py communicator of N > 1 ranks, every rank constructing the writer and calling write_frame at
+    the same frames): each rank writes its piece of every frame and rank 0 the .pvtu and the .pvd (module
+    docstring); rank 0 opens (or cuts back) the series and sends the frame number to the others. `.series` is
+    None on the other ranks."""
 
     def __init__(self, directory: str, basename: str, append: bool = False,
-                 keep_until_time: float | None = None):
+                 keep_until_time: float | None = None, comm=None):
         self.dir, self.base = directory, basename
+        self.comm = comm if comm is not None and comm.Get_size() > 1 else None
         os.makedirs(directory, exist_ok=True)
         pvd = os.path.join(directory, f"{basename}.pvd")
-        self.series = PvdSeries.open_existing(pvd, keep_until_time) if append and os.path.exists(pvd) \
-            else PvdSeries(pvd)
-        self.frame = len(self.series.entries)
+        self.series = None
+        if self.comm is None or self.comm.Get_rank() == 0:
+            self.series = PvdSeries.open_existing(pvd, keep_until_time) if append and os.path.exists(pvd) \
+                else PvdSeries(pvd)
+        # (N ranks: the others wait here until rank 0 has cut the series back and deleted the dropped pieces)
+        self.frame = len(self.series.entries) if self.comm is None else \
+            self.comm.bcast(len(self.series.entries) if self.series is not None else None, root=0)
 
     def write_frame(self, time: float, points, cells, point_data=None, cell_data=None) -> str:
-        """Write `BASENAME_<frame>.vtu` (write_vtu arguments) and add it to the series at `time`."""
+        """Write `BASENAME_<frame>.vtu` (write_vtu arguments) and add it to the series at `time`. With comm:
+        (points, cells, data) are this rank's piece, None for no piece; returns the .pvtu's name."""
+        if self.comm is not None:
+            return self._write_parallel(time, points, cells, point_data, cell_data)
         name = f"{self.base}_{self.frame:06d}.vtu"
         write_vtu(os.path.join(self.dir, name), points, cells, point_data=point_data or None,
                   cell_data=cell_data or None)
         self.series.add(time, name)
+        self.frame += 1
+        return name
+
+    def _write_parallel(self, time, points, cells, point_data, cell_data) -> str:
+        rank = self.comm.Get_rank()
+        name = f"{self.base}_{self.frame:06d}.pvtu"
+        info = None
+        if points is not None:
+            piece = f"{self.base}_{self.frame:06d}_p{rank}.vtu"
+            write_vtu(os.path.join(self.dir, piece), points, cells, point_data=point_data or None,
+                      cell_data=cell_data or None)
+            info = (piece, array_info(point_data, cell_data))
+        infos = self.comm.gather(info, root=0)  # (also: every piece is on disk before the .pvd names the frame)
+        if rank == 0:
+            pieces = [i for i in infos if i is not None]
+            write_pvtu(os.path.join(self.dir, name), [p for p, _ in pieces], pieces[0][1] if pieces else array_info())
+            self.series.add(time, name)
         self.frame += 1
         return name

@@ -18,6 +18,12 @@ zero third component so ParaView shows them as vectors (glyphs, "Warp By Vector"
 (a symmetric 2D stress (sxx, syy, sxy) stays 3 components under its given name). field_data: name -> scalar or
 array (whole-dataset values such as the time); meshio 5 reads `<FieldData>` but does not write it, so this module
 adds that element to meshio's file, encoded as meshio encodes the other arrays.
+
+Parallel pieces (`write_pvtu`): a `.pvtu` file (`<VTKFile type="PUnstructuredGrid">`) names the `.vtu` pieces of
+one grid (`<Piece Source="...">`, paths relative to the .pvtu) and declares their arrays (`<PPoints>`,
+`<PPointData>`, `<PCellData>`: name, VTK type and number of components of each, as `array_info` computes them from
+the arrays handed to write_vtu). The grid is the union of the pieces, in the listed order; each piece numbers
+its points from 0.
 """
 from __future__ import annotations
 
@@ -197,4 +203,42 @@ def write_vtu(path, points, cells, point_data=None, cell_data=None, field_data=N
             with open(tmp, "w", encoding="utf-8") as f:
                 f.write(text[:i] + _field_data_xml(fd) + text[i:])
     atomic_write_with(path, write_to)
+    return path
+
+
+def array_info(point_data=None, cell_data=None) -> dict:
+    """The arrays that `write_vtu(path, points, cells, point_data, cell_data)` writes, as a .pvtu declares them:
+    {"points": [("Points", "Float64", 3)], "point": [(name, VTK type, components)], "cell": [...]}, in the
+    given order (2-vectors padded to 3 components, bool -> UInt8, as write_vtu does; scalars: 1 component)."""
+    def info(kind, data):
+        out = []
+        for k, v in (data or {}).items():
+            a = _numeric(f"{kind}[{k!r}]", v)
+            a = _vtk_array(_prepare_field(kind, k, a, a.shape[0] if a.ndim else -1))
+            out.append((k, _VTK_DTYPES[a.dtype], 1 if a.ndim == 1 else int(a.shape[1])))
+        return out
+    return {"points": [("Points", "Float64", 3)], "point": info("point_data", point_data),
+            "cell": info("cell_data", cell_data)}
+
+
+def write_pvtu(path, sources, arrays: dict) -> str:
+    """Write the parallel grid `path` (.pvtu) of the pieces `sources` (.vtu paths relative to the .pvtu's
+    directory, in order) with the arrays `arrays` (array_info of any piece: every piece has the same arrays);
+    atomically. Returns `path`."""
+    def pdata(items, with_name=True):
+        return "".join(f'<PDataArray type="{t}"' + (f" Name={quoteattr(k)}" if with_name else "")
+                       + (f' NumberOfComponents="{c}"' if c != 1 or not with_name else "") + "/>\n"
+                       for k, t, c in items)
+    if not sources:
+        raise InputError(f"{path}: a parallel grid needs at least one piece")
+    text = ('<?xml version="1.0"?>\n'
+            '<VTKFile type="PUnstructuredGrid" version="0.1" byte_order="LittleEndian" '
+            f'header_type="{HEADER_TYPE}">\n<PUnstructuredGrid GhostLevel="0">\n'
+            f'<PPoints>\n{pdata(arrays["points"], False)}</PPoints>\n'
+            f'<PPointData>\n{pdata(arrays["point"])}</PPointData>\n'
+            f'<PCellData>\n{pdata(arrays["cell"])}</PCellData>\n'
+            + "".join(f"<Piece Source={quoteattr(str(s).replace(chr(92), '/'))}/>\n" for s in sources)
+            + "</PUnstructuredGrid>\n</VTKFile>\n")
+    from .atomic import atomic_write_text
+    atomic_write_text(path, text)
     return path
