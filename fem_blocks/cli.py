@@ -15,7 +15,7 @@ import os
 import sys
 
 from . import __version__
-from .errors import ConvergenceError, InputError
+from .errors import ConvergenceError, InputError, RankMismatchError
 
 DEMO_DIR = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "demos")
 DEFAULT_DEMO = "shear_wall_p030"  # `make demo`: the micro-model wall (docs/validation.md); the thesis' model is "shear_wall_fc_p030"
@@ -212,6 +212,9 @@ def _main(argv=None, comm=None) -> int:
         return 130
     except ConvergenceError as e:
         print(f"fem-blocks: run stopped: {e}", file=sys.stderr)
+        return 1
+    except RankMismatchError as e:
+        print(f"fem-blocks: run failed: {e}", file=sys.stderr)
         return 1
     except (FloatingPointError, ArithmeticError) as e:
         print(f"fem-blocks: run failed: {e}", file=sys.stderr)

@@ -13,6 +13,10 @@ class ConvergenceError(RuntimeError):
     """A solver did not converge and the run policy says to stop."""
 
 
+class RankMismatchError(RuntimeError):
+    """N MPI ranks that should hold the same model do not (raised on every rank alike; the CLI exits with 1)."""
+
+
 def check_range(name, value, lo=None, hi=None, lo_open=False, hi_open=False, expected=None):
     """Raise InputError unless lo (<|<=) value (<|<=) hi; returns float(value)."""
     try:

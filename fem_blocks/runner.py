@@ -893,14 +893,24 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
     gauge_ids = gauge_points(case, model)  # [output] gauges
     cols = history_columns(model, rot_ids, joint_ids, gauge_ids)
     hpath = os.path.join(out_dir, "history.csv")
-    if not root:
-        hist = _NoHistory()
-    elif ck is not None and os.path.exists(hpath):
-        # the rows before the checkpoint: read once from the file the run wrote (cut back to the checkpoint's
-        # step), rather than copied into every checkpoint
-        hist = HistoryWriter.resume(hpath, int(ck["sim.step"]), columns=cols, flush_every=50, keep=True)
-    else:
-        hist = HistoryWriter(hpath, cols, flush_every=50, keep=True)  # keep=True: figures from memory
+    hist, err = _NoHistory(), None
+    try:
+        if not root:
+            pass
+        elif ck is not None and os.path.exists(hpath):
+            # the rows before the checkpoint: read once from the file the run wrote (cut back to the checkpoint's
+            # step), rather than copied into every checkpoint
+            hist = HistoryWriter.resume(hpath, int(ck["sim.step"]), columns=cols, flush_every=50, keep=True)
+        else:
+            hist = HistoryWriter(hpath, cols, flush_every=50, keep=True)  # keep=True: figures from memory
+    except Exception as e:  # noqa: BLE001 - N ranks: raised on every rank (rank 0 alone reads the history)
+        if comm is None:
+            raise
+        err = e
+    if comm is not None:
+        err = comm.bcast(err, root=0)
+        if err is not None:
+            raise err
     cstats = run["cstats"]
     names = list(model.names)
     guards = _Guards(case, model, names)
@@ -1110,6 +1120,8 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
     finally:
         hist.close()
         bar.close()
+        if model.contact is not None:
+            model.contact.close()  # (N ranks: the PETSc objects of the shared solve, on every rank at once)
         if stopped_run is not None:
             try:
                 finish(f"stopped: {stopped_run}", stopped_run.code)

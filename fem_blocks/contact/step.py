@@ -57,6 +57,38 @@ from .scene import ContactScene
 STATUS_NAMES = ("open", "stick", "slip")
 
 
+class _SharedLinear:
+    """N > 1 ranks: Newton's J Δr = -F (J in W's block pattern) on a PETSc block matrix with the rows of each rank's
+    contacts, factored by MUMPS (distributed/linear.DistBlockSolver). Built at its first solve (a Gauss–Seidel step
+    whose Newton fallback never fires builds nothing) and kept, with MUMPS's symbolic analysis, while W's block
+    pattern stays the same; any ownership gives the same solution, so a kept solver serves a new contact set of the
+    same pattern."""
+
+    def __init__(self, comm):
+        self.comm, self.solver, self.pattern = comm, None, None
+        self.W, self.owner = None, None
+
+    def bind(self, W, owner):
+        """The Delassus operator of the next solves and a function giving the contacts' ranks."""
+        self.W, self.owner = W, owner
+
+    def solve(self, Jb, rhs):
+        W = self.W
+        if self.solver is None or not (np.array_equal(self.pattern[0], W.indptr)
+                                       and np.array_equal(self.pattern[1], W.indices)):
+            from ..distributed.linear import DistBlockSolver
+            if self.solver is not None:
+                self.solver.destroy()
+            self.solver = DistBlockSolver(W.indptr, W.indices, W.dim, self.owner(), self.comm)
+            self.pattern = (W.indptr.copy(), W.indices.copy())
+        return self.solver.solve(Jb, rhs)
+
+    def destroy(self):
+        if self.solver is not None:
+            self.solver.destroy()
+        self.solver = None
+
+
 class ContactStep:
     """The `contact` hook of `dynamics.Simulation` (solve -> ContactResult / on_step_change). Keeps what the next
     step needs (contact set, G, Delassus operator, warm start P, law state); reads the simulation, writes nothing
@@ -93,7 +125,7 @@ class ContactStep:
         self.comm = None  # MPI ranks sharing the contact solve (use_comm); None: this process alone
         self.body_owner = None  # N > 1 ranks: the rank of each body (distributed/partition.partition_graph)
         self._colours = None  # order = "colours": the colour solver of the current Delassus operator
-        self._linear, self._linear_W = None, None  # N > 1 ranks, Newton: the distributed linear solve and its W
+        self._linear = None  # N > 1 ranks, Newton: the shared linear solve (_SharedLinear)
 
     # ------------------------------------------------------------------ set-up
     def on_step_change(self, sim):
@@ -132,17 +164,37 @@ class ContactStep:
 
     def _linear_solver(self):
         """N > 1 ranks and a Newton solver: the distributed solve of J Δr = -F on the Delassus operator's pattern
-        (distributed/linear.DistBlockSolver: PETSc block matrix, rows of the owned contacts, MUMPS)."""
+        (_SharedLinear: built at the first Newton iteration, kept while W's block pattern does not change)."""
         if self.comm is None or not (self.opts.solver == "newton" or self.opts.fallback == "newton"):
             return None
-        if self._linear is not None and self._linear_W is self.Wdel:
-            return self._linear
-        from ..distributed.linear import DistBlockSolver
-        if self._linear is not None:
-            self._linear.destroy()
-        W = self.Wdel
-        self._linear, self._linear_W = DistBlockSolver(W.indptr, W.indices, W.dim, self._owner(), self.comm), W
+        if self._linear is None:
+            self._linear = _SharedLinear(self.comm)
+        self._linear.bind(self.Wdel, self._owner)
         return self._linear
+
+    def _check_replicas(self):
+        """N > 1 ranks: every rank built its own copy of the model; their contact sets and Delassus operators must
+        agree (nodes whose BLAS or CPU differ can give different bits). Compared by the contact and block counts and
+        a checksum of a sample of W's blocks; RankMismatchError on every rank if they differ."""
+        import zlib
+        from ..errors import RankMismatchError
+        W = self.Wdel
+        step = max(1, W.blocks.shape[0] // 4096)
+        mine = (W.n, W.indices.size, zlib.crc32(np.ascontiguousarray(W.blocks[::step]).tobytes()),
+                zlib.crc32(np.ascontiguousarray(self.cs.gap).tobytes()))
+        every = self.comm.allgather(mine)
+        if any(x != every[0] for x in every):
+            bad = [p for p, x in enumerate(every) if x != every[0]]
+            raise RankMismatchError(f"the MPI ranks' copies of the model differ at step {self.steps + 1} (contacts, "
+                                    f"Delassus blocks, checksums: rank 0 {every[0]}, ranks {bad} otherwise): run on "
+                                    "nodes of one kind (same CPU, same BLAS), e.g. with OPENBLAS_CORETYPE set")
+
+    def close(self):
+        """Release the PETSc objects of a run on N > 1 ranks (collective: every rank calls it at the end)."""
+        for obj in (self._colours, self._linear):
+            if obj is not None:
+                obj.destroy()
+        self._colours = self._linear = None
 
     def _colour_solver(self):
         """order = "colours": the colour solver of the current Delassus operator (rebuilt with it); on N > 1
@@ -279,6 +331,8 @@ class ContactStep:
             self._rigid_W_restored = None
             self.Wdel = self._delassus(W_flat, W_offset, W_size)
             self.W_dirty = False
+            if self.comm is not None:
+                self._check_replicas()
             self.timers["delassus"] += perf_counter() - c
 
     def _check_initial_penetration(self, first, bx):

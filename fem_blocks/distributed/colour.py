@@ -21,8 +21,8 @@ couple and the groups need 25 and 74 colours.)
 
 Distribution (comm with N > 1 ranks; distributed/sweep.py). Rank p owns the contacts `owner == p` (the time
 stepper: the rank of the contact's candidate body, distributed/partition.py; with groups, one group's contacts
-must have one owner) and holds their rows of W (column order
-of the global row kept, so every v_α is summed exactly as serially), q_α, μ_α, the law data and the impulses of its
+must have one owner) and holds their rows of W (without the blocks of zeros, `coupling_rows`, as the serial
+sweep; column order of the global row kept, so every v_α is summed exactly as serially), q_α, μ_α, the law data and the impulses of its
 contacts and of the *ghost* contacts its rows couple to. After colour c, one PETSc scatter carries the new impulses of
 colour c to the ranks that hold them as ghosts (neighbour ranks only). The iterates are the serial ones, bitwise,
 for any N and any ownership.
@@ -77,6 +77,23 @@ def colour_groups(W: BlockCSR, cand, ant, nb: int) -> np.ndarray:
     return _greedy_colouring(S.indptr.astype(np.int64), S.indices.astype(np.int64))[group]
 
 
+def coupling_rows(W: BlockCSR) -> BlockCSR:
+    """W without its off-diagonal blocks of zeros (the assembly stores them between contacts that share only a body
+    held in every dof): the rows the colour solver sweeps. A contact then reads only the impulses it is coupled to,
+    so that reading a ghost impulse of its own colour before that colour's exchange (a block of zeros, the colours
+    ignore it) cannot happen; the sums of the other blocks keep their order. W itself if it has none."""
+    keep = np.any(W.blocks != 0.0, axis=(1, 2))
+    keep[W.diag_pos[W.diag_pos >= 0]] = True
+    if keep.all():
+        return W
+    row = np.repeat(np.arange(W.n), np.diff(W.indptr))
+    cnt = np.bincount(row[keep], minlength=W.n)
+    new_pos = np.cumsum(keep) - 1
+    diag = np.where(W.diag_pos >= 0, new_pos[np.maximum(W.diag_pos, 0)], -1).astype(np.int64)
+    return BlockCSR(np.concatenate([[0], np.cumsum(cnt)]).astype(np.int64), np.ascontiguousarray(W.indices[keep]),
+                    np.ascontiguousarray(W.blocks[keep]), diag)
+
+
 class ColourSolver:
     """The colour-order NLGS for one Delassus operator W (set up once per W; collective when `comm` has N > 1
     ranks). contact_owner: (nc,) rank of each contact (N > 1); comm: an mpi4py communicator or None (serial);
@@ -98,10 +115,11 @@ class ColourSolver:
         self.colour = colour
         self.n_colours = int(colour.max()) + 1 if n else 0
         self.dist = None
+        Wc = coupling_rows(W) if n else W
         if self.comm is None:
             self.owned = np.arange(n, dtype=np.int64)
             self.ghost = np.zeros(0, dtype=np.int64)
-            self.rows = (W.indptr, W.indices, W.blocks, W.diag_pos)
+            self.rows = (Wc.indptr, Wc.indices, Wc.blocks, Wc.diag_pos)
             self.order = [np.ascontiguousarray(np.flatnonzero(colour == c), dtype=np.int64)
                           for c in range(self.n_colours)]
             self.r = np.zeros(self.d * n)
@@ -111,7 +129,8 @@ class ColourSolver:
         if owner.shape != (n,):
             raise InputError(f"contact_owner: expected {n} ranks (one per contact), got shape {owner.shape}")
         rank = self.comm.Get_rank()
-        lr = local_rows(W, np.zeros(self.d * n), np.zeros(n), np.flatnonzero(owner == rank))
+        lr = local_rows(Wc, np.zeros(self.d * n), np.zeros(n), np.flatnonzero(owner == rank))
+        del Wc
         self.owned, self.ghost = lr.owned, lr.ghost
         self.rows = (lr.indptr, lr.indices, lr.blocks, lr.diag_pos)
         self.dist = DistSweep(lr, colour[np.concatenate([lr.owned, lr.ghost])], self.n_colours, self.comm)

@@ -143,12 +143,24 @@ class SeriesWriter:
         os.makedirs(directory, exist_ok=True)
         pvd = os.path.join(directory, f"{basename}.pvd")
         self.series = None
-        if self.comm is None or self.comm.Get_rank() == 0:
+        if self.comm is None:
             self.series = PvdSeries.open_existing(pvd, keep_until_time) if append and os.path.exists(pvd) \
                 else PvdSeries(pvd)
+            self.frame = len(self.series.entries)
+            return
+        got = None
+        if self.comm.Get_rank() == 0:
+            try:
+                self.series = PvdSeries.open_existing(pvd, keep_until_time) if append and os.path.exists(pvd) \
+                    else PvdSeries(pvd)
+                got = len(self.series.entries)
+            except Exception as e:  # noqa: BLE001 - raised on every rank below (a malformed series on resume)
+                got = e
         # (N ranks: the others wait here until rank 0 has cut the series back and deleted the dropped pieces)
-        self.frame = len(self.series.entries) if self.comm is None else \
-            self.comm.bcast(len(self.series.entries) if self.series is not None else None, root=0)
+        got = self.comm.bcast(got, root=0)
+        if isinstance(got, Exception):
+            raise got
+        self.frame = got
 
     def write_frame(self, time: float, points, cells, point_data=None, cell_data=None) -> str:
         """Write `BASENAME_<frame>.vtu` (write_vtu arguments) and add it to the series at `time`. With comm:

@@ -1,0 +1,137 @@
+"""The colour-order Gauss–Seidel on one process (fem_blocks/distributed/colour.py, `[contact] order = "colours"`).
+
+Expectations from outside the code under test: a Delassus operator built here from random rigid bodies (3 dofs, one
+of them held: W = Hᵀ M⁻¹ H with M⁻¹ = 0 on the held body), stored like the assembly stores it (a block for every pair
+of contacts sharing a body, blocks of zeros through the held body); the serial kernel `nlgs.sweep` applied in the
+order of the colours; `math.fsum` for the stopping test's sums.
+"""
+import math
+
+import numpy as np
+
+from fem_blocks.distributed.colour import ColourSolver, colour_groups, coupling_rows
+from fem_blocks.linalg import BlockCSR
+from fem_blocks.solver import nlgs
+
+
+def problem(nb=9, nc=40, seed=1):
+    """(W BlockCSR with the assembly's pattern, q, mu, cand, ant): body 0 is held (it couples nothing)."""
+    rng = np.random.default_rng(seed)
+    cand = rng.integers(1, nb, nc)
+    ant = np.where(rng.random(nc) < 0.3, 0, rng.integers(1, nb, nc))
+    ant = np.where(ant == cand, 0, ant)
+    H = np.zeros((3 * nb, 2 * nc))
+    for a in range(nc):
+        for k in range(2):
+            g = rng.normal(size=3)
+            H[3 * cand[a]:3 * cand[a] + 3, 2 * a + k] = g
+            H[3 * ant[a]:3 * ant[a] + 3, 2 * a + k] = -rng.normal(size=3)
+    minv = rng.uniform(0.5, 2.0, 3 * nb)
+    minv[:3] = 0.0  # body 0 held in every dof
+    Wd = H.T @ (minv[:, None] * H) + 0.05 * np.eye(2 * nc)
+    indptr, idx, blocks, diag = [0], [], [], []
+    for a in range(nc):
+        for b in range(nc):
+            if {cand[a], ant[a]} & {cand[b], ant[b]} or a == b:
+                if a == b:
+                    diag.append(len(idx))
+                idx.append(b)
+                blocks.append(Wd[2 * a:2 * a + 2, 2 * b:2 * b + 2])
+        indptr.append(len(idx))
+    W = BlockCSR(np.array(indptr), np.array(idx), np.ascontiguousarray(blocks), np.array(diag))
+    q = rng.normal(size=2 * nc)
+    return W, q, rng.uniform(0.3, 0.8, nc), cand, ant
+
+
+def dense(B):
+    n, d = B.n, B.dim
+    out = np.zeros((d * n, d * n))
+    for i in range(n):
+        for k in range(B.indptr[i], B.indptr[i + 1]):
+            j = B.indices[k]
+            out[d * i:d * i + d, d * j:d * j + d] = B.blocks[k]
+    return out
+
+
+def test_coupling_rows_drop_only_off_diagonal_blocks_of_zeros():
+    """Same matrix, diagonal blocks where they were, no off-diagonal block of zeros left. Catches a wrong mapping
+    of the diagonal positions or dropping a diagonal block."""
+    W, q, mu, cand, ant = problem()
+    Wc = coupling_rows(W)
+    zero = np.all(W.blocks == 0.0, axis=(1, 2))
+    assert zero.sum() > 0  # the held body gives blocks of zeros
+    assert Wc.indices.size == W.indices.size - zero.sum()
+    assert np.array_equal(dense(Wc), dense(W))
+    assert np.all(Wc.indices[Wc.diag_pos] == np.arange(W.n))
+    off = np.ones(Wc.indices.size, dtype=bool)
+    off[Wc.diag_pos] = False
+    assert not np.any(np.all(Wc.blocks[off] == 0.0, axis=(1, 2)))
+
+
+def test_colours_separate_coupled_groups_and_keep_groups_whole():
+    """Two contacts of one colour and of different (candidate, antagonist) groups have W_αβ = W_βα = 0; the contacts
+    of one group share a colour; the held body couples nothing (fewer colours than the structural pattern)."""
+    W, q, mu, cand, ant = problem()
+    colour = colour_groups(W, cand, ant, 9)
+    D = dense(W)
+    group = cand * 9 + ant
+    for a in range(W.n):
+        for b in range(W.n):
+            if group[a] == group[b]:
+                assert colour[a] == colour[b]
+            elif colour[a] == colour[b]:
+                assert not np.any(D[2 * a:2 * a + 2, 2 * b:2 * b + 2]), (a, b)
+    only_held = [(a, b) for a in range(W.n) for b in range(W.n)
+                 if {cand[a], ant[a]} & {cand[b], ant[b]} == {0} and colour[a] == colour[b]]
+    assert only_held  # contacts that share only the held body may share a colour
+    structural = BlockCSR(W.indptr, W.indices, np.ones_like(W.blocks), W.diag_pos)
+    s = colour_groups(structural, cand, ant, 9)
+    assert all(s[a] != s[b] for a, b in only_held)  # (the structural pattern would separate them)
+
+
+def test_serial_colour_solver_is_nlgs_sweeps_in_colour_order_with_exact_sums():
+    """k sweeps of ColourSolver = k passes of nlgs.sweep over the contacts sorted by colour (stable), bitwise; the
+    reported change is sqrt(fsum(Δr²)/fsum(r²)) of the last sweep, bitwise. Catches a colour skipped or swept twice,
+    a sweep over the whole W instead of the coupling rows with another order, and a running (inexact) sum."""
+    W, q, mu, cand, ant = problem()
+    cs = ColourSolver(W, bodies=(cand, ant, 9))
+    order = np.argsort(cs.colour, kind="stable").astype(np.int64)
+    Wc = coupling_rows(W)
+    for k in (1, 2, 7):
+        res = cs.solve(q, mu, tol=1e-300, max_sweeps=k)
+        r = np.zeros(2 * W.n)
+        for _ in range(k):
+            before = r.copy()
+            nlgs.sweep(Wc.indptr, Wc.indices, Wc.blocks, Wc.diag_pos, q, mu, r, order)
+        assert res.sweeps == k and not res.converged
+        assert np.array_equal(res.r, r)
+        dr = r - before
+        assert res.change == math.sqrt(math.fsum(dr * dr) / math.fsum(r * r))
+
+
+def test_ranks_whose_models_differ_stop_with_a_clear_error():
+    """N ranks each build the model: the contact step compares their contact sets and Delassus operators when it
+    rebuilds W and raises RankMismatchError (on every rank: the comparison is all-gathered) if one differs; equal
+    copies pass. (A fake communicator stands for the ranks.)"""
+    import types
+
+    import pytest
+
+    from fem_blocks.contact.step import ContactStep
+    from fem_blocks.errors import RankMismatchError
+    W, q, mu, cand, ant = problem()
+
+    class Comm:
+        def __init__(self, other):
+            self.other = other
+
+        def allgather(self, x):
+            return [x, self.other(x)]
+
+    step = ContactStep([], [])
+    step.Wdel, step.cs = W, types.SimpleNamespace(gap=np.arange(W.n, dtype=float))
+    step.comm = Comm(lambda x: x)
+    step._check_replicas()
+    step.comm = Comm(lambda x: (x[0], x[1], x[2] + 1, x[3]))
+    with pytest.raises(RankMismatchError, match="ranks' copies of the model differ"):
+        step._check_replicas()
