@@ -123,7 +123,7 @@ class ContactStep:
         self.friction_total = 0.0  # frictional dissipation of every step so far [J] (contact/friction.py)
         self.timers = dict(detection=0.0, delassus=0.0, nlgs=0.0, correction=0.0, local=0.0)
         self.comm = None  # MPI ranks sharing the contact solve (use_comm); None: this process alone
-        self.body_owner = None  # N > 1 ranks: the rank of each body (distributed/partition.partition_graph)
+        self.body_owner = None  # N > 1 ranks: the rank of each body (distributed/graph.partition_graph)
         self._colours = None  # order = "colours": the colour solver of the current Delassus operator
         self._linear = None  # N > 1 ranks, Newton: the shared linear solve (_SharedLinear)
 
@@ -157,7 +157,7 @@ class ContactStep:
         """N > 1 ranks: the rank of each contact, that of its candidate body (bodies partitioned once by PT-Scotch
         on the body-contact graph, distributed/partition.py, or restored from the checkpoint)."""
         if self.body_owner is None or len(self.body_owner) != self.scene.nb:
-            from ..distributed.partition import body_graph, partition_graph
+            from ..distributed.graph import body_graph, partition_graph
             g = body_graph(self.scene.nb, np.zeros((0, 2), dtype=np.int64), self.cs.cand_body, self.cs.ant_body)
             self.body_owner = partition_graph(*g, self.comm)
         return self.body_owner[self.cs.cand_body]
