@@ -20,6 +20,9 @@ import time
 # the mixed-mode law with its softening cap and viscous damage, brick cracks (shear_wall_p030, the micro-model),
 # dry 2D Coulomb joints with NLGS (arch), dry 3D joints (wall3d_push).
 DEMOS = ("shear_wall_fc_p030.toml", "shear_wall_p030.toml", "arch.toml", "wall3d_push.toml")
+# ... and again with the colour-order Gauss-Seidel of runs on several MPI ranks ([contact] order = "colours": its
+# exact sums and per-contact residual terms, 2D cohesive, 2D and 3D Coulomb)
+COLOURS = ("shear_wall_p030.toml", "arch.toml", "wall3d_push.toml")
 STEPS_PER_STAGE = 2
 
 
@@ -27,17 +30,24 @@ def _demo_dir() -> str:
     return os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "demos")
 
 
-def warm(demos=DEMOS, out=None, verbose: bool = True) -> float:
-    """Run each demo for STEPS_PER_STAGE steps per stage (``--quick`` resolution); return the seconds taken."""
+def warm(demos=DEMOS, out=None, verbose: bool = True, colours=COLOURS) -> float:
+    """Run each demo for STEPS_PER_STAGE steps per stage (``--quick`` resolution), then each of `colours` with the
+    colour-order Gauss-Seidel; return the seconds taken."""
+    import dataclasses
     from .case import load_case, quick
     from .runner import run_case
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix="fem_blocks_warmup_") as tmp:
-        for name in demos:
+        for name in list(demos) + [f"{c}:colours" for c in colours]:
+            name, _, variant = name.partition(":")
             path = os.path.join(_demo_dir(), name)
             if not os.path.exists(path):
                 continue
             case = quick(load_case(path))
+            if variant:
+                case.contact = dataclasses.replace(case.contact, solver="nlgs", fallback="none", coarse="none",
+                                                   order="colours", criterion="residual", max_sweeps=20)
+                name = f"{name} (order = 'colours')"
             for st in case.stages:
                 st.duration = min(st.duration, STEPS_PER_STAGE * st.h)
                 st.output_every = STEPS_PER_STAGE
@@ -45,7 +55,8 @@ def warm(demos=DEMOS, out=None, verbose: bool = True) -> float:
             log = io.StringIO()
             try:  # the two-step runs' own warnings (unconverged steps...) mean nothing here: kept out of sight
                 with contextlib.redirect_stdout(log), contextlib.redirect_stderr(log):
-                    run_case(case, os.path.join(out or tmp, os.path.splitext(name)[0]), progress=False)
+                    run_case(case, os.path.join(out or tmp, os.path.splitext(name)[0].replace(" ", "_")),
+                             progress=False)
             except Exception as e:  # a failed warm-up only costs compile time later: say so, do not stop the set-up
                 print(f"[setup] warning: warm-up run of {name} stopped ({type(e).__name__}: {e}); its kernels "
                       "compile at the first run instead", flush=True)
