@@ -31,35 +31,9 @@ from fem_blocks.dynamics import Simulation  # noqa: E402
 from fem_blocks.expand import expand  # noqa: E402
 from fem_blocks.model import build_model  # noqa: E402
 
-CASE = """name = "wall_{n}"
-gravity = [0.0, -9.81]
-[materials.brick]
-E = 5e9
-nu = 0.2
-rho = 1800.0
-thickness = 0.12
-[wall]
-type = "running_bond"
-material = "brick"
-brick_length = 0.25
-brick_height = 0.06
-courses = {courses}
-bricks_per_course = {per}
-mesh_size = 0.03
-cell = "quad"
-group = "bricks"
-[wall.foundation]
-depth = 0.2
-overhang = 0.1
-[[interfaces]]
-name = "j"
-between = ["bricks", "bricks"]
-mu = 0.7
-[[interfaces]]
-name = "f"
-between = ["bricks", "foundation"]
-mu = 0.7
-[contact]
+from bench_partition import wall_case  # noqa: E402 (bench/ is on sys.path when this file runs)
+
+SETTINGS = """[contact]
 order = "colours"
 tol = 1e-4
 max_sweeps = 1000
@@ -73,12 +47,8 @@ velocity_reset = true
 
 
 def run(n_bricks, comm, steps, warm, show=True):
-    per = max(2, int(round(np.sqrt(n_bricks * 0.25 / 0.5))))  # as bench_wall.build
-    courses = max(1, int(round(n_bricks / per)))
     with tempfile.TemporaryDirectory() as d:
-        path = os.path.join(d, "wall.toml")
-        with open(path, "w") as f:
-            f.write(CASE.format(n=n_bricks, courses=courses, per=per))
+        path = wall_case(n_bricks, d, SETTINGS)  # the wall of bench_partition.py, with this benchmark's solver and steps
         comm.Barrier()
         c = time.perf_counter()
         model = build_model(expand(load_case(path)))

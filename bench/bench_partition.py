@@ -52,19 +52,22 @@ mu = 0.7
 name = "f"
 between = ["bricks", "foundation"]
 mu = 0.7
-[[stages]]
+"""
+STAGE = """[[stages]]
 name = "g"
 duration = 0.01
 h = 1e-3
 """
 
 
-def wall_case(n_bricks, directory):
+def wall_case(n_bricks, directory, settings=STAGE):
+    """The case file of the wall of about n_bricks bricks in `directory`: CASE, then `settings` (the [contact] table
+    and the stages; bench_dist.py gives its own)."""
     per = max(2, int(round(np.sqrt(n_bricks * 0.25 / 0.5))))  # as bench_wall.build
     courses = max(1, int(round(n_bricks / per)))
     path = os.path.join(directory, f"wall_{n_bricks}.toml")
     with open(path, "w") as f:
-        f.write(CASE.format(n=n_bricks, courses=courses, per=per))
+        f.write(CASE.format(n=n_bricks, courses=courses, per=per) + settings)
     return path
 
 
