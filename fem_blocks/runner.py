@@ -25,6 +25,7 @@ from .output.contacts import ContactsWriter
 from .output.paraview import BodiesWriter, BodiesWriter3D
 from .output.summary import write_summary
 from .specs import ChecksSpec, OutputSpec, default_of
+from .distributed.root import on_root
 
 DOFS = ("x", "y", "rz")  # 2D; model.dofs gives the dofs of the model's dimension (3D: x, y, z, rx, ry, rz)
 
@@ -825,17 +826,10 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
     if resume:
         if comm is None:
             ck_path, ck = latest_checkpoint(out_dir)
-        else:  # rank 0 chooses the checkpoint, every rank reads it
+        else:  # rank 0 chooses the checkpoint (or raises on every rank), every rank reads it
             from .output.checkpoint import read_checkpoint
-            found = None
-            try:
-                found = latest_checkpoint(out_dir)[0] if root else None
-            except InputError as e:
-                found = e
-            found = comm.bcast(found, root=0)
-            if isinstance(found, Exception):
-                raise found
-            ck_path, ck = found, read_checkpoint(found)
+            ck_path = on_root(comm, lambda: latest_checkpoint(out_dir)[0])
+            ck = read_checkpoint(ck_path)
         if str(ck["case_hash"]) != fp and not force:
             raise InputError(f"{ck_path}: the case file {case.source} (or a base or mesh file it names, or --quick) "
                              "changed since this checkpoint was written; run without --resume to start again, or add "
@@ -893,24 +887,18 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
     gauge_ids = gauge_points(case, model)  # [output] gauges
     cols = history_columns(model, rot_ids, joint_ids, gauge_ids)
     hpath = os.path.join(out_dir, "history.csv")
-    hist, err = _NoHistory(), None
-    try:
-        if not root:
-            pass
-        elif ck is not None and os.path.exists(hpath):
+
+    def open_history():
+        if ck is not None and os.path.exists(hpath):
             # the rows before the checkpoint: read once from the file the run wrote (cut back to the checkpoint's
             # step), rather than copied into every checkpoint
-            hist = HistoryWriter.resume(hpath, int(ck["sim.step"]), columns=cols, flush_every=50, keep=True)
-        else:
-            hist = HistoryWriter(hpath, cols, flush_every=50, keep=True)  # keep=True: figures from memory
-    except Exception as e:  # noqa: BLE001 - N ranks: raised on every rank (rank 0 alone reads the history)
-        if comm is None:
-            raise
-        err = e
-    if comm is not None:
-        err = comm.bcast(err, root=0)
-        if err is not None:
-            raise err
+            return HistoryWriter.resume(hpath, int(ck["sim.step"]), columns=cols, flush_every=50, keep=True)
+        return HistoryWriter(hpath, cols, flush_every=50, keep=True)  # keep=True: figures from memory
+
+    # (N ranks: rank 0 alone opens the history; its failure is raised on every rank)
+    hist = on_root(comm, open_history, share=False)
+    if hist is None:  # a rank other than 0 on N ranks
+        hist = _NoHistory()
     cstats = run["cstats"]
     names = list(model.names)
     guards = _Guards(case, model, names)
@@ -936,18 +924,8 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
         write_checkpoint(out_dir, arrays if arrays is not None else _snapshot(sim, model, run))
 
     def finish(status: str, code: int | None = None) -> dict:
-        if comm is not None:  # rank 0 writes the summary and figures; every rank returns them (or raises)
-            out = None
-            if root:
-                try:
-                    out = _finish(status, code)
-                except Exception as e:  # noqa: BLE001 - raised on every rank below
-                    out = e
-            out = comm.bcast(out, root=0)
-            if isinstance(out, Exception):
-                raise out
-            return out
-        return _finish(status, code)
+        # (N ranks: rank 0 writes the summary and figures; every rank returns the summary, or raises)
+        return on_root(comm, _finish, status, code)
 
     def _finish(status: str, code: int | None = None) -> dict:
         conv = convergence_report(case, run["cstats"], model.contact is not None)

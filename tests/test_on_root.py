@@ -18,6 +18,7 @@ One-line bugs, each made in root.py and seen to fail here (what fails in bracket
 - share=False also dropping the exception (share_false_raise: rank 1 returns None instead of raising OSError);
 - no load of the pickle on rank 0 before sending (bad_init: rank 0 raises BadInit, not the RuntimeError);
 - a communicator of size 1 not taken as one process (the size-1 serial case: comm.Get_rank used).
+- root.py importing a fem_blocks module (`from ..errors import InputError`: the import test).
 """
 import json
 import os
@@ -150,3 +151,10 @@ def test_calls_stay_paired_after_failures(ranks):
     for r in ranks:
         assert (r["after"]["kind"], r["after"]["value"]) == ("value", "last")
     assert sum(g["calls"] for g in ranks[1].values()) == 0  # rank 1 never called fn
+
+
+def test_root_module_imports_nothing_of_fem_blocks():
+    """runner.py and output/pvd.py import root.py: it must import no fem_blocks module (no import cycle)."""
+    from test_imports import PKG, imports_of, modules
+    mods = modules()
+    assert imports_of("fem_blocks.distributed.root", os.path.join(PKG, "distributed", "root.py"), set(mods)) == set()

@@ -17,6 +17,7 @@ import os
 import xml.etree.ElementTree as ET
 from xml.sax.saxutils import quoteattr
 
+from ..distributed.root import on_root
 from ..errors import InputError
 from .atomic import atomic_write_text
 from .vtu import array_info, write_pvtu, write_vtu
@@ -143,24 +144,15 @@ class SeriesWriter:
         os.makedirs(directory, exist_ok=True)
         pvd = os.path.join(directory, f"{basename}.pvd")
         self.series = None
-        if self.comm is None:
+
+        def open_series():
             self.series = PvdSeries.open_existing(pvd, keep_until_time) if append and os.path.exists(pvd) \
                 else PvdSeries(pvd)
-            self.frame = len(self.series.entries)
-            return
-        got = None
-        if self.comm.Get_rank() == 0:
-            try:
-                self.series = PvdSeries.open_existing(pvd, keep_until_time) if append and os.path.exists(pvd) \
-                    else PvdSeries(pvd)
-                got = len(self.series.entries)
-            except Exception as e:  # noqa: BLE001 - raised on every rank below (a malformed series on resume)
-                got = e
-        # (N ranks: the others wait here until rank 0 has cut the series back and deleted the dropped pieces)
-        got = self.comm.bcast(got, root=0)
-        if isinstance(got, Exception):
-            raise got
-        self.frame = got
+            return len(self.series.entries)
+
+        # (N ranks: the others wait here until rank 0 has cut the series back and deleted the dropped pieces; its
+        # failure, e.g. a malformed series on resume, is raised on every rank)
+        self.frame = on_root(self.comm, open_series)
 
     def write_frame(self, time: float, points, cells, point_data=None, cell_data=None) -> str:
         """Write `BASENAME_<frame>.vtu` (write_vtu arguments) and add it to the series at `time`. With comm:
