@@ -1,9 +1,9 @@
 """Run under mpirun by tests/test_on_root.py: every rank makes the same sequence of on_root calls (CASES) and writes
 what it got, case by case, to OUT_DIR/rank<r>.json (its own file: written whatever the other ranks do).
 
-Per case: {"kind": "value", "value": (its repr if not a JSON type), "same_object": fn's own object returned?} or {"kind": "raised", "type",
-"module", "msg", "attrs" (the instance __dict__ and an OSError's errno), "cause" (type name of __cause__)}, and "calls": how many times
-this rank called fn.
+Per case: {"kind": "value", "value" (its repr if not a JSON type), "callable", "same_object": fn's own object
+returned?} or {"kind": "raised", "type", "module", "msg", "attrs" (the instance __dict__ and an OSError's errno),
+"cause" (type name of __cause__)}, and "calls": how many times this rank called fn.
 
 Usage: mpirun -n 2 python tests/_on_root_mpi.py OUT_DIR
 """
