@@ -28,6 +28,7 @@ import os
 import sys
 from dataclasses import dataclass, field
 
+from ..distributed.root import on_root
 from ..errors import InputError
 from .specimen import TESTS, Emitter, SpecimenSpec
 
@@ -135,9 +136,9 @@ def run_lab(lab: LabCase, out: str, quick: bool = False, quiet: bool = False, re
         if quick:
             case = make_quick(case)
         d = os.path.join(out, label)
-        has_ck = resume and any(os.path.exists(os.path.join(d, f)) for f in (CK_NAME, CK_PREV))
-        if comm is not None:  # (rank 0's view of the files decides for every rank)
-            has_ck = comm.bcast(has_ck, root=0)
+        # (N ranks: rank 0's view of the files decides for every rank)
+        has_ck = on_root(comm, lambda: resume and any(os.path.exists(os.path.join(d, f))
+                                                      for f in (CK_NAME, CK_PREV)))
         try:
             summ = run_case(case, d, progress=not quiet, resume=has_ck, force=force, comm=comm)
             st, line = int(summ.get("exit_status") or 0), convergence_line(summ.get("convergence"))
