@@ -10,10 +10,11 @@ scatters are set up in the first) are not timed; then `--steps` steps are.
 Rank 0 prints one markdown row per wall: ranks, bricks, contacts, colours, contacts per rank (min–max), setup [s]
 (model build + first steps, max over ranks), ms per step, sweeps per step, ms per sweep in the contact solve (NLGS
 timer / sweeps), of which in the per-colour exchanges (max over ranks), bytes sent / received per sweep per rank
-(max), messages per sweep per rank (max), peak RSS per rank [MB] (max), and the sha1 of the floor's reaction and
+(max), messages per sweep per rank (max), peak RSS per rank [MB] (max), the blocks of W held per rank (max: each
+rank assembles the rows of its own contacts), and the sha1 of the floor's reaction and
 the sweep counts of the timed steps (equal sha1 on any N: the same iterates).
 
-Usage: mpirun -n N .venv/bin/python bench/bench_dist.py [n_bricks ...] [--steps S] [--warm W]
+Usage: mpirun -n N .venv/bin/python bench/bench_dist.py [n_bricks ...] [--steps S] [--warm W] [--max-sweeps K]
 """
 import argparse
 import hashlib
@@ -36,7 +37,7 @@ from bench_partition import wall_case  # noqa: E402 (bench/ is on sys.path when 
 SETTINGS = """[contact]
 order = "colours"
 tol = 1e-4
-max_sweeps = 1000
+max_sweeps = {max_sweeps}
 [[stages]]
 name = "g"
 duration = 1.0
@@ -46,9 +47,10 @@ velocity_reset = true
 """
 
 
-def run(n_bricks, comm, steps, warm, show=True):
+def run(n_bricks, comm, steps, warm, show=True, max_sweeps=1000):
     with tempfile.TemporaryDirectory() as d:
-        path = wall_case(n_bricks, d, SETTINGS)  # the wall of bench_partition.py, with this benchmark's solver and steps
+        # the wall of bench_partition.py, with this benchmark's solver and steps
+        path = wall_case(n_bricks, d, SETTINGS.format(max_sweeps=max_sweeps))
         comm.Barrier()
         c = time.perf_counter()
         model = build_model(expand(load_case(path)))
@@ -75,7 +77,7 @@ def run(n_bricks, comm, steps, warm, show=True):
     dist = col.dist
     rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     mine = (col.n_owned, t_setup, t_steps, t_nlgs, 8 * dist.entries_sent if dist else 0,
-            8 * dist.entries_recv if dist else 0, dist.messages if dist else 0, rss)
+            8 * dist.entries_recv if dist else 0, dist.messages if dist else 0, rss, cs.Wdel.blocks.shape[0])
     rows = np.array(comm.gather(mine), dtype=float) if comm.size > 1 else np.array([mine], dtype=float)
     if comm.rank == 0 and show:
         nsw = sum(sweeps)
@@ -84,7 +86,7 @@ def run(n_bricks, comm, steps, warm, show=True):
               f"{rows[:, 0].min():.0f}–{rows[:, 0].max():.0f} | {rows[:, 1].max():.1f} | "
               f"{1e3 * rows[:, 2].max() / steps:.1f} | {nsw / steps:.1f} | {1e3 * rows[:, 3].max() / max(nsw, 1):.3f} | "
               f"{rows[:, 4].max():.0f} / {rows[:, 5].max():.0f} | {rows[:, 6].max():.0f} | {rows[:, 7].max():.0f} | "
-              f"{h} |", flush=True)
+              f"{rows[:, 8].max():.0f} | {h} |", flush=True)
     col.destroy()
 
 
@@ -94,13 +96,14 @@ if __name__ == "__main__":
     ap.add_argument("sizes", nargs="*", type=int, default=[1000])
     ap.add_argument("--steps", type=int, default=20)
     ap.add_argument("--warm", type=int, default=2)
+    ap.add_argument("--max-sweeps", type=int, default=1000, help="[contact] max_sweeps of the wall's steps")
     a = ap.parse_args()
     comm = MPI.COMM_WORLD
     if comm.rank == 0:
         print(f"{a.warm} untimed steps, then {a.steps} timed steps\n\n| ranks | bricks (bodies) | contacts | colours | "
               "contacts per rank | setup [s] | ms/step | sweeps/step | ms/sweep (NLGS) | bytes sent / received per "
-              "sweep per rank | messages per sweep per rank | peak RSS per rank [MB] | sha1 (reactions, sweeps) |\n"
-              "|---|---|---|---|---|---|---|---|---|---|---|---|---|", flush=True)
+              "sweep per rank | messages per sweep per rank | peak RSS per rank [MB] | blocks of W per rank | sha1 "
+              "(reactions, sweeps) |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|", flush=True)
     run(20, comm, 2, 1, show=False)  # warm-up: numba caches outside the timed runs
     for n in a.sizes:
-        run(n, comm, a.steps, a.warm)
+        run(n, comm, a.steps, a.warm, max_sweeps=a.max_sweeps)

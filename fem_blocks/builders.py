@@ -66,21 +66,26 @@ class Layout:
         return x0, x1, y0, y1
 
     def check_no_overlap(self, source: str = "layout"):
-        """Raise InputError if two blocks overlap (area > 0, tolerance 1e-9 of the block size)."""
+        """Raise InputError if two blocks overlap (area > 0, tolerance 1e-9 of the block size): the pairs whose boxes
+        meet (the contact detection's grid broad phase, contact/broadphase.grid_pairs: linear in the number of
+        blocks), then overlaps ox = min(x1) - max(x0) > tol and oy > tol; the first such pair (i < j, smallest i, then
+        j) is named."""
         if not self.blocks:
             raise InputError(f"{source}: the layout has no block")
+        from .contact.broadphase import grid_pairs
         B = np.array([[b.x, b.y, b.x + b.length, b.y + b.height] for b in self.blocks])
-        tol = 1e-9 * max(1.0, float(np.max(B[:, 2:] - B[:, :2])))
-        order = np.argsort(B[:, 0])
-        Bs = B[order]
-        for i in range(len(Bs)):
-            j = i + 1
-            while j < len(Bs) and Bs[j, 0] < Bs[i, 2] - tol:
-                ox = min(Bs[i, 2], Bs[j, 2]) - max(Bs[i, 0], Bs[j, 0])
-                oy = min(Bs[i, 3], Bs[j, 3]) - max(Bs[i, 1], Bs[j, 1])
-                if ox > tol and oy > tol:
-                    raise InputError(f"{source}: blocks {order[i]} and {order[j]} overlap")
-                j += 1
+        size = B[:, 2:] - B[:, :2]
+        tol = 1e-9 * max(1.0, float(np.max(size)))
+        P = grid_pairs(B[:, :2], B[:, 2:], np.arange(len(B)), max(float(np.median(size.max(axis=1))), 1e-12))
+        if not len(P):
+            return
+        i, j = P[:, 0], P[:, 1]
+        ox = np.minimum(B[i, 2], B[j, 2]) - np.maximum(B[i, 0], B[j, 0])
+        oy = np.minimum(B[i, 3], B[j, 3]) - np.maximum(B[i, 1], B[j, 1])
+        bad = P[(ox > tol) & (oy > tol)]
+        if len(bad):
+            i, j = bad[np.lexsort((bad[:, 1], bad[:, 0]))[0]]
+            raise InputError(f"{source}: blocks {i} and {j} overlap")
 
 
 def split_bricks(blocks: list, brick_length: float) -> list:

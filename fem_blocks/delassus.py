@@ -20,28 +20,32 @@ from .linalg import BlockCSR
 
 
 @njit(cache=True)
-def _row_pattern(nc, order, ent_contact, starts, side_body):
-    """Block-CSR pattern of the Delassus operator (any block size): row α holds every contact sharing a body
-    with α (once), columns sorted. `order`/`starts` list the (contact, side) entities of each body (see
-    body_entities). Returns indptr, indices, diag_pos (position of the diagonal block of each row)."""
+def _row_pattern(nc, rows, order, ent_contact, starts, side_body):
+    """Block-CSR pattern of the rows `rows` of the Delassus operator (any block size): row i (contact rows[i])
+    holds every contact sharing a body with it (once, columns = contact numbers 0..nc-1), columns sorted.
+    `order`/`starts` list the (contact, side) entities of each body (see body_entities). Returns indptr,
+    indices, diag_pos (position of the diagonal block of each row)."""
+    nr = rows.shape[0]
     marker = -np.ones(nc, dtype=np.int64)
-    counts = np.zeros(nc, dtype=np.int64)
-    for a in range(nc):
+    counts = np.zeros(nr, dtype=np.int64)
+    for i in range(nr):
+        a = rows[i]
         for s in range(2):
             b = side_body[a, s]
             for e in range(starts[b], starts[b + 1]):
                 c = ent_contact[order[e]]
                 if marker[c] != a:
                     marker[c] = a
-                    counts[a] += 1
-    indptr = np.zeros(nc + 1, dtype=np.int64)
-    for a in range(nc):
-        indptr[a + 1] = indptr[a] + counts[a]
-    indices = np.empty(indptr[nc], dtype=np.int64)
-    diag_pos = np.empty(nc, dtype=np.int64)
+                    counts[i] += 1
+    indptr = np.zeros(nr + 1, dtype=np.int64)
+    for i in range(nr):
+        indptr[i + 1] = indptr[i] + counts[i]
+    indices = np.empty(indptr[nr], dtype=np.int64)
+    diag_pos = np.empty(nr, dtype=np.int64)
     marker[:] = -1
-    for a in range(nc):
-        k = indptr[a]
+    for i in range(nr):
+        a = rows[i]
+        k = indptr[i]
         for s in range(2):
             b = side_body[a, s]
             for e in range(starts[b], starts[b + 1]):
@@ -50,11 +54,11 @@ def _row_pattern(nc, order, ent_contact, starts, side_body):
                     marker[c] = a
                     indices[k] = c
                     k += 1
-        row = indices[indptr[a]:indptr[a + 1]]
+        row = indices[indptr[i]:indptr[i + 1]]
         row.sort()
-        for kk in range(indptr[a], indptr[a + 1]):
+        for kk in range(indptr[i], indptr[i + 1]):
             if indices[kk] == a:
-                diag_pos[a] = kk
+                diag_pos[i] = kk
     return indptr, indices, diag_pos
 
 
@@ -72,7 +76,8 @@ def body_entities(side_body, nb: int):
 
 
 @njit(cache=True)
-def _assemble_rows(nc, order, ent_contact, ent_side, starts, side_body, side_dofs, side_G, W_flat, W_offset, W_size):
+def _assemble_rows(nc, rows, order, ent_contact, ent_side, starts, side_body, side_dofs, side_G, W_flat, W_offset,
+                   W_size):
     """Row-by-row block-CSR assembly of w^{αβ} = Σ_{shared body b} G^α_s W_b G^β_s'ᵀ (d x d blocks, d =
     side_G.shape[2]): the pattern of _row_pattern; per side s of row α, GW = G^α_s W_b over all of body b's dofs
     once (GW[r, j] = Σ_i G^α_s[r, i] W_b[d_i, j], i in slot order), then one d x d product per entity (β, s') of
@@ -85,15 +90,17 @@ def _assemble_rows(nc, order, ent_contact, ent_side, starts, side_body, side_dof
     adds its terms one by one."""
     d = side_G.shape[2]
     nd = side_dofs.shape[2]
-    indptr, indices, diag_pos = _row_pattern(nc, order, ent_contact, starts, side_body)
-    blocks = np.zeros((indptr[nc], d, d))
+    nr = rows.shape[0]
+    indptr, indices, diag_pos = _row_pattern(nc, rows, order, ent_contact, starts, side_body)
+    blocks = np.zeros((indptr[nr], d, d))
     pos_of = -np.ones(nc, dtype=np.int64)
     maxsz = 0
     for b in range(W_size.shape[0]):
         maxsz = max(maxsz, W_size[b])
     GW = np.zeros((d, maxsz))
-    for a in range(nc):
-        for kk in range(indptr[a], indptr[a + 1]):
+    for i in range(nr):
+        a = rows[i]
+        for kk in range(indptr[i], indptr[i + 1]):
             pos_of[indices[kk]] = kk
         for s in range(2):
             b = side_body[a, s]
@@ -147,10 +154,13 @@ def _assemble_rows(nc, order, ent_contact, ent_side, starts, side_body, side_dof
     return indptr, indices, blocks, diag_pos
 
 
-def assemble(G, W_flat, W_offset, W_size, nb: int) -> BlockCSR:
+def assemble(G, W_flat, W_offset, W_size, nb: int, rows=None) -> BlockCSR:
     """Block-CSR Delassus operator w^{αβ} = G^α W H^β (d x d blocks, local order (n, t) or (n, t, s)) from the G
     blocks of either dimension (side_body (nc, 2), side_dofs (nc, 2, nd), side_G (nc, 2, d, nd)) and the per-body
-    dense W stored flat (row-major square block of size W_size[b] at W_offset[b], in the body's W numbering)."""
+    dense W stored flat (row-major square block of size W_size[b] at W_offset[b], in the body's W numbering).
+    rows: the contacts (increasing) whose rows to assemble, None for all; row i of the result is row rows[i] of the
+    whole operator, bitwise (columns: all nc contacts; diag_pos: the position of block (rows[i], rows[i])), so a
+    rank of a distributed run assembles only the rows of its own contacts."""
     nc = G.side_body.shape[0]
     d = G.side_G.shape[2]
     W_size = np.asarray(W_size, dtype=np.int64)
@@ -162,8 +172,9 @@ def assemble(G, W_flat, W_offset, W_size, nb: int) -> BlockCSR:
     if nc and np.any(G.side_dofs.max(axis=2) >= W_size[G.side_body]):
         raise InputError("G blocks: a dof index exceeds its body's W size")
     ent_contact, ent_side, order, starts = body_entities(G.side_body, nb)
+    rows = np.arange(nc, dtype=np.int64) if rows is None else np.ascontiguousarray(rows, dtype=np.int64)
     indptr, indices, blocks, diag_pos = _assemble_rows(
-        nc, order, ent_contact, ent_side, starts, np.ascontiguousarray(G.side_body, dtype=np.int64),
+        nc, rows, order, ent_contact, ent_side, starts, np.ascontiguousarray(G.side_body, dtype=np.int64),
         np.ascontiguousarray(G.side_dofs, dtype=np.int64), np.ascontiguousarray(G.side_G, dtype=np.float64),
         np.ascontiguousarray(W_flat, dtype=float), np.asarray(W_offset, dtype=np.int64), W_size)
     return BlockCSR(indptr, indices, blocks, diag_pos)

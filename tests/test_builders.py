@@ -125,3 +125,20 @@ def test_overlap_detected():
     blocks = [B.Block(0.2, 0.05, 0, 0, 0), B.Block(0.2, 0.05, 0.1, 0.01, 0)]
     with pytest.raises(InputError, match="overlap"):
         B.Layout(blocks).check_no_overlap()
+
+
+def test_overlap_check_names_the_first_overlapping_pair_and_accepts_touching_blocks():
+    """Layout.check_no_overlap on a running-bond wall (blocks touching along every joint: no error) and the same wall
+    with one block of the second course moved up by a quarter of its height onto its upper neighbours.
+    Catches: touching counted as overlap (the tolerance dropped), a pair missed by the broad phase, the wrong pair
+    named."""
+    blocks = B.running_bond(3, 6, 0.2, 0.05, 0.0)
+    B.Layout(blocks).check_no_overlap()
+    moved = list(blocks)
+    k = next(i for i, b in enumerate(blocks) if b.course == 1 and b.x > 0.05)
+    b = blocks[k]
+    moved[k] = B.Block(b.length, b.height, b.x, b.y + 0.25 * b.height, b.course, b.group)
+    over = sorted(j for j, c in enumerate(blocks) if j != k and c.course == 2 and c.x < b.x + b.length - 1e-12
+                  and c.x + c.length > b.x + 1e-12)
+    with pytest.raises(InputError, match=rf"blocks {min(k, over[0])} and {max(k, over[0])} overlap"):
+        B.Layout(moved).check_no_overlap("wall")

@@ -135,3 +135,28 @@ def test_ranks_whose_models_differ_stop_with_a_clear_error():
     step.comm = Comm(lambda x: (x[0], x[1], x[2] + 1, x[3]))
     with pytest.raises(RankMismatchError, match="ranks' copies of the model differ"):
         step._check_replicas()
+
+
+def test_a_ranks_rows_give_the_colours_and_iterates_of_the_whole_operator():
+    """ColourSolver.from_rows (a rank holding only the rows of its own contacts, here one rank holding them all, on
+    MPI.COMM_SELF): the colours are colour_groups' on the whole W (the group graph from the rows' nonzero blocks) and
+    the solve gives the whole-operator solver's r, u and sweep count, bit for bit. Catches: groups coupled through a
+    block of zeros (the held body, 25 colours instead of 6 on a wall), a colour per group read in contact order. (Rows
+    split among ranks, the gathered group graph: tests/test_dist_run.py, bitwise against one process.)"""
+    from mpi4py import MPI
+    from fem_blocks.distributed.colour import body_pair_groups
+    W, q, mu, cand, ant = problem(seed=4)
+    n = W.n
+    ref = ColourSolver(W, bodies=(cand, ant, 9))
+    rows = BlockCSR(W.indptr.copy(), W.indices.copy(), W.blocks.copy(), W.diag_pos.copy())
+    ids = np.arange(n)
+    got = ColourSolver.from_rows(rows, ids, ids, n, body_pair_groups(cand, ant, 9)[0], MPI.COMM_SELF)
+    try:
+        assert got.n_colours == ref.n_colours
+        for c in range(ref.n_colours):
+            assert np.array_equal(got.order[c], ref.order[c])
+        a = ref.solve(q, mu, tol=1e-10, max_sweeps=300)
+        b = got.solve(q, mu, tol=1e-10, max_sweeps=300)
+        assert a.sweeps == b.sweeps and np.array_equal(a.r, b.r) and np.array_equal(a.u, b.u)
+    finally:
+        got.destroy()

@@ -212,3 +212,26 @@ def test_grid_pairs_2d_groups_vs_brute_force():
     for cell in (0.5, 3.0, 50.0):
         pairs = grid_pairs(lo, hi, group, cell)
         assert np.array_equal(pairs[np.lexsort((pairs[:, 1], pairs[:, 0]))], np.column_stack([i, j]))
+
+
+def test_rows_of_the_operator_are_its_rows_bitwise():
+    """A rank assembles only the rows of its own contacts (delassus.assemble rows=) from the G blocks of a subset of
+    the contacts (kin.build_G on cs.subset): both must be the whole operator's and the whole G's, bit for bit, or a
+    distributed run would not reproduce the serial iterates. Expectation: the whole assembly, itself checked against
+    the dense G W Gᵀ above. Catches: row i assembled for contact i instead of rows[i]; the diagonal position taken
+    in the whole operator's numbering; a G block that depends on the other contacts of the set."""
+    cs, G, kind, rot, center, Wb, U_offset, Wd, Wr, nbn = scene_G(seed=5)
+    B = delassus.assemble(G, *Wb, nb=3)
+    rows = np.array([1, 4, 6])
+    R = delassus.assemble(G, *Wb, nb=3, rows=rows)
+    assert R.n == len(rows)
+    for i, a in enumerate(rows):
+        s, e = B.indptr[a], B.indptr[a + 1]
+        assert np.array_equal(R.indices[R.indptr[i]:R.indptr[i + 1]], B.indices[s:e])
+        assert np.array_equal(R.blocks[R.indptr[i]:R.indptr[i + 1]], B.blocks[s:e])
+        assert R.indices[R.diag_pos[i]] == a and R.diag_pos[i] - R.indptr[i] == B.diag_pos[a] - s
+    sub = np.array([0, 2, 3, 6])
+    Gs = kin.build_G(cs.subset(sub), kind, rot, center, np.concatenate([np.arange(nbn), np.arange(4)]),
+                     np.array([0, 0, nbn]))
+    for k in ("side_body", "side_dofs", "side_G"):
+        assert np.array_equal(getattr(Gs, k), getattr(G, k)[sub])

@@ -125,6 +125,7 @@ class ContactStep:
         self.comm = None  # MPI ranks sharing the contact solve (use_comm); None: this process alone
         self.body_owner = None  # N > 1 ranks: the rank of each body (distributed/graph.partition_graph)
         self._colours = None  # order = "colours": the colour solver of the current Delassus operator
+        self._local = None  # N > 1 ranks in colour order: this rank's contacts (_RankContacts), else None
         self._linear = None  # N > 1 ranks, Newton: the shared linear solve (_SharedLinear)
 
     # ------------------------------------------------------------------ set-up
@@ -162,6 +163,53 @@ class ContactStep:
             self.body_owner = partition_graph(*g, self.comm)
         return self.body_owner[self.cs.cand_body]
 
+    def _split(self) -> bool:
+        """N > 1 ranks in colour order: each rank holds the G blocks of its contacts and their neighbours only, and
+        the Delassus rows of its own contacts (docs/scaling.md "Phase B1")."""
+        return self.comm is not None and self.opts.order == "colours"
+
+    def _rank_contacts(self) -> "_RankContacts":
+        """This rank's part of the contact set (N > 1 ranks, colour order). With O the bodies of this rank and A the
+        contacts it owns (candidate body in O): B = O ∪ the bodies of A, and L = the contacts with a body in B
+        (global numbers, increasing). L holds every contact coupled to one of A (W_αβ needs a shared body) and every
+        contact acting on a body of O (its impulse reaches that body)."""
+        cs, p = self.cs, self.comm.Get_rank()
+        own = np.flatnonzero(self._owner() == p)
+        mine = self.body_owner == p
+        near = mine.copy()
+        near[cs.cand_body[own]] = True
+        near[cs.ant_body[own]] = True
+        L = np.flatnonzero(near[cs.cand_body] | near[cs.ant_body])
+        return _RankContacts(L, own, np.searchsorted(L, own), np.repeat(mine, self.scene.W_size))
+
+    def _build_G(self, centers):
+        """The G blocks of the contact set (N > 1 ranks in colour order: of this rank's contacts L only)."""
+        s, cs = self.scene, self.cs
+        self._local = self._rank_contacts() if self._split() else None
+        if self._local is not None:
+            cs = cs.subset(self._local.L)
+        self.G = self._kin.build_G(cs, s.kind, s.rot, centers, s.bnode_index_flat, s.bnode_offset)
+
+    def _all_rows(self, x: np.ndarray) -> np.ndarray:
+        """Per-contact values x (nG, k) (rows of G's contacts) as the values of every contact: N > 1 ranks in colour order,
+        the rows of this rank's own contacts gathered from every rank (ColourSolver.gather); else x."""
+        if self._local is None:
+            return x
+        return self._colours.gather(np.ascontiguousarray(x[self._local.own_pos]), x.shape[1])
+
+    def _impulse(self, P: np.ndarray) -> np.ndarray:
+        """H P, the contact impulses on the bodies (flat W-numbered vector). N > 1 ranks in colour order: each rank
+        sums the impulses on its own bodies from its contacts L (all that act on them, in increasing contact number,
+        as one process does), and an all-reduce of the vectors, zero elsewhere, gives every rank the same bits."""
+        s, K = self.scene, self._kin
+        if self._local is None:
+            return K.accumulate_impulse(self.G, P, s.n_udof, s.U_offset)
+        from mpi4py import MPI
+        imp = K.accumulate_impulse(self.G, P[self._local.L], s.n_udof, s.U_offset)
+        imp[~self._local.dofs] = 0.0
+        self.comm.Allreduce(MPI.IN_PLACE, imp, op=MPI.SUM)
+        return imp
+
     def _linear_solver(self):
         """N > 1 ranks and a Newton solver: the distributed solve of J Δr = -F on the Delassus operator's pattern
         (_SharedLinear: built at the first Newton iteration, kept while W's block pattern does not change)."""
@@ -175,13 +223,15 @@ class ContactStep:
     def _check_replicas(self):
         """N > 1 ranks: every rank built its own copy of the model; their contact sets and Delassus operators must
         agree (nodes whose BLAS or CPU differ can give different bits). Compared by the contact and block counts and
-        a checksum of a sample of W's blocks; RankMismatchError on every rank if they differ."""
+        a checksum of a sample of W's blocks (each rank's own rows in colour order: the contact sets only);
+        RankMismatchError on every rank if they differ."""
         import zlib
         from ..errors import RankMismatchError
-        W = self.Wdel
-        step = max(1, W.blocks.shape[0] // 4096)
-        mine = (W.n, W.indices.size, zlib.crc32(np.ascontiguousarray(W.blocks[::step]).tobytes()),
-                zlib.crc32(np.ascontiguousarray(self.cs.gap).tobytes()))
+        mine = (len(self.cs.gap), zlib.crc32(np.ascontiguousarray(self.cs.gap).tobytes()))
+        if self._local is None:  # (else each rank holds its own rows of W)
+            W = self.Wdel
+            step = max(1, W.blocks.shape[0] // 4096)
+            mine += (W.n, W.indices.size, zlib.crc32(np.ascontiguousarray(W.blocks[::step]).tobytes()))
         every = self.comm.allgather(mine)
         if any(x != every[0] for x in every):
             bad = [p for p, x in enumerate(every) if x != every[0]]
@@ -203,9 +253,15 @@ class ContactStep:
             return None
         if self._colours is not None and self._colours.W is self.Wdel:
             return self._colours
-        from ..distributed.colour import ColourSolver
+        from ..distributed.colour import ColourSolver, body_pair_groups
         if self._colours is not None:
             self._colours.destroy()
+        if self._local is not None:
+            cs = self.cs
+            self._colours = ColourSolver.from_rows(self.Wdel, self._local.own, self._local.L, len(cs.gap),
+                                                   body_pair_groups(cs.cand_body, cs.ant_body, self.scene.nb)[0],
+                                                   self.comm)
+            return self._colours
         owner = self._owner() if self.comm is not None else None
         self._colours = ColourSolver(self.Wdel, owner, self.comm,
                                      bodies=(self.cs.cand_body, self.cs.ant_body, self.scene.nb))
@@ -240,8 +296,11 @@ class ContactStep:
         return cs
 
     def _delassus(self, W_flat, W_offset, W_size):
+        """W of the contact set; N > 1 ranks in colour order: the rows of this rank's own contacts, columns the
+        contacts L (delassus.assemble's rows)."""
         from .. import delassus
-        return delassus.assemble(self.G, W_flat, W_offset, W_size, self.scene.nb)
+        rows = None if self._local is None else self._local.own_pos
+        return delassus.assemble(self.G, W_flat, W_offset, W_size, self.scene.nb, rows=rows)
 
     def _initial_state(self):
         """Committed law state of new contacts: 2D (nc, NSTATE); 3D one more column, S_US = NSTATE (u_S)."""
@@ -321,8 +380,7 @@ class ContactStep:
         elif updated and len(self.cs.gap):  # between re-detections: same pairs, current points, frames and gaps
             self.cs = self._det.update_geometry(self.cs, s.positions(), s.bedges if self.dim == 2 else s.bfaces)
         if redetect or updated:
-            centers = s.centers(reference=redetect and first and not updated)
-            self.G = self._kin.build_G(self.cs, s.kind, s.rot, centers, s.bnode_index_flat, s.bnode_offset)
+            self._build_G(s.centers(reference=redetect and first and not updated))
             self.mark_W_dirty()
         if self.W_dirty:
             from time import perf_counter
@@ -382,7 +440,6 @@ class ContactStep:
         self.dim = sim.dim
         self._det, self._kin = (det, kin) if self.dim == 2 else (det3, kin3)
         self._cs_cls = det.ContactSet if self.dim == 2 else det3.ContactSet
-        self._g_cls = kin.GBlocks if self.dim == 2 else kin3.GBlocks
         if self.dim == 3 and self.opts.coarse != "none":
             raise InputError(f"contact.coarse = {self.opts.coarse!r}: the interface coarse space is 2D only; expected "
                              "'none' in 3D")
@@ -420,8 +477,6 @@ class ContactStep:
             return d
         for k in self._CS:
             d[f"contact.cs.{k}"] = getattr(self.cs, k)
-        for k in ("side_body", "side_dofs", "side_G"):
-            d[f"contact.G.{k}"] = getattr(self.G, k)
         d["contact.P"], d["contact.state"], d["contact.law"] = self.P, self.state, self.law
         if self.h_last is not None:  # the predictor's history
             d["contact.h_last"] = np.float64(self.h_last)
@@ -454,7 +509,6 @@ class ContactStep:
         if len(self.cs.cand_body) and max(self.cs.cand_body.max(), self.cs.ant_body.max()) >= self.scene.nb:
             raise InputError("checkpoint: contacts refer to bodies this model does not have")
         self._assign_laws()
-        self.G = self._g_cls(*(np.array(d[f"contact.G.{k}"]) for k in ("side_body", "side_dofs", "side_G")))
         self.P, self.state = np.array(d["contact.P"]), np.array(d["contact.state"])
         self.h_last = float(d["contact.h_last"]) if "contact.h_last" in d else None
         self.P_prev = np.array(d["contact.P_prev"]) if "contact.P_prev" in d else None
@@ -465,6 +519,9 @@ class ContactStep:
         owner = np.array(d["contact.body_owner"]) if "contact.body_owner" in d else None
         self.body_owner = (owner if owner is not None and self.comm is not None and len(owner) == self.scene.nb
                            and owner.max(initial=0) < self.comm.Get_size() else None)  # else partitioned again
+        # G: frozen geometry, from the reference placement as at the first step (the frames of the scene, never
+        # refreshed); updated geometry rebuilds it at the next step
+        self._build_G(self.scene.centers(reference=self.opts.geometry == "frozen"))
         self.W_dirty = True  # rebuilt at the next step (new scene); 3D: with the rigid W in use at the export
         self._rigid_W_restored = (np.array(d["contact.rigid_W"]) if "contact.rigid_W" in d
                                   and not bool(d["contact.W_dirty"]) else None)
@@ -510,10 +567,11 @@ class ContactStep:
                                  rigid_impulse=ri, friction=np.zeros(0), friction_total=self.friction_total)
         ufree = s.gather("ufree")
         K = self._kin
-        vfree = K.local_velocity(self.G, ufree, s.U_offset)
-        vi = K.local_velocity(self.G, s.gather("u"), s.U_offset)
+        colours = self._colour_solver()
+        vfree = self._all_rows(K.local_velocity(self.G, ufree, s.U_offset))
+        vi = self._all_rows(K.local_velocity(self.G, s.gather("u"), s.U_offset))
         if self.opts.geometry == "frozen":
-            gt = self.gap_ref + K.local_velocity(self.G, s.gather("q"), s.U_offset)[:, 0]
+            gt = self.gap_ref + self._all_rows(K.local_velocity(self.G, s.gather("q"), s.U_offset)[:, :1])[:, 0]
         else:
             gt = cs.gap - cs.g0 - self.g_built  # as-built contacts of the initial set: g - g0 - g_built
         from ..laws import S_UP
@@ -542,7 +600,7 @@ class ContactStep:
             coarse = self._coarse
         res = solve(ContactProblem(self.Wdel, q.ravel(), self.mu, laws=laws),
                     dataclasses.replace(self.opts, seed=self.opts.seed + self.steps), r0=self.warm_start(h).ravel(),
-                    coarse=coarse, colours=self._colour_solver(), linear=self._linear_solver())
+                    coarse=coarse, colours=colours, linear=self._linear_solver())
         if self.cohesive:
             from ..laws import commit_step  # crushing at the cap, then the laws' commit (any dimension)
             commit_step(self.law, self.par, self.state, res.trial, ueff, res.r, res.u, cs.area, h, th)
@@ -561,7 +619,7 @@ class ContactStep:
         from .friction import friction_work  # -r̃_T · Δu_T per contact, from the committed state
         friction = friction_work(self.law, self.par, self.state, P, v, vi, cs.area, h, th)
         self.friction_total += float(friction.sum())
-        imp = K.accumulate_impulse(self.G, P, s.n_udof, s.U_offset)
+        imp = self._impulse(P)
         gc, rc, ri = s.corrections(imp)
         tm["correction"] += perf_counter() - c3
         status = np.zeros(nc, dtype=np.int64)
@@ -585,3 +643,14 @@ class ContactStep:
                              status=status,
                              law=self.law.copy(), state=self.state.copy(), group_corr=gc, rigid_corr=rc,
                              rigid_impulse=ri, friction=friction, friction_total=self.friction_total)
+
+
+@dataclasses.dataclass
+class _RankContacts:
+    """A rank's part of the contact set (N > 1 ranks in colour order, ContactStep._rank_contacts): L its contacts
+    (global numbers, increasing: its own and those sharing a body with them or acting on its bodies), own its own
+    contacts (global), own_pos their positions in L, dofs the mask of its bodies' dofs in the flat W numbering."""
+    L: np.ndarray
+    own: np.ndarray
+    own_pos: np.ndarray
+    dofs: np.ndarray

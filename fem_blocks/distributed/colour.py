@@ -55,26 +55,52 @@ MAX_OUTER = 100      # interface laws: most staggered passes (solver/nlgs.solve_
 X_TOL = 1e-12        # interface laws: the internal variables have stopped changing
 
 
+def body_pair_groups(cand, ant, nb: int) -> tuple[np.ndarray, int]:
+    """(group of each contact, number of groups): contacts grouped by (candidate, antagonist) body pair, groups
+    numbered in increasing (candidate, antagonist) order."""
+    cand = np.asarray(cand, dtype=np.int64)
+    ant = np.asarray(ant, dtype=np.int64)
+    keys, group = np.unique(cand * nb + ant, return_inverse=True)
+    return group.astype(np.int64).ravel(), int(keys.size)
+
+
+def colour_group_graph(n_groups: int, ga, gb, comm=None) -> np.ndarray:
+    """Colour per group: greedy (groups in increasing number) on the symmetric graph of the group pairs
+    (ga[k], gb[k]) (self-pairs allowed, they couple nothing). comm (N > 1 ranks): each rank gives the pairs of its
+    own rows, the graph is their union (one Allgatherv of the distinct pairs), the same colours on every rank."""
+    ga = np.asarray(ga, dtype=np.int64)
+    gb = np.asarray(gb, dtype=np.int64)
+    e = np.unique(np.concatenate([ga * n_groups + gb, gb * n_groups + ga]))
+    if comm is not None and comm.Get_size() > 1:
+        from mpi4py import MPI
+        counts = np.array(comm.allgather(e.size), dtype=np.int64)
+        every = np.empty(int(counts.sum()), dtype=np.int64)
+        comm.Allgatherv(e, [every, counts, np.concatenate([[0], np.cumsum(counts)[:-1]]), MPI.INT64_T])
+        e = np.unique(every)
+    i, j = e // n_groups, e % n_groups
+    indptr = np.concatenate([[0], np.cumsum(np.bincount(i, minlength=n_groups))]).astype(np.int64)
+    return _greedy_colouring(indptr, j.astype(np.int64))
+
+
+def _nonzero_blocks(W: BlockCSR):
+    """(rows, cols): the row and column of every block of W with a nonzero entry (rows numbered 0..W.n-1)."""
+    nz = np.any(W.blocks != 0.0, axis=(1, 2))
+    rows = np.repeat(np.arange(W.n, dtype=np.int64), np.diff(W.indptr))
+    return rows[nz], W.indices[nz]
+
+
 def colour_groups(W: BlockCSR, cand, ant, nb: int) -> np.ndarray:
     """Colour per contact: contacts grouped by (candidate, antagonist) body pair; two groups are coupled when a
     contact of one and a contact of the other have a block W_αβ with a nonzero entry (they share a body that moves:
     through a body held in every dof, like a fixed foundation, the assembly stores blocks of zeros, which couple
     nothing: 0·r_β is 0 whatever the ghost copy of r_β holds); coupled groups get different colours (greedy, groups in
-    increasing (candidate, antagonist) order); every contact takes its group's colour."""
-    import scipy.sparse as sp
+    increasing (candidate, antagonist) order, `colour_group_graph`); every contact takes its group's colour."""
     cand = np.asarray(cand, dtype=np.int64)
-    ant = np.asarray(ant, dtype=np.int64)
-    n = cand.size
-    if n == 0:
+    if cand.size == 0:
         return np.zeros(0, dtype=np.int64)
-    keys, group = np.unique(cand * nb + ant, return_inverse=True)
-    P = sp.csr_matrix((np.ones(n), (np.arange(n), group)), shape=(n, keys.size))
-    nz = np.any(W.blocks != 0.0, axis=(1, 2)).astype(np.float64)  # a block of zeros (through a held body) couples nothing
-    A = sp.csr_matrix((nz, W.indices, W.indptr), shape=(n, n))
-    A.eliminate_zeros()
-    S = (P.T @ (A + A.T) @ P).tocsr()
-    S.sort_indices()
-    return _greedy_colouring(S.indptr.astype(np.int64), S.indices.astype(np.int64))[group]
+    group, ng = body_pair_groups(cand, ant, nb)
+    rows, cols = _nonzero_blocks(W)
+    return colour_group_graph(ng, group[rows], group[cols])[group]
 
 
 def coupling_rows(W: BlockCSR) -> BlockCSR:
@@ -103,7 +129,7 @@ class ColourSolver:
     def __init__(self, W: BlockCSR, contact_owner=None, comm=None, bodies=None):
         self.W = W
         self.d = W.dim
-        n = W.n
+        n = self.n = W.n
         self.comm = comm if comm is not None and comm.Get_size() > 1 else None
         if bodies is not None:
             cand, ant, nb = bodies
@@ -124,16 +150,49 @@ class ColourSolver:
                           for c in range(self.n_colours)]
             self.r = np.zeros(self.d * n)
             return
-        from .sweep import DistSweep, local_rows
+        from .sweep import local_rows
         owner = np.asarray(contact_owner, dtype=np.int64)
         if owner.shape != (n,):
             raise InputError(f"contact_owner: expected {n} ranks (one per contact), got shape {owner.shape}")
-        rank = self.comm.Get_rank()
-        lr = local_rows(Wc, np.zeros(self.d * n), np.zeros(n), np.flatnonzero(owner == rank))
+        lr = local_rows(Wc, np.zeros(self.d * n), np.zeros(n), np.flatnonzero(owner == self.comm.Get_rank()))
         del Wc
+        self._distribute(lr, colour[np.concatenate([lr.owned, lr.ghost])])
+
+    @classmethod
+    def from_rows(cls, rows: BlockCSR, owned, columns, n: int, group, comm) -> "ColourSolver":
+        """The colour solver of a run whose ranks hold only the rows of their own contacts (collective on `comm`,
+        N > 1 ranks). rows: the rows of W of this rank's contacts `owned` (global numbers, increasing; row i is
+        contact owned[i]), their column k meaning contact columns[k] (global numbers, increasing), as
+        delassus.assemble(..., rows=...) gives them on a rank's contact subset; n: the number of contacts of the
+        whole run; group: (n,) the body-pair group of every contact (`body_pair_groups`). The colours are those of
+        `colour_groups` on the whole W (the nonzero blocks of every rank's rows, gathered), so the iterates are
+        those of one process in colour order, bitwise."""
+        from .sweep import localise
+        self = cls.__new__(cls)
+        self.W, self.d, self.n = rows, rows.dim, int(n)
+        self.comm = comm
+        owned = np.asarray(owned, dtype=np.int64)
+        columns = np.asarray(columns, dtype=np.int64)
+        group = np.asarray(group, dtype=np.int64)
+        r_loc, c_loc = _nonzero_blocks(rows)
+        colour_of_group = colour_group_graph(int(group.max()) + 1 if group.size else 0,
+                                             group[owned[r_loc]], group[columns[c_loc]], comm)
+        self.n_colours = int(colour_of_group.max()) + 1 if colour_of_group.size else 0  # the same on every rank
+        self.colour = None
+        Wc = coupling_rows(rows)
+        lr = localise(owned, Wc.indptr, columns[Wc.indices], Wc.blocks, Wc.diag_pos)
+        del Wc
+        self._distribute(lr, colour_of_group[group[np.concatenate([lr.owned, lr.ghost])]])
+        return self
+
+    def _distribute(self, lr, colour_local):
+        """N > 1 ranks: this rank's rows `lr` (sweep.LocalRows), the colours of its owned then ghost contacts; the
+        PETSc scatters (sweep.DistSweep) and the layout of the Allgatherv of the owned rows (`gather`)."""
+        from .sweep import DistSweep
+        self.dist = None
         self.owned, self.ghost = lr.owned, lr.ghost
         self.rows = (lr.indptr, lr.indices, lr.blocks, lr.diag_pos)
-        self.dist = DistSweep(lr, colour[np.concatenate([lr.owned, lr.ghost])], self.n_colours, self.comm)
+        self.dist = DistSweep(lr, colour_local, self.n_colours, self.comm)
         self.order = self.dist.order
         self.r = self.dist.r  # owned then ghost impulses; the owned part is the PETSc vector's array
         counts = np.array(self.comm.allgather(lr.owned.size), dtype=np.int64)
@@ -155,12 +214,13 @@ class ColourSolver:
         if self.dist is not None:
             self.dist.scatters[c].scatter(self.dist.vec, self.dist.gvec)
 
-    def _gather(self, x_own: np.ndarray, width: int) -> np.ndarray:
-        """The owned rows' values (n_own, width) of every rank, as one (n, width) array in contact order."""
+    def gather(self, x_own: np.ndarray, width: int) -> np.ndarray:
+        """The owned rows' values (n_own, width) of every rank, as one (n, width) array in contact order, on every
+        rank (one Allgatherv)."""
         if self.comm is None:
             return x_own.reshape(-1, width).copy()
         from mpi4py import MPI
-        n = self.W.n
+        n = self.n
         buf = np.empty(n * width, dtype=x_own.dtype)
         mt = MPI.DOUBLE if x_own.dtype == np.float64 else MPI.INT64_T
         self.comm.Allgatherv(np.ascontiguousarray(x_own).ravel(),
@@ -191,7 +251,7 @@ class ColourSolver:
         u = W r + q on every rank (SolverResult; with laws, `trial` the internal variables to commit)."""
         if criterion not in ("change", "residual"):
             raise InputError(f"criterion = {criterion!r}: expected 'change' or 'residual'")
-        d, n = self.d, self.W.n
+        d, n = self.d, self.n
         q = np.ascontiguousarray(q, dtype=np.float64).ravel()
         mu = np.ascontiguousarray(np.broadcast_to(np.asarray(mu, dtype=np.float64).ravel(), (n,)))
         if q.size != d * n:
@@ -249,12 +309,12 @@ class ColourSolver:
                    f"tolerance {tol:g} on the {criterion})")
         if d == 3 and cases[0]:
             msg += f"; {cases[0]} local solves without a positive diagonal block"
-        r_all = self._gather(self.r[:d * no], d).ravel()
-        u_all = self._gather(u, d).ravel()
+        r_all = self.gather(self.r[:d * no], d).ravel()
+        u_all = self.gather(u, d).ravel()
         out = SolverResult(r_all, u_all, int(sweeps), bool(converged), float(change), res, res_abs, msg,
                            cases if d == 3 else None)
         if coh is not None:
-            out.trial = self._gather(coh["trial"], 1).ravel()
+            out.trial = self.gather(coh["trial"], 1).ravel()
         return out
 
     def _u(self, qo, u):

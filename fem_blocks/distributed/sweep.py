@@ -63,7 +63,7 @@ class LocalRows:
 
 def local_rows(W: BlockCSR, q, mu, owned) -> LocalRows:
     """The rows of the contacts `owned` (global numbers) of a global block-CSR W (a test and file driver's helper:
-    in the time stepper each rank assembles its own rows directly)."""
+    in the time stepper each rank assembles its own rows directly, `localise`)."""
     owned = np.unique(np.asarray(owned, dtype=np.int64))
     d = W.dim
     q = np.asarray(q, dtype=np.float64).reshape(-1, d)
@@ -71,16 +71,26 @@ def local_rows(W: BlockCSR, q, mu, owned) -> LocalRows:
     starts, ends = W.indptr[owned], W.indptr[owned + 1]
     cnt = ends - starts
     pos = np.repeat(starts - np.cumsum(cnt) + cnt, cnt) + np.arange(cnt.sum())  # entries of the owned rows, in order
-    cols = W.indices[pos]
+    indptr = np.concatenate([[0], np.cumsum(cnt)]).astype(np.int64)
+    dpos = W.diag_pos[owned]
+    diag = np.where(dpos >= 0, dpos - starts + indptr[:-1], -1).astype(np.int64)
+    rows = localise(owned, indptr, W.indices[pos], np.ascontiguousarray(W.blocks[pos]), diag)
+    rows.q, rows.mu = np.ascontiguousarray(q[owned]).ravel(), np.ascontiguousarray(mu[owned])
+    return rows
+
+
+def localise(owned, indptr, cols, blocks, diag_pos) -> LocalRows:
+    """LocalRows of the rows of the contacts `owned` (global numbers, increasing): block-CSR indptr, global column
+    numbers `cols` (increasing per row), blocks and the diagonal positions within these rows; the columns renumbered
+    owned first, then the ghosts (the other columns, increasing), their order within a row kept. q and mu empty."""
+    owned = np.asarray(owned, dtype=np.int64)
+    cols = np.asarray(cols, dtype=np.int64)
     ghost = np.setdiff1d(cols, owned)
     ids = np.concatenate([owned, ghost])
     perm = np.argsort(ids, kind="stable")
     local = perm[np.searchsorted(ids, cols, sorter=perm)]
-    indptr = np.concatenate([[0], np.cumsum(cnt)]).astype(np.int64)
-    dpos = W.diag_pos[owned]
-    diag = np.where(dpos >= 0, dpos - starts + indptr[:-1], -1).astype(np.int64)
-    return LocalRows(owned, ghost, indptr, local.astype(np.int64), np.ascontiguousarray(W.blocks[pos]), diag,
-                     np.ascontiguousarray(q[owned]).ravel(), np.ascontiguousarray(mu[owned]))
+    return LocalRows(owned, ghost, np.asarray(indptr, dtype=np.int64), local.astype(np.int64), blocks,
+                     np.asarray(diag_pos, dtype=np.int64), np.zeros(0), np.zeros(0))
 
 
 @njit(cache=True)
