@@ -21,8 +21,16 @@ import time
 # dry 2D Coulomb joints with NLGS (arch), dry 3D joints (wall3d_push).
 DEMOS = ("shear_wall_fc_p030.toml", "shear_wall_p030.toml", "arch.toml", "wall3d_push.toml")
 # ... and again with the colour-order Gauss-Seidel of runs on several MPI ranks ([contact] order = "colours": its
-# exact sums and per-contact residual terms, 2D cohesive, 2D and 3D Coulomb)
+# exact sums and per-contact residual terms, 2D cohesive, 2D and 3D Coulomb), the interface coarse correction
+# (2D Coulomb) and the updated 3D geometry (the re-detection's geometry update)
 COLOURS = ("shear_wall_p030.toml", "arch.toml", "wall3d_push.toml")
+VARIANTS = {
+    "colours": dict(solver="nlgs", fallback="none", coarse="none", order="colours", criterion="residual",
+                    max_sweeps=20),
+    "coarse": dict(solver="nlgs", fallback="none", coarse="interfaces", max_sweeps=40),
+    "updated": dict(geometry="updated"),
+}
+EXTRA = ("arch.toml:coarse", "wall3d_push.toml:updated")
 STEPS_PER_STAGE = 2
 
 
@@ -30,24 +38,24 @@ def _demo_dir() -> str:
     return os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "demos")
 
 
-def warm(demos=DEMOS, out=None, verbose: bool = True, colours=COLOURS) -> float:
+def warm(demos=DEMOS, out=None, verbose: bool = True, colours=COLOURS, extra=EXTRA) -> float:
     """Run each demo for STEPS_PER_STAGE steps per stage (``--quick`` resolution), then each of `colours` with the
-    colour-order Gauss-Seidel; return the seconds taken."""
+    colour-order Gauss-Seidel and the `extra` "demo:variant" runs (VARIANTS: the [contact] keys replaced); return
+    the seconds taken."""
     import dataclasses
     from .case import load_case, quick
     from .runner import run_case
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix="fem_blocks_warmup_") as tmp:
-        for name in list(demos) + [f"{c}:colours" for c in colours]:
+        for name in list(demos) + [f"{c}:colours" for c in colours] + list(extra):
             name, _, variant = name.partition(":")
             path = os.path.join(_demo_dir(), name)
             if not os.path.exists(path):
                 continue
             case = quick(load_case(path))
             if variant:
-                case.contact = dataclasses.replace(case.contact, solver="nlgs", fallback="none", coarse="none",
-                                                   order="colours", criterion="residual", max_sweeps=20)
-                name = f"{name} (order = 'colours')"
+                case.contact = dataclasses.replace(case.contact, **VARIANTS[variant])
+                name = f"{name} ({variant})"
             for st in case.stages:
                 st.duration = min(st.duration, STEPS_PER_STAGE * st.h)
                 st.output_every = STEPS_PER_STAGE
