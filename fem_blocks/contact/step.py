@@ -191,8 +191,8 @@ class ContactStep:
         self.G = self._kin.build_G(cs, s.kind, s.rot, centers, s.bnode_index_flat, s.bnode_offset)
 
     def _all_rows(self, x: np.ndarray) -> np.ndarray:
-        """Per-contact values x (nG, k) (rows of G's contacts) as the values of every contact: N > 1 ranks in colour order,
-        the rows of this rank's own contacts gathered from every rank (ColourSolver.gather); else x."""
+        """Per-contact values x (nG, k), one row per contact of G, as the values (nc, k) of every contact: N > 1 ranks in
+        colour order, the rows of this rank's own contacts gathered from every rank (ColourSolver.gather); else x."""
         if self._local is None:
             return x
         return self._colours.gather(np.ascontiguousarray(x[self._local.own_pos]), x.shape[1])
@@ -222,9 +222,9 @@ class ContactStep:
 
     def _check_replicas(self):
         """N > 1 ranks: every rank built its own copy of the model; their contact sets and Delassus operators must
-        agree (nodes whose BLAS or CPU differ can give different bits). Compared by the contact and block counts and
-        a checksum of a sample of W's blocks (each rank's own rows in colour order: the contact sets only);
-        RankMismatchError on every rank if they differ."""
+        agree (nodes whose BLAS or CPU differ can give different bits). Compared by the contact count and a checksum
+        of the gaps, and, when every rank holds the whole W (not in colour order), its block count and a checksum of
+        a sample of its blocks; RankMismatchError on every rank if they differ."""
         import zlib
         from ..errors import RankMismatchError
         mine = (len(self.cs.gap), zlib.crc32(np.ascontiguousarray(self.cs.gap).tobytes()))

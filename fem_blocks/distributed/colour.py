@@ -21,9 +21,11 @@ couple and the groups need 25 and 74 colours.)
 
 Distribution (comm with N > 1 ranks; distributed/sweep.py). Rank p owns the contacts `owner == p` (the time
 stepper: the rank of the contact's candidate body, distributed/partition.py; with groups, one group's contacts
-must have one owner) and holds their rows of W (without the blocks of zeros, `coupling_rows`, as the serial
-sweep; column order of the global row kept, so every v_α is summed exactly as serially), q_α, μ_α, the law data and the impulses of its
-contacts and of the *ghost* contacts its rows couple to. After colour c, one PETSc scatter carries the new impulses of
+must have one owner) and holds their rows of W (without the blocks of zeros, `coupling_rows`, as the serial sweep;
+column order of the global row kept, so every v_α is summed exactly as serially), q_α, μ_α, the law data and the
+impulses of its contacts and of the *ghost* contacts its rows couple to. The rows come from the whole W
+(`ColourSolver`) or are assembled by the rank itself (`ColourSolver.from_rows`, the time stepper: the group graph is
+then the union of every rank's rows, gathered). After colour c, one PETSc scatter carries the new impulses of
 colour c to the ranks that hold them as ghosts (neighbour ranks only). The iterates are the serial ones, bitwise,
 for any N and any ownership.
 
@@ -93,8 +95,9 @@ def colour_groups(W: BlockCSR, cand, ant, nb: int) -> np.ndarray:
     """Colour per contact: contacts grouped by (candidate, antagonist) body pair; two groups are coupled when a
     contact of one and a contact of the other have a block W_αβ with a nonzero entry (they share a body that moves:
     through a body held in every dof, like a fixed foundation, the assembly stores blocks of zeros, which couple
-    nothing: 0·r_β is 0 whatever the ghost copy of r_β holds); coupled groups get different colours (greedy, groups in
-    increasing (candidate, antagonist) order, `colour_group_graph`); every contact takes its group's colour."""
+    nothing: 0·r_β is 0 whatever the ghost copy of r_β holds); coupled groups get different colours (greedy,
+    groups in increasing (candidate, antagonist) order, `colour_group_graph`); every contact takes its group's
+    colour."""
     cand = np.asarray(cand, dtype=np.int64)
     if cand.size == 0:
         return np.zeros(0, dtype=np.int64)
