@@ -1,9 +1,17 @@
-"""Distributed colour-order Gauss–Seidel (fem_blocks/distributed/sweep.py): rows of W owned per rank, only the
-interface impulses exchanged per colour by PETSc scatters.
+"""The distributed colour-order Gauss–Seidel (fem_blocks/distributed/sweep.py: rows of W owned per rank, the
+interface impulses exchanged per colour by PETSc scatters) solved by its one driver, colour.ColourSolver, and the
+file driver `python -m fem_blocks.distributed.sweep` built on it.
 
-Expectation (independent of the code under test): the serial Gauss–Seidel sweep in colour order,
-`solver.parallel.solve_parallel(comm=None)`, gives the iterates; N = 1, 2, 3 ranks with any ownership of the
-contacts must give the same impulses, sweep count and residual, bitwise."""
+Expectations (independent of the code under test): the iterates and sweep count of the serial Gauss–Seidel sweep
+in colour order, `solver.parallel.solve_parallel(comm=None)` (a replicated sweep of its own); the stopping test's
+residual sqrt(Σ_α ‖F_α‖²)/‖q‖ with both sums correctly rounded by `math.fsum` (the FCLIB natural-map terms
+`nlgs.natural_map_terms`, which tests/test_natural_map_terms.py checks against the serial natural map); the
+ghosts, exchanged entries and messages per rank counted here from W's nonzero blocks, the ownership and the
+colours. N = 1, 2, 3 ranks with contiguous, cyclic, PT-Scotch ownership and a rank without contacts must give the
+same impulses, sweep count and residual, bitwise. Ranks run under mpirun: ONE launch per rank count
+(tests/_dist_sweep_mpi.py calls the file driver's main once per run), the tests read what each run wrote."""
+import json
+import math
 import os
 import shutil
 import subprocess
@@ -14,8 +22,9 @@ import pytest
 import scipy.sparse as sp
 
 from fem_blocks.distributed import sweep as ds
-from fem_blocks.linalg import to_block_csr
-from fem_blocks.solver import parallel
+from fem_blocks.distributed.colour import ColourSolver
+from fem_blocks.linalg import matvec_bcsr, to_block_csr
+from fem_blocks.solver import nlgs, parallel
 
 from _paths import FCLIB, ROOT  # noqa: E402
 
@@ -80,91 +89,166 @@ def test_local_rows_are_the_owned_rows_and_ghosts_the_coupled_contacts():
     assert np.all(seen == 1)
 
 
-def test_one_rank_gives_the_serial_colour_order_iterates_bitwise():
-    from mpi4py import MPI
-    W, q, mu = grid_problem()
-    colour = parallel.colour_contacts(W)
-    rows = ds.local_rows(W, q, mu, np.arange(W.n))
-    d = ds.DistSweep(rows, colour, int(colour.max()) + 1, MPI.COMM_SELF)
-    serial = parallel.solve_parallel(W, q, mu, tol=1e-10, max_sweeps=100000)
-    res = d.solve(tol=1e-10, max_sweeps=100000)
-    assert serial.converged and res.converged
-    assert res.sweeps == serial.sweeps and np.array_equal(res.r, serial.r) and res.residual == serial.residual
-    # the cheap stopping test (MPI sum of partial sums) differs from the ordered sum by rounding only
-    res2 = d.solve(tol=1e-10, max_sweeps=100000, residual="allreduce")
-    assert res2.sweeps == serial.sweeps and np.array_equal(res2.r, serial.r)
-    assert abs(res2.residual - serial.residual) <= 1e-13 * serial.residual
-    d.destroy()
-
-
-def _mpirun(n, problem, out, *args):
-    env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1",
-               OMPI_MCA_rmaps_base_oversubscribe="1", OMPI_MCA_btl_vader_single_copy_mechanism="none", PYTHONPATH=ROOT)
-    p = subprocess.run(["mpirun", "-n", str(n), sys.executable, "-m", "fem_blocks.distributed.sweep", str(problem),
-                        str(out), *args], capture_output=True, text=True, cwd=ROOT, env=env, timeout=300)
-    assert p.returncode == 0, p.stdout + p.stderr
-    return np.load(out)
-
-
-@pytest.mark.skipif(shutil.which("mpirun") is None, reason="no mpirun")
-@pytest.mark.parametrize("n, own", [(3, "cyclic")])
-def test_mpirun_synthetic_equals_serial_colour_order_bitwise(tmp_path, n, own):
-    W, q, mu = grid_problem()
-    prob = tmp_path / "p.npz"
-    np.savez(prob, indptr=W.indptr, indices=W.indices, blocks=W.blocks, diag_pos=W.diag_pos, q=q, mu=mu, tol=1e-10)
-    out = _mpirun(n, prob, tmp_path / "out.npz", "--own", own)
-    serial = parallel.solve_parallel(W, q, mu, tol=1e-10, max_sweeps=100000)
-    assert int(out["ranks"]) == n and bool(out["converged"]) and serial.converged
-    assert int(out["sweeps"]) == serial.sweeps
-    assert np.array_equal(out["r"], serial.r)                 # iterates, bitwise
-    assert float(out["residual"]) == serial.residual          # residual, bitwise (ordered sum on rank 0)
-    nown = out["n_own"]
-    assert nown.sum() == W.n
-    if own == "skip0":
-        assert nown[0] == 0 and out["bytes_sent"][0] == 0 and out["bytes_recv"][0] == 0  # a rank with no contact
-    if n > 1:
-        # bytes sent = bytes received over all ranks; each ghost received once per sweep (2 doubles per contact)
-        assert out["bytes_sent"].sum() == out["bytes_recv"].sum() == 16 * out["n_ghost"].sum()
-
-
-@pytest.mark.skipif(shutil.which("mpirun") is None, reason="no mpirun")
-@pytest.mark.parametrize("n", [3])
-def test_mpirun_fclib_equals_serial_colour_order_bitwise(tmp_path, n):
-    if not os.path.exists(GRANULAR):
-        pytest.skip(f"FCLIB data not found at {FCLIB_DIR}")
-    from fem_blocks.io import fclib
-    p = fclib.read(GRANULAR)
-    W = to_block_csr(p.W, p.dim)
-    out = _mpirun(n, GRANULAR, tmp_path / "out.npz", "--own", "blocks", "--tol", "1e-12", "--max-sweeps", "300")
-    serial = parallel.solve_parallel(W, p.q, p.mu, tol=1e-12, max_sweeps=300)
-    assert int(out["sweeps"]) == serial.sweeps and bool(out["converged"]) == serial.converged
-    assert np.array_equal(out["r"], serial.r) and float(out["residual"]) == serial.residual
-    assert np.all(out["n_ghost"] > 0)  # the partition cuts the contact graph: impulses cross ranks
-
-
-@pytest.mark.parametrize("dim", [2, 3])
-def test_residual_terms_summed_in_order_are_the_serial_natural_map(dim):
-    # the per-contact terms ‖F_α‖² of the ordered residual, summed in contact order, give nlgs.natural_map bitwise
-    # (catches a term computed differently from the serial solver's, e.g. without the mu ‖u_T‖ shift)
-    from fem_blocks.solver import nlgs
-    rng = np.random.default_rng(dim)
-    n = 5000
-    r, u, mu = rng.normal(size=dim * n), rng.normal(size=dim * n), rng.uniform(0.1, 0.9, n)
-    t = nlgs.natural_map_terms(r, u, mu, dim)
-    assert np.sqrt(ds._ordered_sum(t)) == nlgs.natural_map(r, u, mu, dim)
-
-
-@pytest.mark.skipif(shutil.which("mpirun") is None, reason="no mpirun")
-def test_mpirun_3d_equals_serial_colour_order_bitwise(tmp_path):
-    # 3x3 blocks (local solver of solver/local.py, warm-started from r_α): the same bitwise agreement on 2 ranks
+def problem_3d():
+    """A 3D problem (3x3 blocks, the local solver of solver/local.py): W = A Aᵀ + diag, sparse A (W, q, mu)."""
     from test_nlgs import random_problem_3d
     Wd, q = random_problem_3d(n=40, seed=2)
     W = to_block_csr(Wd, 3)
-    mu = np.full(W.n, 0.4)
-    prob = tmp_path / "p3.npz"
-    np.savez(prob, indptr=W.indptr, indices=W.indices, blocks=W.blocks, diag_pos=W.diag_pos, q=q, mu=mu, tol=1e-10)
-    out = _mpirun(2, prob, tmp_path / "out.npz", "--own", "cyclic")
+    return W, q, np.full(W.n, 0.4)
+
+
+def exact_residual(W, q, mu, r):
+    """sqrt(Σ_α ‖F_α‖²) / sqrt(Σ q_i²), both sums correctly rounded (math.fsum), u = W r + q row by row."""
+    u = np.empty_like(q)
+    matvec_bcsr(W.indptr, W.indices, W.blocks, r, u)
+    u += q
+    t = nlgs.natural_map_terms(r, u, mu, W.dim)
+    return math.sqrt(math.fsum(t)) / (math.sqrt(math.fsum(q * q)) or 1.0)
+
+
+def expected_exchange(W, owner, size):
+    """Per rank (n_own, n_ghost, bytes sent, bytes received, messages received) per sweep, counted from W's nonzero
+    blocks: rank p's ghosts are the contacts β owned elsewhere with W_αβ ≠ 0 for an owned α; it receives d doubles
+    per ghost, sends d doubles per (owned contact, rank that ghosts it), and receives one message per colour and
+    owner rank among its ghosts of that colour (colours: parallel.colour_contacts)."""
+    d = W.dim
+    colour = parallel.colour_contacts(W)
+    nz = np.any(W.blocks != 0.0, axis=(1, 2))
+    row = np.repeat(np.arange(W.n), np.diff(W.indptr))
+    ghosts = []
+    for p in range(size):
+        mine = owner[row] == p
+        g = np.unique(W.indices[mine & nz])
+        ghosts.append(g[owner[g] != p])
+    out = []
+    for p in range(size):
+        sent = sum(int(np.sum(owner[ghosts[k]] == p)) for k in range(size) if k != p)
+        msgs = len({(int(colour[b]), int(owner[b])) for b in ghosts[p]})
+        out.append((int(np.sum(owner == p)), ghosts[p].size, 8 * d * sent, 8 * d * ghosts[p].size, msgs))
+    return out
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_colour_solver_is_the_serial_colour_order_with_the_exact_residual(dim):
+    """One process: ColourSolver (contacts coloured one by one, residual criterion every 10 sweeps) gives
+    solve_parallel's impulses, u and sweep count bitwise; its residual is the fsum expectation bitwise, and differs
+    from solve_parallel's running sum by rounding only (<= 1e-13 relative). Catches ‖q‖² for ‖q‖ in the stopping
+    test (checked: `qnorm = float(exact_sums(...)[0])`, without the sqrt, fails)."""
+    W, q, mu = grid_problem() if dim == 2 else problem_3d()
     serial = parallel.solve_parallel(W, q, mu, tol=1e-10, max_sweeps=100000)
-    assert serial.converged and bool(out["converged"]) and int(out["sweeps"]) == serial.sweeps
-    assert np.array_equal(out["r"], serial.r) and float(out["residual"]) == serial.residual
-    assert np.all(out["n_ghost"] > 0)
+    res = ColourSolver(W).solve(q, mu, tol=1e-10, criterion="residual", max_sweeps=100000, check_every=10)
+    assert serial.converged and res.converged
+    assert res.sweeps == serial.sweeps and np.array_equal(res.r, serial.r) and np.array_equal(res.u, serial.u)
+    assert res.residual == exact_residual(W, q, mu, serial.r)
+    assert abs(res.residual - serial.residual) <= 1e-13 * serial.residual
+
+
+def test_file_driver_on_one_process(tmp_path):
+    """The file driver without mpirun (one rank, serial ColourSolver, nothing exchanged): solve_parallel's r and
+    sweeps, the fsum residual, the tolerance read from the .npz. Catches the .npz's tol ignored (checked: the
+    default 1e-8 instead of its 1e-10 stops after 230 sweeps instead of 310 and fails)."""
+    W, q, mu = grid_problem()
+    prob = tmp_path / "p.npz"
+    np.savez(prob, indptr=W.indptr, indices=W.indices, blocks=W.blocks, diag_pos=W.diag_pos, q=q, mu=mu, tol=1e-10)
+    assert ds.main([str(prob), str(tmp_path / "out.npz"), "--own", "cyclic"]) == 0
+    out = np.load(tmp_path / "out.npz")
+    serial = parallel.solve_parallel(W, q, mu, tol=1e-10, max_sweeps=100000)
+    assert int(out["ranks"]) == 1 and bool(out["converged"]) and int(out["sweeps"]) == serial.sweeps
+    assert np.array_equal(out["r"], serial.r) and float(out["residual"]) == exact_residual(W, q, mu, serial.r)
+    assert [list(out[k]) for k in ("n_own", "n_ghost", "bytes_sent", "bytes_recv", "messages")] == \
+        [[W.n], [0], [0], [0], [0]]
+
+
+# (ranks, problem, ownership): every run of one rank count in one mpirun launch
+RUNS = [(2, "grid", "blocks"), (2, "grid", "skip0"), (2, "p3d", "cyclic"), (2, "p3d", "ptscotch"),
+        (3, "grid", "cyclic"), (3, "grid", "ptscotch"), (3, "grid", "skip0"), (3, "fclib", "blocks")]
+FCLIB_ARGS = ["--tol", "1e-12", "--max-sweeps", "300"]
+
+
+def _problem(name):
+    """(W, q, mu, tol, max_sweeps) of a run's problem."""
+    if name == "fclib":
+        from fem_blocks.io import fclib
+        p = fclib.read(GRANULAR)
+        return to_block_csr(p.W, p.dim), p.q, p.mu, 1e-12, 300
+    W, q, mu = grid_problem() if name == "grid" else problem_3d()
+    return W, q, mu, 1e-10, 100000
+
+
+@pytest.fixture(scope="module")
+def launches(tmp_path_factory):
+    """{(ranks, problem, own): OUT.npz of that run}: one mpirun launch per rank count (2, 3)."""
+    if shutil.which("mpirun") is None:
+        pytest.skip("no mpirun")
+    d = tmp_path_factory.mktemp("dist_sweep")
+    paths = {"fclib": GRANULAR}
+    for name in ("grid", "p3d"):
+        W, q, mu, tol, _ = _problem(name)
+        paths[name] = str(d / f"{name}.npz")
+        np.savez(paths[name], indptr=W.indptr, indices=W.indices, blocks=W.blocks, diag_pos=W.diag_pos, q=q, mu=mu,
+                 tol=tol)
+    env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1",
+               OMPI_MCA_rmaps_base_oversubscribe="1", OMPI_MCA_btl_vader_single_copy_mechanism="none", PYTHONPATH=ROOT)
+    outs = {}
+    for n in sorted({r[0] for r in RUNS}):
+        runs = []
+        for key in (r for r in RUNS if r[0] == n and (r[1] != "fclib" or os.path.exists(GRANULAR))):
+            outs[key] = str(d / f"out_{n}_{key[1]}_{key[2]}.npz")
+            runs.append([paths[key[1]], outs[key], "--own", key[2]] + (FCLIB_ARGS if key[1] == "fclib" else []))
+        (d / f"runs{n}.json").write_text(json.dumps(runs))
+        try:
+            p = subprocess.run(["mpirun", "-n", str(n), sys.executable,
+                                os.path.join(ROOT, "tests", "_dist_sweep_mpi.py"), str(d / f"runs{n}.json")],
+                               capture_output=True, text=True, cwd=ROOT, env=env, timeout=120)
+        except subprocess.TimeoutExpired as e:
+            pytest.fail(f"{n} ranks: the launch did not end in 120 s (a rank left waiting in a collective, e.g. ranks "
+                        f"whose stopping decisions differ)\n{e.stdout}\n{e.stderr}")
+        assert p.returncode == 0, (p.stdout + p.stderr)[-3000:]
+    return outs
+
+
+def _out(launches, key):
+    if key not in launches:
+        pytest.skip(f"FCLIB data not found at {FCLIB_DIR}")
+    return np.load(launches[key])
+
+
+@pytest.mark.parametrize("key", RUNS, ids=["-".join(map(str, r)) for r in RUNS])
+def test_mpirun_file_driver_equals_serial_colour_order_bitwise(launches, key):
+    """N = 2, 3 ranks through the file driver (ColourSolver on MPI.COMM_WORLD): solve_parallel's impulses, sweep count
+    and convergence, bitwise; the fsum residual bitwise, the same as on one process. Catches: after each colour the
+    impulses of colour 0 exchanged (checked: `scatters[0]` in ColourSolver._exchange fails every run where impulses
+    cross ranks, all but 2-grid-skip0); ‖q‖ summed over a rank's own contacts only (checked: `exact_sums([qo * qo],
+    None)`: the ranks' stopping decisions differ, a rank is left waiting and the launch fails at its timeout)."""
+    out = _out(launches, key)
+    W, q, mu, tol, max_sweeps = _problem(key[1])
+    serial = parallel.solve_parallel(W, q, mu, tol=tol, max_sweeps=max_sweeps)
+    assert int(out["ranks"]) == key[0] and bool(out["converged"]) == serial.converged
+    assert int(out["sweeps"]) == serial.sweeps
+    assert np.array_equal(out["r"], serial.r)                                  # iterates, bitwise
+    assert float(out["residual"]) == exact_residual(W, q, mu, serial.r)       # exact sums: any N, the same bits
+
+
+@pytest.mark.parametrize("key", RUNS, ids=["-".join(map(str, r)) for r in RUNS])
+def test_mpirun_exchange_counts_per_rank(launches, key):
+    """Per rank, the contacts owned and ghosted, bytes sent and received and messages per sweep (the counters of
+    distributed.sweep.DistSweep): those counted here from W and the ownership (contiguous: contact a on rank
+    ⌊a N / n⌋; cyclic: a mod N; skip0: rank 0 none, ranks 1..N-1 contiguous); PT-Scotch (owner unknown here):
+    sent = received = d doubles per ghost over all ranks. Catches the messages counted per ghost contact instead of
+    per (colour, owner rank) (checked: `remote_owner[cgh == c].size` without np.unique fails)."""
+    out = _out(launches, key)
+    n_ranks, name, own = key
+    W = _problem(name)[0]
+    got = list(zip(*(out[k].tolist() for k in ("n_own", "n_ghost", "bytes_sent", "bytes_recv", "messages"))))
+    if own == "ptscotch":
+        assert sum(g[0] for g in got) == W.n and all(g[0] > 0 for g in got)
+        assert sum(g[2] for g in got) == sum(g[3] for g in got) == 8 * W.dim * sum(g[1] for g in got) > 0
+        return
+    a = np.arange(W.n)
+    owner = {"blocks": a * n_ranks // W.n, "cyclic": a % n_ranks,
+             "skip0": 1 + a * (n_ranks - 1) // W.n}[own]
+    assert got == expected_exchange(W, owner, n_ranks)
+    if own == "skip0":
+        assert got[0] == (0, 0, 0, 0, 0)
+    else:
+        assert all(g[1] > 0 for g in got)  # the ownership cuts the contact graph: impulses cross ranks

@@ -19,15 +19,17 @@ so messages go only to neighbour ranks and carry only the colour's interface imp
 the stored column order of the global row (sorted by global contact number), so every rank computes each v_α
 bitwise as the serial sweep does: N ranks give the serial colour-order iterates, bitwise, for any N and ownership.
 
-Stopping test every `check_every` sweeps (as `parallel.solve_parallel`): the FCLIB natural-map residual
-‖F‖/‖q‖, F_α = r_α - P_K(r_α - (u_α + [mu_α ‖u_T,α‖, 0(, 0)])), u_α = W_α· r + q_α over the owned rows.
-residual="ordered": the terms ‖F_α‖² are gathered to rank 0 and summed in global contact order (‖q‖ likewise,
-once), so the residual, hence the sweep count, is bitwise the serial one (8 bytes per contact to rank 0 per check);
-residual="allreduce": per-rank partial sums added by MPI (a few ulps from the serial value, 8 bytes per rank).
+The solve is `colour.ColourSolver`'s (its sweep loop over these rows and scatters, its stopping tests with exact
+sums: the same sweep count and residual on any N); this module is its set-up on N ranks (`DistSweep`: the rows,
+the scatters and the exchange counters) and a file driver of it.
 
 Run: `mpirun -n N python -m fem_blocks.distributed.sweep PROBLEM OUT.npz [--own blocks|cyclic|skip0|ptscotch]
-[--residual ordered|allreduce] [--tol T]` (PROBLEM: an FCLIB .hdf5 or an .npz with indptr, indices, blocks,
-diag_pos, q, mu; OUT on rank 0: r, sweeps, residual, converged, ranks, timings and exchange counts per rank).
+[--tol T] [--max-sweeps S]` (PROBLEM: an FCLIB .hdf5 or an .npz with indptr, indices, blocks, diag_pos, q, mu and
+optionally tol). It solves with `ColourSolver(W, contact_owner=owner, comm)`, contacts coloured one by one
+(`parallel.colour_contacts`), residual criterion checked every 10 sweeps; OUT on rank 0: r, sweeps, residual,
+converged, ranks, t_setup, and per rank n_own, n_ghost, t_solve, bytes_sent, bytes_recv, messages (per sweep).
+(The former `--residual ordered|allreduce` option and the timings t_sweeps, t_exchange, t_check of the driver's own
+sweep loop are gone with that loop: the stopping test is ColourSolver's.)
 """
 from __future__ import annotations
 
@@ -36,11 +38,9 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
 
 from ..errors import InputError
-from ..linalg import BlockCSR, matvec_bcsr
-from ..solver import nlgs
+from ..linalg import BlockCSR
 
 
 @dataclass
@@ -91,30 +91,6 @@ def localise(owned, indptr, cols, blocks, diag_pos) -> LocalRows:
     local = perm[np.searchsorted(ids, cols, sorter=perm)]
     return LocalRows(owned, ghost, np.asarray(indptr, dtype=np.int64), local.astype(np.int64), blocks,
                      np.asarray(diag_pos, dtype=np.int64), np.zeros(0), np.zeros(0))
-
-
-@njit(cache=True)
-def _ordered_sum(t):
-    s = 0.0
-    for i in range(t.shape[0]):
-        s += t[i]
-    return s
-
-
-@dataclass
-class DistResult:
-    r: np.ndarray            # (d n_own,) impulses of the owned contacts (LocalRows.owned order)
-    u: np.ndarray            # (d n_own,) u = W r + q on the owned rows
-    sweeps: int
-    converged: bool
-    residual: float          # ‖F‖/‖q‖, the same on every rank
-    message: str
-    t_sweeps: float          # wall time in the sweep loop (local solves + exchanges + checks), this rank
-    t_exchange: float        # of which in the per-colour scatters
-    t_check: float           # of which in the residual checks (matvec, natural map, reduction)
-    bytes_sent_per_sweep: int
-    bytes_recv_per_sweep: int
-    messages_per_sweep: int  # messages this rank receives per sweep (one per colour and neighbour rank)
 
 
 class DistSweep:
@@ -178,8 +154,6 @@ class DistSweep:
         self.entries_recv = d * n_gh
         self.messages = per_colour_msgs  # messages received per sweep (one per colour and neighbour owner)
         self.start = start
-        self.ids = None
-        self._qnorm = {}
 
     def destroy(self):
         for s in self.scatters:
@@ -188,83 +162,6 @@ class DistSweep:
         self.gvec.resetArray()
         self.vec.destroy()
         self.gvec.destroy()
-
-    def _global_residual(self, u, mode: str):
-        """‖F‖/‖q‖ over all contacts (same value on every rank)."""
-        rows, comm = self.rows, self.comm
-        t = nlgs.natural_map_terms(self.r, u, rows.mu, self.d)
-        if mode == "allreduce":
-            s = comm.allreduce(float(np.sum(t)))
-            return float(np.sqrt(s)) / self._qnorm[mode]
-        from mpi4py import MPI
-        rank0 = comm.Get_rank() == 0
-        all_t = np.empty(self.n_total) if rank0 else None
-        comm.Gatherv(t, [all_t, self.counts, self.displs, MPI.DOUBLE] if rank0 else None, root=0)
-        res = None
-        if rank0:
-            s = _ordered_sum(all_t[self.ids])
-            res = float(np.sqrt(s)) / self._qnorm[mode]
-        return comm.bcast(res, root=0)
-
-    def solve(self, r0=None, tol: float = 1e-8, max_sweeps: int = 10000, check_every: int = 10,
-              residual: str = "ordered") -> DistResult:
-        """Colour-order NLGS with the residual criterion (as parallel.solve_parallel); collective."""
-        if residual not in ("ordered", "allreduce"):
-            raise InputError(f"residual = {residual!r}: expected 'ordered' or 'allreduce'")
-        if not (tol > 0) or int(max_sweeps) < 1 or int(check_every) < 1:
-            raise InputError("expected tol > 0, max_sweeps >= 1, check_every >= 1")
-        rows, comm, d = self.rows, self.comm, self.d
-        n_own = rows.owned.size
-        if residual == "ordered" and residual not in self._qnorm:  # ‖q‖ in global order, once (collective)
-            ids = comm.gather(rows.owned, root=0)
-            self.counts = np.asarray(comm.allgather(n_own), dtype=np.int64)
-            self.displs = np.concatenate([[0], np.cumsum(self.counts)[:-1]])
-            qs = comm.gather(rows.q.reshape(-1, d), root=0)
-            v = None
-            if comm.Get_rank() == 0:
-                self.ids = np.argsort(np.concatenate(ids), kind="stable")  # gathered terms -> global contact order
-                qa = np.concatenate(qs)[self.ids].ravel()
-                v = float(np.linalg.norm(qa)) or 1.0
-            self._qnorm[residual] = v
-        elif residual == "allreduce" and residual not in self._qnorm:
-            self._qnorm[residual] = float(np.sqrt(comm.allreduce(float(rows.q @ rows.q)))) or 1.0
-        self.r[:] = 0.0
-        if r0 is not None:
-            r0 = np.asarray(r0, dtype=np.float64).ravel()
-            if r0.size != d * n_own:
-                raise InputError(f"r0: expected {d * n_own} entries (owned contacts), got {r0.size}")
-            self.r[:d * n_own] = r0
-            for s in self.scatters:
-                s.scatter(self.vec, self.gvec)
-        u = np.empty(d * n_own)
-        ip, ix, bl, dp, q, mu = rows.indptr, rows.indices, rows.blocks, rows.diag_pos, rows.q, rows.mu
-        sweeps, res, converged, t_x, t_c = 0, np.inf, False, 0.0, 0.0
-        comm.Barrier()
-        t0 = time.perf_counter()
-        while sweeps < max_sweeps:
-            for c in range(self.n_colours):
-                nlgs.sweep(ip, ix, bl, dp, q, mu, self.r, self.order[c])
-                t1 = time.perf_counter()
-                self.scatters[c].scatter(self.vec, self.gvec)
-                t_x += time.perf_counter() - t1
-            sweeps += 1
-            if sweeps % check_every == 0 or sweeps == max_sweeps:
-                t1 = time.perf_counter()
-                matvec_bcsr(ip, ix, bl, self.r, u)
-                u += q
-                res = self._global_residual(u, residual)
-                t_c += time.perf_counter() - t1
-                if res <= tol:
-                    converged = True
-                    break
-        t_loop = time.perf_counter() - t0
-        matvec_bcsr(ip, ix, bl, self.r, u)
-        u += q
-        res = self._global_residual(u, residual)
-        msg = (f"{'converged' if converged else 'not converged'} in {sweeps} colour-order sweeps on "
-               f"{comm.Get_size()} ranks ({self.n_colours} colours, rows owned per rank), residual {res:.3g}")
-        return DistResult(self.r[:d * n_own].copy(), u, sweeps, converged, res, msg, t_loop, t_x, t_c,
-                          8 * self.entries_sent, 8 * self.entries_recv, self.messages)
 
 
 def ownership(n: int, size: int, kind: str = "blocks") -> np.ndarray:
@@ -328,12 +225,11 @@ def _load(path):
 def main(argv=None) -> int:
     import argparse
     from mpi4py import MPI
-    from ..solver.parallel import colour_contacts
+    from .colour import ColourSolver
     ap = argparse.ArgumentParser(prog="python -m fem_blocks.distributed.sweep")
     ap.add_argument("problem")
     ap.add_argument("out")
     ap.add_argument("--own", default="blocks", choices=["blocks", "cyclic", "skip0", "ptscotch"])
-    ap.add_argument("--residual", default="ordered", choices=["ordered", "allreduce"])
     ap.add_argument("--tol", type=float, default=None)
     ap.add_argument("--max-sweeps", type=int, default=100000)
     a = ap.parse_args(sys.argv[1:] if argv is None else argv)
@@ -341,7 +237,7 @@ def main(argv=None) -> int:
     rank, size = comm.Get_rank(), comm.Get_size()
     t0 = time.perf_counter()
     # driver: every rank reads the file and colours the whole graph (a stand-in for the assembly of its own rows and
-    # a distributed colouring), then keeps only its rows
+    # a distributed colouring); ColourSolver keeps only the rank's rows
     W, q, mu = _load(a.problem)
     tol = a.tol
     if tol is None:
@@ -349,39 +245,27 @@ def main(argv=None) -> int:
         if a.problem.endswith(".npz"):
             with np.load(a.problem) as z:
                 tol = float(z["tol"]) if "tol" in z.files else tol
-    colour = colour_contacts(W)
     owner = partition_contacts(W, comm) if a.own == "ptscotch" else ownership(W.n, size, a.own)
-    rows = local_rows(W, q, mu, np.flatnonzero(owner == rank))
-    col_local = colour[np.concatenate([rows.owned, rows.ghost])]
-    n_colours = int(colour.max()) + 1 if colour.size else 0
-    del W, q, mu, colour, owner
-    ds = DistSweep(rows, col_local, n_colours, comm)
+    cs = ColourSolver(W, contact_owner=owner, comm=comm)
     t_setup = time.perf_counter() - t0
-    res = ds.solve(tol=tol, max_sweeps=a.max_sweeps, residual=a.residual)
-    per_rank = comm.gather(dict(n_own=int(rows.owned.size), n_ghost=int(rows.ghost.size), t_sweeps=res.t_sweeps,
-                                t_exchange=res.t_exchange, t_check=res.t_check, bytes_sent=res.bytes_sent_per_sweep,
-                                bytes_recv=res.bytes_recv_per_sweep, messages=res.messages_per_sweep), root=0)
-    r_all = comm.gather((rows.owned, res.r.reshape(-1, rows.dim)), root=0)
+    comm.Barrier()
+    t1 = time.perf_counter()
+    res = cs.solve(q, mu, tol=tol, criterion="residual", max_sweeps=a.max_sweeps, check_every=10)
+    t_solve = time.perf_counter() - t1
+    dist = cs.dist  # None on one rank: nothing exchanged
+    per_rank = comm.gather(dict(n_own=cs.n_owned, n_ghost=int(cs.ghost.size), t_solve=t_solve,
+                                bytes_sent=8 * dist.entries_sent if dist else 0,
+                                bytes_recv=8 * dist.entries_recv if dist else 0,
+                                messages=dist.messages if dist else 0), root=0)
     if rank == 0:
-        d = rows.dim
-        n = sum(o.size for o, _ in r_all)
-        r = np.zeros((n, d))
-        for o, rr in r_all:
-            r[o] = rr
-        np.savez(a.out, r=r.ravel(), sweeps=res.sweeps, residual=res.residual, converged=res.converged, ranks=size,
-                 n_own=[p["n_own"] for p in per_rank], n_ghost=[p["n_ghost"] for p in per_rank],
-                 t_sweeps=[p["t_sweeps"] for p in per_rank], t_exchange=[p["t_exchange"] for p in per_rank],
-                 t_check=[p["t_check"] for p in per_rank],
-                 bytes_sent=[p["bytes_sent"] for p in per_rank], bytes_recv=[p["bytes_recv"] for p in per_rank],
-                 messages=[p["messages"] for p in per_rank], t_setup=t_setup)
+        np.savez(a.out, r=res.r, sweeps=res.sweeps, residual=res.residual, converged=res.converged, ranks=size,
+                 t_setup=t_setup, **{k: [p[k] for p in per_rank] for k in per_rank[0]})
         print(res.message)
         for p, st in enumerate(per_rank):
             print(f"rank {p}: {st['n_own']} owned, {st['n_ghost']} ghost contacts; "
-                  f"{st['t_sweeps'] / max(res.sweeps, 1) * 1e6:.1f} us/sweep "
-                  f"({st['t_exchange'] / max(res.sweeps, 1) * 1e6:.1f} in exchanges, "
-                  f"{st['t_check'] / max(res.sweeps, 1) * 1e6:.1f} in residual checks); per sweep "
+                  f"{st['t_solve'] / max(res.sweeps, 1) * 1e6:.1f} us/sweep (whole solve); per sweep "
                   f"{st['bytes_sent']} B sent, {st['bytes_recv']} B received, {st['messages']} messages")
-    ds.destroy()
+    cs.destroy()
     return 0
 
 
