@@ -49,7 +49,7 @@ import numpy as np
 from ..errors import InputError
 from ..linalg import BlockCSR, matvec_bcsr
 from ..solver import nlgs
-from ..solver.parallel import _greedy_colouring, colour_contacts
+from ..solver.parallel import colour_contacts, pair_colouring
 from ..solver.problem import SolverResult
 from .exact import exact_sums
 
@@ -69,19 +69,18 @@ def body_pair_groups(cand, ant, nb: int) -> tuple[np.ndarray, int]:
 def colour_group_graph(n_groups: int, ga, gb, comm=None) -> np.ndarray:
     """Colour per group: greedy (groups in increasing number) on the symmetric graph of the group pairs
     (ga[k], gb[k]) (self-pairs allowed, they couple nothing). comm (N > 1 ranks): each rank gives the pairs of its
-    own rows, the graph is their union (one Allgatherv of the distinct pairs), the same colours on every rank."""
+    own rows, the graph is their union (one Allgatherv of the distinct pairs), the same colours on every rank
+    (solver/parallel.pair_colouring, the colouring of single contacts too)."""
     ga = np.asarray(ga, dtype=np.int64)
     gb = np.asarray(gb, dtype=np.int64)
-    e = np.unique(np.concatenate([ga * n_groups + gb, gb * n_groups + ga]))
+    e = np.unique(ga * n_groups + gb)
     if comm is not None and comm.Get_size() > 1:
         from mpi4py import MPI
         counts = np.array(comm.allgather(e.size), dtype=np.int64)
         every = np.empty(int(counts.sum()), dtype=np.int64)
         comm.Allgatherv(e, [every, counts, np.concatenate([[0], np.cumsum(counts)[:-1]]), MPI.INT64_T])
-        e = np.unique(every)
-    i, j = e // n_groups, e % n_groups
-    indptr = np.concatenate([[0], np.cumsum(np.bincount(i, minlength=n_groups))]).astype(np.int64)
-    return _greedy_colouring(indptr, j.astype(np.int64))
+        e = every
+    return pair_colouring(n_groups, e // n_groups, e % n_groups)
 
 
 def _nonzero_blocks(W: BlockCSR):

@@ -41,14 +41,21 @@ def _greedy_colouring(indptr, indices):
     return colour
 
 
+def pair_colouring(n: int, a, b) -> np.ndarray:
+    """Colour per vertex 0..n-1 of the graph whose edges are the pairs (a[k], b[k]) (either direction; self-pairs
+    ignored): greedy, vertices in increasing number, each taking the smallest colour none of its coloured
+    neighbours has."""
+    a = np.asarray(a, dtype=np.int64)
+    b = np.asarray(b, dtype=np.int64)
+    e = np.unique(np.concatenate([a * n + b, b * n + a]))
+    indptr = np.concatenate([[0], np.cumsum(np.bincount(e // n, minlength=n))]).astype(np.int64)
+    return _greedy_colouring(indptr, (e % n).astype(np.int64))
+
+
 def colour_contacts(W: BlockCSR) -> np.ndarray:
-    """Colour per contact such that coupled contacts (W_αβ ≠ 0 or W_βα ≠ 0) differ (greedy, in contact order)."""
-    import scipy.sparse as sp
-    n = W.n
-    A = sp.csr_matrix((np.ones(W.indices.size), W.indices, W.indptr), shape=(n, n))
-    S = (A + A.T).tocsr()
-    S.sort_indices()
-    return _greedy_colouring(S.indptr.astype(np.int64), S.indices.astype(np.int64))
+    """Colour per contact such that coupled contacts (a stored block W_αβ or W_βα) differ (greedy, in contact
+    order: `pair_colouring` of W's pattern)."""
+    return pair_colouring(W.n, np.repeat(np.arange(W.n, dtype=np.int64), np.diff(W.indptr)), W.indices)
 
 
 def colour_order(colour: np.ndarray):
