@@ -1,6 +1,6 @@
 """The distributed colour-order Gauss–Seidel (fem_blocks/distributed/sweep.py: rows of W owned per rank, the
 interface impulses exchanged per colour by PETSc scatters) solved by its one driver, colour.ColourSolver, and the
-file driver `python -m fem_blocks.distributed.sweep` built on it.
+file driver `python -m fem_blocks.distributed.colour` built on it.
 
 Expectations (independent of the code under test): the iterates and sweep count of the serial Gauss–Seidel sweep
 in colour order, `solver.parallel.solve_parallel(comm=None)` (a replicated sweep of its own); the stopping test's
@@ -150,7 +150,8 @@ def test_file_driver_on_one_process(tmp_path):
     W, q, mu = grid_problem()
     prob = tmp_path / "p.npz"
     np.savez(prob, indptr=W.indptr, indices=W.indices, blocks=W.blocks, diag_pos=W.diag_pos, q=q, mu=mu, tol=1e-10)
-    assert ds.main([str(prob), str(tmp_path / "out.npz"), "--own", "cyclic"]) == 0
+    from fem_blocks.distributed import colour
+    assert colour.main([str(prob), str(tmp_path / "out.npz"), "--own", "cyclic"]) == 0
     out = np.load(tmp_path / "out.npz")
     serial = parallel.solve_parallel(W, q, mu, tol=1e-10, max_sweeps=100000)
     assert int(out["ranks"]) == 1 and bool(out["converged"]) and int(out["sweeps"]) == serial.sweeps

@@ -21,20 +21,12 @@ bitwise as the serial sweep does: N ranks give the serial colour-order iterates,
 
 The solve is `colour.ColourSolver`'s (its sweep loop over these rows and scatters, its stopping tests with exact
 sums: the same sweep count and residual on any N); this module is its set-up on N ranks (`DistSweep`: the rows,
-the scatters and the exchange counters) and a file driver of it.
+the scatters and the exchange counters) and the contact ownerships of the file driver (`python -m
+fem_blocks.distributed.colour`).
 
-Run: `mpirun -n N python -m fem_blocks.distributed.sweep PROBLEM OUT.npz [--own blocks|cyclic|skip0|ptscotch]
-[--tol T] [--max-sweeps S]` (PROBLEM: an FCLIB .hdf5 or an .npz with indptr, indices, blocks, diag_pos, q, mu and
-optionally tol). It solves with `ColourSolver(W, contact_owner=owner, comm)`, contacts coloured one by one
-(`parallel.colour_contacts`), residual criterion checked every 10 sweeps; OUT on rank 0: r, sweeps, residual,
-converged, ranks, t_setup, and per rank n_own, n_ghost, t_solve, bytes_sent, bytes_recv, messages (per sweep).
-(The former `--residual ordered|allreduce` option and the timings t_sweeps, t_exchange, t_check of the driver's own
-sweep loop are gone with that loop: the stopping test is ColourSolver's.)
 """
 from __future__ import annotations
 
-import sys
-import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -208,66 +200,3 @@ def partition_contacts(W: BlockCSR, comm, kind: str = "ptscotch") -> np.ndarray:
     part.destroy()
     adj.destroy()
     return owner
-
-
-def _load(path):
-    from ..linalg import to_block_csr
-    if path.endswith(".npz"):
-        with np.load(path) as z:
-            W = BlockCSR(z["indptr"].astype(np.int64), z["indices"].astype(np.int64),
-                         np.ascontiguousarray(z["blocks"]), z["diag_pos"].astype(np.int64))
-            return W, np.ascontiguousarray(z["q"], dtype=np.float64), np.asarray(z["mu"], dtype=np.float64)
-    from ..io import fclib
-    p = fclib.read(path)
-    return to_block_csr(p.W, p.dim), np.ascontiguousarray(p.q, dtype=np.float64), np.asarray(p.mu, dtype=np.float64)
-
-
-def main(argv=None) -> int:
-    import argparse
-    from mpi4py import MPI
-    from .colour import ColourSolver
-    ap = argparse.ArgumentParser(prog="python -m fem_blocks.distributed.sweep")
-    ap.add_argument("problem")
-    ap.add_argument("out")
-    ap.add_argument("--own", default="blocks", choices=["blocks", "cyclic", "skip0", "ptscotch"])
-    ap.add_argument("--tol", type=float, default=None)
-    ap.add_argument("--max-sweeps", type=int, default=100000)
-    a = ap.parse_args(sys.argv[1:] if argv is None else argv)
-    comm = MPI.COMM_WORLD
-    rank, size = comm.Get_rank(), comm.Get_size()
-    t0 = time.perf_counter()
-    # driver: every rank reads the file and colours the whole graph (a stand-in for the assembly of its own rows and
-    # a distributed colouring); ColourSolver keeps only the rank's rows
-    W, q, mu = _load(a.problem)
-    tol = a.tol
-    if tol is None:
-        tol = 1e-8
-        if a.problem.endswith(".npz"):
-            with np.load(a.problem) as z:
-                tol = float(z["tol"]) if "tol" in z.files else tol
-    owner = partition_contacts(W, comm) if a.own == "ptscotch" else ownership(W.n, size, a.own)
-    cs = ColourSolver(W, contact_owner=owner, comm=comm)
-    t_setup = time.perf_counter() - t0
-    comm.Barrier()
-    t1 = time.perf_counter()
-    res = cs.solve(q, mu, tol=tol, criterion="residual", max_sweeps=a.max_sweeps, check_every=10)
-    t_solve = time.perf_counter() - t1
-    dist = cs.dist  # None on one rank: nothing exchanged
-    per_rank = comm.gather(dict(n_own=cs.n_owned, n_ghost=int(cs.ghost.size), t_solve=t_solve,
-                                bytes_sent=8 * dist.entries_sent if dist else 0,
-                                bytes_recv=8 * dist.entries_recv if dist else 0,
-                                messages=dist.messages if dist else 0), root=0)
-    if rank == 0:
-        np.savez(a.out, r=res.r, sweeps=res.sweeps, residual=res.residual, converged=res.converged, ranks=size,
-                 t_setup=t_setup, **{k: [p[k] for p in per_rank] for k in per_rank[0]})
-        print(res.message)
-        for p, st in enumerate(per_rank):
-            print(f"rank {p}: {st['n_own']} owned, {st['n_ghost']} ghost contacts; "
-                  f"{st['t_solve'] / max(res.sweeps, 1) * 1e6:.1f} us/sweep (whole solve); per sweep "
-                  f"{st['bytes_sent']} B sent, {st['bytes_recv']} B received, {st['messages']} messages")
-    cs.destroy()
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())
