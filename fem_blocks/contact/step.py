@@ -182,10 +182,13 @@ class ContactStep:
         L = np.flatnonzero(near[cs.cand_body] | near[cs.ant_body])
         return _RankContacts(L, own, np.searchsorted(L, own), np.repeat(mine, self.scene.W_size))
 
-    def _build_G(self, centers):
-        """The G blocks of the contact set (N > 1 ranks in colour order: of this rank's contacts L only)."""
+    def _build_G(self, centers, new_set: bool):
+        """The G blocks of the contact set (N > 1 ranks in colour order: of this rank's contacts L only). new_set: the
+        contact set was detected or restored, so L is found again; between re-detections (updated geometry) the
+        pairs and their order stay, and so does L."""
         s, cs = self.scene, self.cs
-        self._local = self._rank_contacts() if self._split() else None
+        if new_set:
+            self._local = self._rank_contacts() if self._split() else None
         if self._local is not None:
             cs = cs.subset(self._local.L)
         self.G = self._kin.build_G(cs, s.kind, s.rot, centers, s.bnode_index_flat, s.bnode_offset)
@@ -380,7 +383,7 @@ class ContactStep:
         elif updated and len(self.cs.gap):  # between re-detections: same pairs, current points, frames and gaps
             self.cs = self._det.update_geometry(self.cs, s.positions(), s.bedges if self.dim == 2 else s.bfaces)
         if redetect or updated:
-            self._build_G(s.centers(reference=redetect and first and not updated))
+            self._build_G(s.centers(reference=redetect and first and not updated), new_set=redetect)
             self.mark_W_dirty()
         if self.W_dirty:
             from time import perf_counter
@@ -521,7 +524,7 @@ class ContactStep:
                            and owner.max(initial=0) < self.comm.Get_size() else None)  # else partitioned again
         # G: frozen geometry, from the reference placement as at the first step (the frames of the scene, never
         # refreshed); updated geometry rebuilds it at the next step
-        self._build_G(self.scene.centers(reference=self.opts.geometry == "frozen"))
+        self._build_G(self.scene.centers(reference=self.opts.geometry == "frozen"), new_set=True)
         self.W_dirty = True  # rebuilt at the next step (new scene); 3D: with the rigid W in use at the export
         self._rigid_W_restored = (np.array(d["contact.rigid_W"]) if "contact.rigid_W" in d
                                   and not bool(d["contact.W_dirty"]) else None)
