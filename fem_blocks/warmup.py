@@ -22,19 +22,16 @@ import time
 DEMOS = ("shear_wall_fc_p030.toml", "shear_wall_p030.toml", "arch.toml", "wall3d_push.toml")
 # ... and again with the colour-order Gauss-Seidel of runs on several MPI ranks ([contact] order = "colours": its
 # exact sums and per-contact residual terms, 2D cohesive, 2D and 3D Coulomb), the interface coarse correction
-# (2D Coulomb), the updated 3D geometry (the re-detection's geometry update) and the 3D interface laws with the
-# residual criterion (wall3d_push's joints made brittle: the 3D cohesive sweep, internal-variable update and natural
-# map; one compiled kernel serves every law)
+# (2D Coulomb) and the updated 3D geometry (a re-detection every other step, so that the steps in between update
+# the contact geometry: detection_3d.update_geometry)
 COLOURS = ("shear_wall_p030.toml", "arch.toml", "wall3d_push.toml")
 VARIANTS = {
     "colours": dict(solver="nlgs", fallback="none", coarse="none", order="colours", criterion="residual",
                     max_sweeps=20),
     "coarse": dict(solver="nlgs", fallback="none", coarse="interfaces", max_sweeps=40),
-    "updated": dict(geometry="updated"),
-    "cohesive3": dict(solver="nlgs", fallback="none", criterion="residual", max_sweeps=40),
+    "updated": dict(geometry="updated", redetect_every=2),
 }
-EXTRA = ("arch.toml:coarse", "wall3d_push.toml:updated", "wall3d_push.toml:cohesive3")
-BRITTLE = dict(variant="dugdale", r_c=1e5, l_c=1e-4)  # "cohesive3": the joints' law (parameters of no importance)
+EXTRA = ("arch.toml:coarse", "wall3d_push.toml:updated")
 STEPS_PER_STAGE = 2
 
 
@@ -59,9 +56,6 @@ def warm(demos=DEMOS, out=None, verbose: bool = True, colours=COLOURS, extra=EXT
             case = quick(load_case(path))
             if variant:
                 case.contact = dataclasses.replace(case.contact, **VARIANTS[variant])
-                if variant == "cohesive3":
-                    case.interfaces = [dataclasses.replace(i, law="brittle", params=dict(BRITTLE, mu=i.mu))
-                                       for i in case.interfaces]
                 name = f"{name} ({variant})"
             for st in case.stages:
                 st.duration = min(st.duration, STEPS_PER_STAGE * st.h)
