@@ -154,13 +154,48 @@ def _assemble_rows(nc, rows, order, ent_contact, ent_side, starts, side_body, si
     return indptr, indices, blocks, diag_pos
 
 
-def assemble(G, W_flat, W_offset, W_size, nb: int, rows=None) -> BlockCSR:
+@njit(cache=True)
+def _drop_zero_blocks(indptr, indices, blocks, diag_pos):
+    """In place: the off-diagonal blocks whose entries are all exactly zero removed from block-CSR rows, the others
+    moved forward in their order (indptr, diag_pos updated). Returns the number of blocks kept: the first ones of
+    indices and blocks."""
+    d = blocks.shape[1]
+    w = 0
+    start = indptr[0]
+    for i in range(indptr.shape[0] - 1):
+        end = indptr[i + 1]
+        for kk in range(start, end):
+            keep = kk == diag_pos[i]
+            if not keep:
+                for r in range(d):
+                    for q in range(d):
+                        if blocks[kk, r, q] != 0.0:
+                            keep = True
+            if keep:
+                if kk == diag_pos[i]:
+                    diag_pos[i] = w
+                if w != kk:
+                    indices[w] = indices[kk]
+                    blocks[w] = blocks[kk]
+                w += 1
+        start = end
+        indptr[i + 1] = w
+    return w
+
+
+def assemble(G, W_flat, W_offset, W_size, nb: int, rows=None, couplings: bool = False) -> BlockCSR:
     """Block-CSR Delassus operator w^{αβ} = G^α W H^β (d x d blocks, local order (n, t) or (n, t, s)) from the G
     blocks of either dimension (side_body (nc, 2), side_dofs (nc, 2, nd), side_G (nc, 2, d, nd)) and the per-body
     dense W stored flat (row-major square block of size W_size[b] at W_offset[b], in the body's W numbering).
     rows: the contacts (increasing) whose rows to assemble, None for all; row i of the result is row rows[i] of the
     whole operator, bitwise (columns: all nc contacts; diag_pos: the position of block (rows[i], rows[i])), so a
-    rank of a distributed run assembles only the rows of its own contacts."""
+    rank of a distributed run assembles only the rows of its own contacts.
+    couplings: keep only the blocks that couple (the diagonal blocks and the off-diagonal blocks with a nonzero
+    entry): the blocks of zeros between contacts that share only a body held in every dof (W_b = 0: a fixed
+    foundation, O(contacts on it²) of them) are dropped as the rows are assembled, so the result is
+    `distributed.colour.coupling_rows` of the whole operator, bitwise, without a second copy of the rows. The
+    colour-order sweeps read these rows only; the other solvers keep the whole pattern (Newton's elimination order
+    and NLGS's sums depend on it)."""
     nc = G.side_body.shape[0]
     d = G.side_G.shape[2]
     W_size = np.asarray(W_size, dtype=np.int64)
@@ -177,6 +212,9 @@ def assemble(G, W_flat, W_offset, W_size, nb: int, rows=None) -> BlockCSR:
         nc, rows, order, ent_contact, ent_side, starts, np.ascontiguousarray(G.side_body, dtype=np.int64),
         np.ascontiguousarray(G.side_dofs, dtype=np.int64), np.ascontiguousarray(G.side_G, dtype=np.float64),
         np.ascontiguousarray(W_flat, dtype=float), np.asarray(W_offset, dtype=np.int64), W_size)
+    if couplings:
+        k = _drop_zero_blocks(indptr, indices, blocks, diag_pos)
+        indices, blocks = indices[:k], blocks[:k]  # views: the dropped tail is not copied (nor freed)
     return BlockCSR(indptr, indices, blocks, diag_pos)
 
 

@@ -160,3 +160,31 @@ def test_a_ranks_rows_give_the_colours_and_iterates_of_the_whole_operator():
         assert a.sweeps == b.sweeps and np.array_equal(a.r, b.r) and np.array_equal(a.u, b.u)
     finally:
         got.destroy()
+
+
+def test_colour_order_run_sweeps_the_delassus_arrays_without_a_copy(tmp_path):
+    """A run in colour order holds W's rows once: the contact step assembles only the blocks that couple, and the
+    colour solver sweeps those arrays themselves (a copy without the blocks of zeros doubled the largest array of a
+    run). The wall stands on a fixed foundation, whose contacts share only it: blocks of zeros in the whole
+    operator. Expectation: the whole operator assembled here from the step's own G, through coupling_rows.
+    Catches: the couplings flag not passed (the solver copies), the blocks of zeros kept."""
+    import dist_cases
+    from fem_blocks import delassus
+    from fem_blocks.case import load_case
+    from fem_blocks.dynamics import Simulation
+    from fem_blocks.expand import expand
+    from fem_blocks.model import build_model
+    path = tmp_path / "w.toml"
+    path.write_text(dist_cases.wall("w", courses=2, per=3))
+    model = build_model(expand(load_case(str(path))))
+    sim = Simulation(model.bodies, h=1e-3, theta=1.0, gravity=model.gravity, velocity_reset=True,
+                     contact=model.contact)
+    sim.step()
+    step = model.contact
+    W = step.Wdel
+    assert np.shares_memory(step._colours.rows[2], W.blocks)
+    whole = delassus.assemble(step.G, *step.scene.W_blocks(None), step.scene.nb)
+    assert whole.indices.size > W.indices.size  # the foundation's blocks of zeros
+    for k in ("indptr", "indices", "blocks", "diag_pos"):
+        assert np.array_equal(getattr(W, k), getattr(coupling_rows(whole), k)), k
+

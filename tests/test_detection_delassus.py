@@ -214,6 +214,33 @@ def test_grid_pairs_2d_groups_vs_brute_force():
         assert np.array_equal(pairs[np.lexsort((pairs[:, 1], pairs[:, 0]))], np.column_stack([i, j]))
 
 
+def test_coupling_blocks_only_are_the_coupling_rows_of_the_whole_operator_bitwise():
+    """In colour order the assembly keeps only the blocks that couple (delassus.assemble couplings=True), so the
+    colour solver sweeps W's own arrays rather than a copy without the blocks of zeros: they must be
+    `coupling_rows` of the whole assembly, bit for bit, also for a rank's rows. Expectation: the whole assembly
+    (checked against the dense G W Gᵀ above) through coupling_rows (checked against the dense W in
+    tests/test_colour.py). The rigid body is held in every dof (W = 0), so the contacts that share only it have
+    blocks of zeros. Catches: a diagonal block of zeros dropped, a block kept or dropped by its first entry only,
+    a row's indptr or diag_pos not moved with its blocks."""
+    from fem_blocks.distributed.colour import coupling_rows
+    cs, G, kind, rot, center, (W_flat, W_offset, W_size), U_offset, Wd, Wr, nbn = scene_G(seed=5)
+    W_flat = W_flat.copy()
+    W_flat[W_offset[2]:] = 0.0  # body 2 held in every dof
+    B = delassus.assemble(G, W_flat, W_offset, W_size, nb=3)
+    for rows in (None, np.array([1, 2, 5, 6])):
+        E = coupling_rows(B if rows is None else delassus.assemble(G, W_flat, W_offset, W_size, nb=3, rows=rows))
+        C = delassus.assemble(G, W_flat, W_offset, W_size, nb=3, rows=rows, couplings=True)
+        assert C.indices.size < (B.indices.size if rows is None else B.indptr[rows + 1].sum() - B.indptr[rows].sum())
+        for k in ("indptr", "indices", "blocks", "diag_pos"):
+            assert np.array_equal(getattr(C, k), getattr(E, k)), k
+    # a block with a single nonzero entry off its first one is kept (3 of its 4 entries zero)
+    blocks = np.zeros((3, 2, 2))
+    blocks[0, 0, 0] = blocks[2, 0, 0] = 1.0
+    blocks[1, 1, 0] = 2.0
+    ip, ix, dp = np.array([0, 2, 3]), np.array([0, 1, 1]), np.array([0, 2])
+    assert delassus._drop_zero_blocks(ip, ix, blocks, dp) == 3
+
+
 def test_rows_of_the_operator_are_its_rows_bitwise():
     """A rank assembles only the rows of its own contacts (delassus.assemble rows=) from the G blocks of a subset of
     the contacts (kin.build_G on cs.subset): both must be the whole operator's and the whole G's, bit for bit, or a

@@ -137,7 +137,14 @@ class ContactStep:
 
     def set_options(self, opts: ContactOptions):
         """Take new solver options (a stage's tol/max_sweeps: ContactOptions.for_stage) from the next step on."""
-        self.opts = self._on_ranks(opts)
+        self._take_options(self._on_ranks(opts))
+
+    def _take_options(self, opts: ContactOptions):
+        """The colour order keeps only W's coupling blocks (`_delassus`): W is rebuilt when the order changes to or
+        from it."""
+        if (opts.order == "colours") != (self.opts.order == "colours"):
+            self.W_dirty = True
+        self.opts = opts
 
     def use_comm(self, comm):
         """Share the contact solve among the MPI ranks of `comm` (every rank runs the same model and steps; the
@@ -146,7 +153,7 @@ class ContactStep:
         fallback and the coarse correction run on every rank alike, the Newton iterations' linear solves shared
         (distributed/linear.py: the same iterates within the linear solver's rounding)."""
         self.comm = comm if comm is not None and comm.Get_size() > 1 else None
-        self.opts = self._on_ranks(self.opts)
+        self._take_options(self._on_ranks(self.opts))
 
     def _on_ranks(self, opts: ContactOptions) -> ContactOptions:
         if (getattr(self, "comm", None) is not None and opts.solver == "nlgs" and opts.fallback == "none"
@@ -300,10 +307,12 @@ class ContactStep:
 
     def _delassus(self, W_flat, W_offset, W_size):
         """W of the contact set; N > 1 ranks in colour order: the rows of this rank's own contacts, columns the
-        contacts L (delassus.assemble's rows)."""
+        contacts L (delassus.assemble's rows). In colour order only the blocks that couple are assembled
+        (delassus.assemble's couplings): the rows the colour solver sweeps, held once."""
         from .. import delassus
         rows = None if self._local is None else self._local.own_pos
-        return delassus.assemble(self.G, W_flat, W_offset, W_size, self.scene.nb, rows=rows)
+        return delassus.assemble(self.G, W_flat, W_offset, W_size, self.scene.nb, rows=rows,
+                                 couplings=self.opts.order == "colours")
 
     def _initial_state(self):
         """Committed law state of new contacts: 2D (nc, NSTATE); 3D one more column, S_US = NSTATE (u_S)."""
