@@ -617,13 +617,14 @@ def test_random_coupled_problems_converge_to_zero_natural_map(law, params):
         q = rng.normal(size=3 * n) * 0.1
         lawv = np.full(n, code, dtype=np.int64)
         parv = np.tile(par, (n, 1))
+        muv = parv[:, 0].copy()  # contiguous, as the contact step passes it (a strided view compiles new kernels)
         st = initial_state(lawv, 3)
         ueff = rng.normal(size=(n, 3)) * 1e-4
         area = np.full(n, 0.01)
-        res, x = nlgs.solve_cohesive(W3, q, parv[:, 0], lawv, parv, st, ueff, area, 1e-2, 1.0, tol=1e-11,
+        res, x = nlgs.solve_cohesive(W3, q, muv, lawv, parv, st, ueff, area, 1e-2, 1.0, tol=1e-11,
                                      criterion="residual", check_every=1, max_sweeps=20000)
         assert res.converged, res.message
-        f = nlgs.natural_map_cohesive(W3.indptr, W3.indices, W3.blocks, q, parv[:, 0], res.r, lawv, parv, st, x,
+        f = nlgs.natural_map_cohesive(W3.indptr, W3.indices, W3.blocks, q, muv, res.r, lawv, parv, st, x,
                                       ueff, area, 1e-2, 1.0)
         assert f <= 1e-11 * np.linalg.norm(q)
         x2 = x.copy()

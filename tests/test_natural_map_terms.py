@@ -7,10 +7,13 @@ copied below verbatim from solver/nlgs.py (old_*), on random problems of every i
 return the old values bitwise; (2) the terms added one by one in contact order from 0.0, then sqrt, are those
 values bitwise; (3) the terms of a subset of rows (a rank's owned contacts, local numbering: owned then ghosts,
 the matrix not square) are the global terms of those contacts, bitwise.
+
+The old functions run as plain Python (their numba decorators removed, the code otherwise verbatim; the kernels they
+call are the package's compiled ones): the same IEEE operations in the same order, and compiling them took about
+half a minute of every clean CI run.
 """
 import numpy as np
 import pytest
-from numba import njit
 
 from fem_blocks import laws
 from fem_blocks.distributed import sweep as ds
@@ -22,7 +25,6 @@ from fem_blocks.laws import compression_stiffness as _kcomp, linear_part as _lin
 from fem_blocks.laws import cap_stress as _cap_stress, P_CSS as _P_CSS
 
 # ----------------------------------------------------------------------------- verbatim copies (before the split)
-@njit(cache=True)
 def old_natural_map_2d(r, u, mu):
     """‖F‖_2 with F_α = r_α - P_K(r_α - (u_α + [mu |u_T|, 0])) (2D Coulomb cone K)."""
     n = mu.shape[0]
@@ -36,7 +38,6 @@ def old_natural_map_2d(r, u, mu):
     return np.sqrt(s)
 
 
-@njit(cache=True)
 def old_natural_map_3d(r, u, mu):
     """‖F‖_2 with F_α = r_α - P_K(r_α - (u_α + [mu ‖u_T‖, 0, 0])) (3D Coulomb cone K)."""
     s = 0.0
@@ -52,7 +53,6 @@ def old_natural_map_3d(r, u, mu):
     return np.sqrt(s)
 
 
-@njit(cache=True)
 def old_natural_map_cohesive3(indptr, indices, blocks, q, mu, r, law, par, st, trial, ueff, area, h, theta):
     """3D ‖F‖ of the transformed problem: F = P̃/σ - P_K(P̃/σ - (v + [μ‖v_T‖, 0, 0])), P̃ = P + P_adh(u(v)), σ the
     contact's gain (residual_scale); at a cap
@@ -107,7 +107,6 @@ def old_natural_map_cohesive3(indptr, indices, blocks, q, mu, r, law, par, st, t
     return np.sqrt(s)
 
 
-@njit(cache=True)
 def old_natural_map_cohesive(indptr, indices, blocks, q, mu, r, law, par, st, trial, ueff, area, h, theta):
     """‖F‖ of the transformed problem: F = P̃/σ - P_K(P̃/σ - (v + [μ|v_T|, 0])), P̃ = P + P_adh(u(v)), σ the contact's
     gain (residual_scale; 1 for Coulomb contacts) (2D or 3D by the block size)."""
@@ -206,7 +205,6 @@ def random_problem(n, dim, seed, codes=tuple(range(6))):
     return W, q, par[:, laws.P_MU].copy(), r, law, par, st, trial, ueff, area
 
 
-@njit(cache=True)
 def in_order(t):
     """Σ t[α] added one by one in index order from 0.0 (the serial residual's summation)."""
     s = 0.0
