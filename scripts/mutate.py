@@ -206,9 +206,15 @@ MUTATIONS = [
     Mutation("impulse_every_contact", "N ranks: every rank adds the impulses of all its contacts L to the bodies",
              "fem_blocks/contact/step.py", "        imp[~self._local.dofs] = 0.0\n", "",
              ("tests/test_dist_run.py",)),
-    Mutation("group_graph_not_gathered", "N ranks: each rank colours the group graph of its own rows only",
-             "fem_blocks/distributed/colour.py", "    if comm is not None and comm.Get_size() > 1:\n        from mpi4py",
-             "    if False:\n        from mpi4py", ("tests/test_dist_run.py",)),
+    Mutation("greedy_edges_not_symmetric", "N ranks: an edge known to one end's owner is not sent to the other's",
+             "fem_blocks/distributed/greedy.py",
+             "    extra = np.concatenate(got) if got else np.empty((0, 2), dtype=np.int64)",
+             "    extra = np.empty((0, 2), dtype=np.int64)", ("tests/test_dist_greedy.py",)),
+    Mutation("greedy_ready_without_ghosts", "N ranks: a group is coloured without waiting for its lower ghost "
+             "neighbours' colours", "fem_blocks/distributed/greedy.py",
+             "            if gid[j] < gid[i] and colour[j] < 0:\n                ready = False",
+             "            if j < n_own and gid[j] < gid[i] and colour[j] < 0:\n                ready = False",
+             ("tests/test_dist_greedy.py",)),
 ]
 
 IGNORE = shutil.ignore_patterns(".git", "__pycache__", ".venv", "*.pyc", ".pytest_cache", "out", "*.egg-info")

@@ -150,7 +150,8 @@ def test_a_ranks_rows_give_the_colours_and_iterates_of_the_whole_operator():
     ref = ColourSolver(W, bodies=(cand, ant, 9))
     rows = BlockCSR(W.indptr.copy(), W.indices.copy(), W.blocks.copy(), W.diag_pos.copy())
     ids = np.arange(n)
-    got = ColourSolver.from_rows(rows, ids, ids, n, body_pair_groups(cand, ant, 9)[0], MPI.COMM_SELF)
+    got = ColourSolver.from_rows(rows, ids, ids, n, body_pair_groups(cand, ant, 9)[0], np.zeros(n, int),
+                                 MPI.COMM_SELF)
     try:
         assert got.n_colours == ref.n_colours
         for c in range(ref.n_colours):

@@ -270,7 +270,7 @@ class ContactStep:
             cs = self.cs
             self._colours = ColourSolver.from_rows(self.Wdel, self._local.own, self._local.L, len(cs.gap),
                                                    body_pair_groups(cs.cand_body, cs.ant_body, self.scene.nb)[0],
-                                                   self.comm)
+                                                   self._owner(), self.comm)
             return self._colours
         owner = self._owner() if self.comm is not None else None
         self._colours = ColourSolver(self.Wdel, owner, self.comm,

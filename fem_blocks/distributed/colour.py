@@ -19,15 +19,15 @@ is one exchange between ranks: on the running-bond walls of bench/bench_dist.py 
 contact colours against 6 group colours. Blocks of zeros count: with them, the contacts on a fixed foundation all
 couple and the groups need 25 and 74 colours.)
 
-Distribution (comm with N > 1 ranks; distributed/sweep.py). Rank p owns the contacts `owner == p` (the time
-stepper: the rank of the contact's candidate body, distributed/partition.py; with groups, one group's contacts
-must have one owner) and holds their rows of W (without the blocks of zeros, `coupling_rows`, as the serial sweep;
-column order of the global row kept, so every v_α is summed exactly as serially), q_α, μ_α, the law data and the
-impulses of its contacts and of the *ghost* contacts its rows couple to. The rows come from the whole W
-(`ColourSolver`) or are assembled by the rank itself (`ColourSolver.from_rows`, the time stepper: the group graph is
-then the union of every rank's rows, gathered). After colour c, one PETSc scatter carries the new impulses of
-colour c to the ranks that hold them as ghosts (neighbour ranks only). The iterates are the serial ones, bitwise,
-for any N and any ownership.
+Distribution (comm with N > 1 ranks; distributed/sweep.py). Rank p owns the contacts `owner == p` (the time stepper:
+the rank of the contact's candidate body, distributed/partition.py; with groups, one group's contacts must have one
+owner) and holds their rows of W (without the blocks of zeros, `coupling_rows`, as the serial sweep; column order of
+the global row kept, so every v_α is summed exactly as serially), q_α, μ_α, the law data and the impulses of its
+contacts and of the *ghost* contacts its rows couple to. The rows come from the whole W (`ColourSolver`) or are
+assembled by the rank itself (`ColourSolver.from_rows`, the time stepper: each rank colours its own groups from its
+rows, distributed/greedy.py, the colours of the whole group graph without gathering it). After colour c, one PETSc
+scatter carries the new impulses of colour c to the ranks that hold them as ghosts (neighbour ranks only). The iterates
+are the serial ones, bitwise, for any N and any ownership.
 
 Stopping tests, as solver/nlgs.py's `_run` / `_run_cohesive` / `solve_cohesive`, with every sum over contacts exact
 (distributed/exact.py: correctly rounded, independent of the order of the terms and of how they are split among
@@ -77,20 +77,14 @@ def body_pair_groups(cand, ant, nb: int) -> tuple[np.ndarray, int]:
     return group.astype(np.int64).ravel(), int(keys.size)
 
 
-def colour_group_graph(n_groups: int, ga, gb, comm=None) -> np.ndarray:
+def colour_group_graph(n_groups: int, ga, gb) -> np.ndarray:
     """Colour per group: greedy (groups in increasing number) on the symmetric graph of the group pairs
-    (ga[k], gb[k]) (self-pairs allowed, they couple nothing). comm (N > 1 ranks): each rank gives the pairs of its
-    own rows, the graph is their union (one Allgatherv of the distinct pairs), the same colours on every rank
-    (solver/parallel.pair_colouring, the colouring of single contacts too)."""
+    (ga[k], gb[k]) (self-pairs allowed, they couple nothing): solver/parallel.pair_colouring, the colouring of
+    single contacts too. (On N > 1 ranks each rank colours its own groups: distributed/greedy.py, the same
+    colours.)"""
     ga = np.asarray(ga, dtype=np.int64)
     gb = np.asarray(gb, dtype=np.int64)
     e = np.unique(ga * n_groups + gb)
-    if comm is not None and comm.Get_size() > 1:
-        from mpi4py import MPI
-        counts = np.array(comm.allgather(e.size), dtype=np.int64)
-        every = np.empty(int(counts.sum()), dtype=np.int64)
-        comm.Allgatherv(e, [every, counts, np.concatenate([[0], np.cumsum(counts)[:-1]]), MPI.INT64_T])
-        e = every
     return pair_colouring(n_groups, e // n_groups, e % n_groups)
 
 
@@ -172,14 +166,17 @@ class ColourSolver:
         self._distribute(lr, colour[np.concatenate([lr.owned, lr.ghost])])
 
     @classmethod
-    def from_rows(cls, rows: BlockCSR, owned, columns, n: int, group, comm) -> "ColourSolver":
+    def from_rows(cls, rows: BlockCSR, owned, columns, n: int, group, owner, comm) -> "ColourSolver":
         """The colour solver of a run whose ranks hold only the rows of their own contacts (collective on `comm`,
         N > 1 ranks). rows: the rows of W of this rank's contacts `owned` (global numbers, increasing; row i is
         contact owned[i]), their column k meaning contact columns[k] (global numbers, increasing), as
         delassus.assemble(..., rows=...) gives them on a rank's contact subset; n: the number of contacts of the
-        whole run; group: (n,) the body-pair group of every contact (`body_pair_groups`). The colours are those of
-        `colour_groups` on the whole W (the nonzero blocks of every rank's rows, gathered), so the iterates are
-        those of one process in colour order, bitwise."""
+        whole run; group: (n,) the body-pair group of every contact (`body_pair_groups`); owner: (n,) the rank of
+        every contact (one per group). The colours are those of `colour_groups` on the whole W: the greedy colouring
+        of the group graph, each rank colouring its own groups from the nonzero blocks of its rows
+        (distributed/greedy.py, no rank holds the whole graph), so the iterates are those of one process in colour
+        order, bitwise."""
+        from .greedy import greedy_colours
         from .sweep import localise
         self = cls.__new__(cls)
         self.W, self.d, self.n = rows, rows.dim, int(n)
@@ -187,15 +184,23 @@ class ColourSolver:
         owned = np.asarray(owned, dtype=np.int64)
         columns = np.asarray(columns, dtype=np.int64)
         group = np.asarray(group, dtype=np.int64)
+        owner = np.asarray(owner, dtype=np.int64)
+        one = np.zeros(int(group.max()) + 1 if group.size else 0, dtype=np.int64)
+        one[group] = np.arange(group.size)  # a contact of each group: its owner is the group's
         r_loc, c_loc = _nonzero_blocks(rows)
-        colour_of_group = colour_group_graph(int(group.max()) + 1 if group.size else 0,
-                                             group[owned[r_loc]], group[columns[c_loc]], comm)
-        self.n_colours = int(colour_of_group.max()) + 1 if colour_of_group.size else 0  # the same on every rank
+        ids, col = greedy_colours(group[owned], group[owned[r_loc]], group[columns[c_loc]],
+                                  lambda g: owner[one[g]], comm)
+        from mpi4py import MPI
+        self.n_colours = comm.allreduce(int(col.max()) + 1 if col.size else 0, op=MPI.MAX)
         self.colour = None
         Wc = coupling_rows(rows)
         lr = localise(owned, Wc.indptr, columns[Wc.indices], Wc.blocks, Wc.diag_pos)
         del Wc
-        self._distribute(lr, colour_of_group[group[np.concatenate([lr.owned, lr.ghost])]])
+        g_local = group[np.concatenate([lr.owned, lr.ghost])]
+        pos = np.minimum(np.searchsorted(ids, g_local), max(ids.size - 1, 0))
+        if g_local.size and not np.array_equal(ids[pos], g_local):
+            raise InputError("ColourSolver.from_rows: a ghost contact whose group is not coupled to an own group")
+        self._distribute(lr, col[pos])
         return self
 
     def _distribute(self, lr, colour_local):

@@ -1,0 +1,53 @@
+"""The greedy colouring of a graph spread over MPI ranks (fem_blocks/distributed/greedy.py): the colours of the
+sequential greedy (solver/parallel.pair_colouring) on the union of every rank's edges, on any number of ranks, without
+any rank holding the graph.
+
+Expectation: pair_colouring of the whole graph in this process (the serial colouring, tested against its
+definition in tests/test_colour.py and used by every serial run in colour order). One mpirun launch per rank count
+(tests/_greedy_mpi.py, four graphs each: random with duplicates and self-pairs, random plus a path through every
+vertex, one vertex alone, vertices without edges); on 2 ranks both own vertices, on 3 the last owns none; each edge is
+given only to the owner of its first end. Catches: an edge not made symmetric (a rank colouring a vertex before a
+lower neighbour it does not know of), a vertex coloured before its lower ghost neighbours' colours arrived, the
+colour of a ghost read from the wrong rank or position, a rank leaving the rounds early (hang: the launch times out).
+"""
+import os
+import shutil
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from fem_blocks.solver.parallel import pair_colouring
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, os.path.join(ROOT, "tests"))
+import _greedy_mpi  # noqa: E402
+
+
+@pytest.mark.parametrize("size", [1, 2, 3])
+def test_distributed_greedy_colours_are_the_serial_greedy(tmp_path, size):
+    if shutil.which("mpirun") is None:
+        pytest.skip("no mpirun")
+    env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1",
+               OMPI_MCA_rmaps_base_oversubscribe="1", OMPI_MCA_btl_vader_single_copy_mechanism="none", PYTHONPATH=ROOT)
+    try:
+        p = subprocess.run(["mpirun", "-n", str(size), sys.executable, os.path.join(ROOT, "tests", "_greedy_mpi.py"),
+                            str(tmp_path)], capture_output=True, text=True, cwd=ROOT, env=env, timeout=120)
+    except subprocess.TimeoutExpired as e:
+        pytest.fail(f"a rank was left waiting: the launch did not end in 120 s\n{e.stdout}\n{e.stderr}")
+    assert p.returncode == 0, (p.stdout + p.stderr)[-3000:]
+    got = [np.load(tmp_path / f"rank{r}.npz") for r in range(size)]
+    for k in range(4):
+        n, a, b, owner = _greedy_mpi.graph(k, size)
+        ref = pair_colouring(n, a, b)
+        if k == 1:
+            assert ref.max() >= 3  # a graph that needs several colours
+        for r in range(size):
+            ids, col = got[r][f"ids_{k}"], got[r][f"colour_{k}"]
+            mine = np.flatnonzero(owner == r)
+            assert np.all(np.isin(mine, ids))  # its vertices, and the neighbours it saw
+            assert np.array_equal(col, ref[ids]), (k, r)
+        assert len(np.unique(owner)) == min(size, 2) or n == 1  # vertices on 2 ranks (on 3: the last has none)
+        if size > 2:
+            assert not np.any(owner == size - 1)
