@@ -35,8 +35,8 @@ def main(out):
     for k in range(4):
         n, a, b, owner = graph(k, size)
         mine = owner[a] == p
-        ids, col = greedy_colours(np.flatnonzero(owner == p), a[mine], b[mine], lambda x: owner[x], comm)
-        res[f"ids_{k}"], res[f"colour_{k}"] = ids, col
+        ids, col, rounds = greedy_colours(np.flatnonzero(owner == p), a[mine], b[mine], lambda x: owner[x], comm)
+        res[f"ids_{k}"], res[f"colour_{k}"], res[f"rounds_{k}"] = ids, col, rounds
     np.savez(f"{out}/rank{p}.npz", **res)
 
 

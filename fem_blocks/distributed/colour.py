@@ -188,8 +188,8 @@ class ColourSolver:
         one = np.zeros(int(group.max()) + 1 if group.size else 0, dtype=np.int64)
         one[group] = np.arange(group.size)  # a contact of each group: its owner is the group's
         r_loc, c_loc = _nonzero_blocks(rows)
-        ids, col = greedy_colours(group[owned], group[owned[r_loc]], group[columns[c_loc]],
-                                  lambda g: owner[one[g]], comm)
+        ids, col, self.colour_rounds = greedy_colours(group[owned], group[owned[r_loc]], group[columns[c_loc]],
+                                                      lambda g: owner[one[g]], comm)
         from mpi4py import MPI
         self.n_colours = comm.allreduce(int(col.max()) + 1 if col.size else 0, op=MPI.MAX)
         self.colour = None

@@ -65,14 +65,19 @@ def greedy_colours(own, a, b, owner_of, comm):
     """The sequential greedy colours of a graph whose vertices are spread over the ranks of `comm` (collective).
     own: the global numbers of this rank's vertices (distinct); (a, b): edges this rank knows, a ∈ own (either
     direction is an edge; self-pairs ignored); owner_of(x): the rank owning each vertex of the array x (called on
-    the b's). Returns (ids, colour): this rank's vertices and their neighbours (global numbers, increasing) and their
-    colours, those of pair_colouring on the union of every rank's edges."""
+    the b's). Returns (ids, colour, rounds): this rank's vertices and their neighbours (global numbers, increasing),
+    their colours (those of pair_colouring on the union of every rank's edges) and the number of rounds."""
     from mpi4py import MPI
     own = np.unique(np.asarray(own, dtype=np.int64))
     a = np.asarray(a, dtype=np.int64)
     b = np.asarray(b, dtype=np.int64)
     keep = a != b
-    a, b = a[keep], b[keep]
+    if np.any(keep):  # distinct pairs (a rank's rows give each pair once per coupled block)
+        m = int(max(a[keep].max(), b[keep].max())) + 1
+        e = np.unique(a[keep] * m + b[keep])
+        a, b = e // m, e % m
+    else:
+        a, b = a[keep], b[keep]
     if np.any(~np.isin(a, own)):
         raise ValueError("greedy_colours: an edge (a, b) with a not among this rank's vertices")
     p, size = comm.Get_rank(), comm.Get_size()
@@ -112,6 +117,7 @@ def greedy_colours(own, a, b, owner_of, comm):
         sdis = np.cumsum(scounts) - scounts
         rdis = np.cumsum(rcounts) - rcounts
         colour = -np.ones(gid.size, dtype=np.int64)
+        rounds = 0
         sbuf = np.empty(send_all.size, dtype=np.int64)
         rbuf = np.empty(recv_all.size, dtype=np.int64)
         while True:
@@ -119,9 +125,10 @@ def greedy_colours(own, a, b, owner_of, comm):
             sbuf[:] = colour[send_all]
             graph.Neighbor_alltoallv([sbuf, (scounts, sdis), MPI.INT64_T], [rbuf, (rcounts, rdis), MPI.INT64_T])
             colour[recv_all] = rbuf
+            rounds += 1
             if comm.allreduce(left, op=MPI.SUM) == 0:
                 break
     finally:
         graph.Free()
     order = np.argsort(gid, kind="stable")
-    return gid[order], colour[order]
+    return gid[order], colour[order], rounds
