@@ -71,7 +71,17 @@ def warm(demos=DEMOS, out=None, verbose: bool = True, colours=COLOURS, extra=EXT
                       "compile at the first run instead", flush=True)
             if verbose:
                 print(f"[setup] numba kernels of {name}: {time.perf_counter() - t1:.0f} s", flush=True)
+    _several_ranks()
     return time.perf_counter() - t0
+
+
+def _several_ranks():
+    """The kernels only a run on several MPI ranks calls (one process never does): the distributed greedy
+    colouring's pass (distributed/greedy.py), on a two-vertex graph on MPI.COMM_SELF."""
+    import numpy as np
+    from mpi4py import MPI
+    from .distributed.greedy import greedy_colours
+    greedy_colours(np.array([0, 1]), np.array([0]), np.array([1]), np.zeros_like, MPI.COMM_SELF)
 
 
 def main() -> int:
