@@ -199,7 +199,8 @@ class ColourSolver:
         g_local = group[np.concatenate([lr.owned, lr.ghost])]
         pos = np.minimum(np.searchsorted(ids, g_local), max(ids.size - 1, 0))
         if g_local.size and not np.array_equal(ids[pos], g_local):
-            raise InputError("ColourSolver.from_rows: a ghost contact whose group is not coupled to an own group")
+            raise RuntimeError("ColourSolver.from_rows: a ghost contact whose group is not coupled to an own group "
+                               "(the rows and the group graph disagree)")
         self._distribute(lr, col[pos])
         return self
 
