@@ -1,4 +1,4 @@
-"""Run under mpirun by tests/test_dist_greedy.py: every rank builds the same random graphs (GRAPHS), keeps the
+"""Run under mpirun by tests/test_dist_greedy.py: every rank builds the same random graphs (`graph`), keeps the
 vertices it owns and only the edges given to it, colours with distributed/greedy.greedy_colours and writes what it
 got to OUT_DIR/rank<r>.npz: for graph k, ids_k and colour_k (its vertices and their neighbours), and rounds_k.
 
@@ -13,7 +13,7 @@ from fem_blocks.distributed.greedy import greedy_colours
 
 
 def graph(k, size):
-    """(n, a, b, owner, given): random edges (a, b) over n vertices, duplicates and self-pairs included; the owner
+    """(n, a, b, owner): random edges (a, b) over n vertices, duplicates and self-pairs included; the owner
     rank of each vertex (on 3 ranks or more the last owns none); each edge given to one rank only: the owner of a,
     in the direction (a, b) (never the reverse), so a rank may not know an edge of its vertex."""
     rng = np.random.default_rng(k)

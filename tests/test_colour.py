@@ -188,4 +188,3 @@ def test_colour_order_run_sweeps_the_delassus_arrays_without_a_copy(tmp_path):
     assert whole.indices.size > W.indices.size  # the foundation's blocks of zeros
     for k in ("indptr", "indices", "blocks", "diag_pos"):
         assert np.array_equal(getattr(W, k), getattr(coupling_rows(whole), k)), k
-
