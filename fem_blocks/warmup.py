@@ -71,20 +71,7 @@ def warm(demos=DEMOS, out=None, verbose: bool = True, colours=COLOURS, extra=EXT
                       "compile at the first run instead", flush=True)
             if verbose:
                 print(f"[setup] numba kernels of {name}: {time.perf_counter() - t1:.0f} s", flush=True)
-    try:
-        _several_ranks()
-    except Exception as e:  # as above: compile time later, not a failed set-up
-        print(f"[setup] warning: warm-up of the several-rank kernels stopped ({type(e).__name__}: {e})", flush=True)
     return time.perf_counter() - t0
-
-
-def _several_ranks():
-    """The kernels only a run on several MPI ranks calls (one process never does): the distributed greedy
-    colouring's pass (distributed/greedy.py), on a two-vertex graph on MPI.COMM_SELF."""
-    import numpy as np
-    from mpi4py import MPI
-    from .distributed.greedy import greedy_colours
-    greedy_colours(np.array([0, 1]), np.array([0]), np.array([1]), np.zeros_like, MPI.COMM_SELF)
 
 
 def main() -> int:

@@ -211,7 +211,7 @@ MUTATIONS = [
              "    extra = np.concatenate(got) if got else np.empty((0, 2), dtype=np.int64)",
              "    extra = np.empty((0, 2), dtype=np.int64)", ("tests/test_dist_greedy.py",)),
     Mutation("greedy_ready_without_ghosts", "N ranks: a group is coloured without waiting for its lower ghost "
-             "neighbours' colours", "fem_blocks/distributed/greedy.py",
+             "neighbours' colours", "fem_blocks/solver/parallel.py",
              "            if gid[j] < gid[i] and colour[j] < 0:\n                ready = False",
              "            if j < n_own and gid[j] < gid[i] and colour[j] < 0:\n                ready = False",
              ("tests/test_dist_greedy.py",)),

@@ -11,7 +11,8 @@ w < v has its colour (Jones–Plassmann with the vertex numbers as priorities): 
 the colours are those of the sequential greedy, on any number of ranks and for any ownership. One round:
 
 1. each rank passes over its uncoloured vertices in increasing number and colours those whose lower neighbours are
-   all coloured (its own chains of dependencies are resolved within the pass: a lower own vertex comes first);
+   all coloured (solver/parallel.greedy_pass, the pass of the sequential colouring itself; its own chains of
+   dependencies are resolved within the pass: a lower own vertex comes first);
 2. the colours of the vertices of p that another rank q has as neighbours go to q (an MPI neighbourhood
    all-to-all on the graph of the ranks that share edges);
 3. an all-reduce of the vertices left uncoloured ends the rounds at 0.
@@ -25,40 +26,8 @@ either direction, as for pair_colouring. Memory per rank: its vertices, their ed
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
-
-@njit(cache=True)
-def _pass(n_own, gid, indptr, indices, colour):
-    """One pass over the own vertices 0..n_own-1 (increasing global number gid): colour each uncoloured vertex whose
-    lower neighbours (gid smaller; local numbers in indices) are all coloured with the smallest colour none of them
-    has. Returns the number of own vertices still uncoloured."""
-    left = 0
-    maxdeg = 0
-    for i in range(n_own):
-        maxdeg = max(maxdeg, indptr[i + 1] - indptr[i])
-    used = np.full(maxdeg + 1, -1, dtype=np.int64)  # used[c] == i: colour c taken by a lower neighbour of i
-    for i in range(n_own):
-        if colour[i] >= 0:
-            continue
-        ready = True
-        for k in range(indptr[i], indptr[i + 1]):
-            j = indices[k]
-            if gid[j] < gid[i] and colour[j] < 0:
-                ready = False
-                break
-        if not ready:
-            left += 1
-            continue
-        for k in range(indptr[i], indptr[i + 1]):
-            j = indices[k]
-            if gid[j] < gid[i] and colour[j] <= maxdeg:
-                used[colour[j]] = i
-        c = 0
-        while used[c] == i:
-            c += 1
-        colour[i] = c
-    return left
+from ..solver.parallel import greedy_pass
 
 
 def greedy_colours(own, a, b, owner_of, comm):
@@ -121,7 +90,7 @@ def greedy_colours(own, a, b, owner_of, comm):
         sbuf = np.empty(send_all.size, dtype=np.int64)
         rbuf = np.empty(recv_all.size, dtype=np.int64)
         while True:
-            left = _pass(own.size, gid, indptr, indices, colour)
+            left = greedy_pass(own.size, gid, indptr, indices, colour)
             sbuf[:] = colour[send_all]
             graph.Neighbor_alltoallv([sbuf, (scounts, sdis), MPI.INT64_T], [rbuf, (rcounts, rdis), MPI.INT64_T])
             colour[recv_all] = rbuf

@@ -25,20 +25,39 @@ from .problem import SolverResult
 
 
 @njit(cache=True)
-def _greedy_colouring(indptr, indices):
-    n = indptr.shape[0] - 1
-    colour = -np.ones(n, dtype=np.int64)
-    used = np.full(n + 1, -1, dtype=np.int64)  # used[c] == a: colour c is taken by a neighbour of a
-    for a in range(n):
-        for k in range(indptr[a], indptr[a + 1]):
-            b = indices[k]
-            if b != a and colour[b] >= 0:
-                used[colour[b]] = a
+def greedy_pass(n_own, gid, indptr, indices, colour):
+    """One pass of the greedy colouring over the vertices 0..n_own-1 (their global numbers gid increasing; a vertex's
+    neighbours indices[indptr[i]:indptr[i + 1]] in local numbers, gid of every local vertex, colour -1 where
+    unknown): each uncoloured vertex whose lower neighbours (gid smaller) are all coloured takes the smallest colour
+    none of them has, c(v) = min {k ≥ 0 : k ≠ c(w), w < v neighbour}. With every vertex local and gid = 0..n-1 one
+    pass is the sequential greedy colouring (`pair_colouring`); distributed/greedy.py repeats it across ranks.
+    Returns the number of vertices 0..n_own-1 left uncoloured."""
+    left = 0
+    maxdeg = 0
+    for i in range(n_own):
+        maxdeg = max(maxdeg, indptr[i + 1] - indptr[i])
+    used = np.full(maxdeg + 1, -1, dtype=np.int64)  # used[c] == i: colour c taken by a lower neighbour of i
+    for i in range(n_own):
+        if colour[i] >= 0:
+            continue
+        ready = True
+        for k in range(indptr[i], indptr[i + 1]):
+            j = indices[k]
+            if gid[j] < gid[i] and colour[j] < 0:
+                ready = False
+                break
+        if not ready:
+            left += 1
+            continue
+        for k in range(indptr[i], indptr[i + 1]):
+            j = indices[k]
+            if gid[j] < gid[i] and colour[j] <= maxdeg:
+                used[colour[j]] = i
         c = 0
-        while used[c] == a:
+        while used[c] == i:
             c += 1
-        colour[a] = c
-    return colour
+        colour[i] = c
+    return left
 
 
 def pair_colouring(n: int, a, b) -> np.ndarray:
@@ -49,7 +68,9 @@ def pair_colouring(n: int, a, b) -> np.ndarray:
     b = np.asarray(b, dtype=np.int64)
     e = np.unique(np.concatenate([a * n + b, b * n + a]))
     indptr = np.concatenate([[0], np.cumsum(np.bincount(e // n, minlength=n))]).astype(np.int64)
-    return _greedy_colouring(indptr, (e % n).astype(np.int64))
+    colour = -np.ones(n, dtype=np.int64)
+    greedy_pass(n, np.arange(n, dtype=np.int64), indptr, (e % n).astype(np.int64), colour)
+    return colour
 
 
 def colour_contacts(W: BlockCSR) -> np.ndarray:
