@@ -61,6 +61,16 @@ from . import corotational
 from .bodies import DeformableBody, DeformableBody3D, RigidBody, RigidBody3D, check_step
 from .errors import InputError
 
+_BODY_KEY = "sim.body"  # a body's checkpoint entries: "sim.body<i>.<name>" (Simulation.export_state)
+
+
+def body_of_key(key: str) -> int | None:
+    """The body i of a checkpoint entry "sim.body<i>.<name>" (Simulation.export_state), None for any other entry."""
+    if not key.startswith(_BODY_KEY):
+        return None
+    head = key[len(_BODY_KEY):].split(".", 1)[0]
+    return int(head) if head.isdigit() else None
+
 MOVE_TOL = 1e-3  # a driven dof "moves" in a step if its increment is >= MOVE_TOL x the model's largest increment
 
 
@@ -382,17 +392,18 @@ class Simulation:
              "sim.external_work": np.float64(self.external_work), "sim.driver_work": np.float64(self.driver_work),
              "sim.h": np.float64(self.h), "sim.theta": np.float64(self.theta)}
         for i, b in enumerate(self.bodies):
-            d[f"sim.body{i}.q"] = np.array(b.q)
-            d[f"sim.body{i}.u"] = np.array(b.u)
+            key = f"{_BODY_KEY}{i}."
+            d[key + "q"] = np.array(b.q)
+            d[key + "u"] = np.array(b.u)
             if b.kind == 0 and b.framed:  # co-rotational frame (and, 2D, its unwrapped angle)
-                d[f"sim.body{i}.R"] = np.array(b.R)
-                d[f"sim.body{i}.position"] = np.array(b.position)
+                d[key + "R"] = np.array(b.R)
+                d[key + "position"] = np.array(b.position)
                 if self.dim == 2:
-                    d[f"sim.body{i}.phi"] = np.array(b._phi)
+                    d[key + "phi"] = np.array(b._phi)
             if b.kind == 1:
-                d[f"sim.body{i}.reaction"] = np.array(b.reaction)
+                d[key + "reaction"] = np.array(b.reaction)
                 if self.dim == 3:
-                    d[f"sim.body{i}.orientation"] = np.array(b.orientation)
+                    d[key + "orientation"] = np.array(b.orientation)
         if self.last_contact is not None:
             d.update(self.last_contact.export())
         return d
@@ -405,7 +416,7 @@ class Simulation:
             rigid = ("reaction",) + (("orientation",) if self.dim == 3 else ()) if b.kind == 1 else ()
             frame = (("R", "position") + (("_phi",) if self.dim == 2 else ())) if b.kind == 0 and b.framed else ()
             for name in ("q", "u") + rigid + frame:
-                key = f"sim.body{i}.{name.lstrip('_')}"
+                key = f"{_BODY_KEY}{i}.{name.lstrip('_')}"
                 if key not in d or np.shape(d[key]) != np.shape(getattr(b, name)):
                     raise InputError(f"checkpoint: {key}: missing or of another shape than body {i} of this model "
                                      f"(expected {np.shape(getattr(b, name))})")

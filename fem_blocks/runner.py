@@ -652,6 +652,16 @@ def _snapshot(sim: Simulation, model: Model, run: dict) -> dict:
     return d
 
 
+def _body_owner(model: Model, comm) -> np.ndarray:
+    """N ranks: the rank of each body, for the checkpoint's pieces: the contact step's partition (PT-Scotch, the
+    contacts' owners), else (no contact solved yet, no contacts) the ParaView pieces' blocks of bodies."""
+    from .output.paraview import piece_owner
+    c = model.contact
+    if c is not None and c.body_owner is not None and len(c.body_owner) == len(model.bodies):
+        return np.asarray(c.body_owner, dtype=np.int64)
+    return piece_owner(len(model.bodies), comm.Get_size())
+
+
 def _run_arrays(run: dict) -> dict:
     import json
     return {"run.stage": np.int64(run["stage"]), "run.k": np.int64(run["k"]),
@@ -807,8 +817,9 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
     comm: an mpi4py communicator of N > 1 ranks running this same call (`mpirun -n N fem-blocks run`). Every rank
     builds the model and steps it; the contact solve is shared (contact/step.py ContactStep.use_comm: the
     Gauss–Seidel sweeps split by contact owner, in colour order); every rank writes the ParaView piece of its block
-    of bodies (blocks_<frame>_p<rank>.vtu; output/paraview.py), rank 0 the .pvtu/.pvd series and every other
-    output and checkpoint; every rank returns the same summary (and raises the same RunStopped).
+    of bodies (blocks_<frame>_p<rank>.vtu; output/paraview.py) and its piece of each checkpoint (its bodies and
+    contacts: distributed/checkpoint.py), rank 0 the .pvtu/.pvd series and every other output; every rank returns
+    the same summary (and raises the same RunStopped).
 
     resume=True continues from the newest valid checkpoint in `out_dir` (refused if the case file or its meshes
     changed since, unless force=True); history.csv and the .pvd series are cut back to the checkpoint and
@@ -826,10 +837,15 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
     if resume:
         if comm is None:
             ck_path, ck = latest_checkpoint(out_dir)
-        else:  # rank 0 chooses the checkpoint (or raises on every rank), every rank reads it
-            from .output.checkpoint import read_checkpoint
-            ck_path = on_root(comm, lambda: latest_checkpoint(out_dir)[0])
-            ck = read_checkpoint(ck_path)
+        else:  # rank 0 chooses the checkpoint (or raises on every rank), every other rank reads its files
+            from .output.checkpoint import latest_checkpoint_files, load_checkpoint
+            found = {}
+
+            def choose():
+                label, paths, found["arrays"] = latest_checkpoint_files(out_dir)
+                return label, paths
+            ck_path, paths = on_root(comm, choose)
+            ck = found["arrays"] if found else load_checkpoint(paths)
         if str(ck["case_hash"]) != fp and not force:
             raise InputError(f"{ck_path}: the case file {case.source} (or a base or mesh file it names, or --quick) "
                              "changed since this checkpoint was written; run without --resume to start again, or add "
@@ -918,10 +934,17 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
         run["e0"] = (info.kinetic, info.elastic, info.gravity_potential)
 
     def checkpoint(arrays=None):
-        if not root:  # N ranks: rank 0 holds the same state and writes it
+        arrays = arrays if arrays is not None else _snapshot(sim, model, run)
+        if comm is None:
+            hist.flush()  # the history must hold every step up to the checkpoint
+            write_checkpoint(out_dir, arrays)
             return
-        hist.flush()  # the history must hold every step up to the checkpoint
-        write_checkpoint(out_dir, arrays if arrays is not None else _snapshot(sim, model, run))
+        # N ranks: each writes its piece (its bodies and contacts), rank 0 after flushing the history
+        from .contact.step import ContactStep
+        from .distributed.checkpoint import write_pieces
+        from .dynamics import body_of_key
+        write_pieces(comm, out_dir, arrays, _body_owner(model, comm), body_of_key,
+                     ContactStep.per_contact_keys(arrays), before=hist.flush)
 
     def finish(status: str, code: int | None = None) -> dict:
         # (N ranks: rank 0 writes the summary and figures; every rank returns the summary, or raises)
@@ -943,6 +966,7 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
         summary["exit_status"] = conv["exit_status"] if code is None else code
         if comm is not None:
             summary["mpi_ranks"] = comm.Get_size()
+            summary["outputs"]["checkpoint"] = "checkpoint.rank<p>.npz"  # (one piece per rank)
         summary.update(_figures(case, sim, model, out_dir, hist.columns_dict(), conv, summary.get("stages")))
         write_summary(os.path.join(out_dir, "summary.json"), summary)
         return summary

@@ -215,6 +215,18 @@ MUTATIONS = [
              "            if gid[j] < gid[i] and colour[j] < 0:\n                ready = False",
              "            if j < n_own and gid[j] < gid[i] and colour[j] < 0:\n                ready = False",
              ("tests/test_dist_greedy.py",)),
+    Mutation("ck_state_not_per_contact", "checkpoint pieces: the law state left out of the per-contact entries "
+             "(every rank holds all its rows)", "fem_blocks/contact/step.py",
+             '    PER_CONTACT = ("contact.P", "contact.state", "contact.law",',
+             '    PER_CONTACT = ("contact.P", "contact.law",', ("tests/test_checkpoint_pieces.py",)),
+    Mutation("ck_owner_from_antagonist", "checkpoint pieces: a contact's rows go to the rank of its antagonist body",
+             "fem_blocks/output/checkpoint.py", '        cand = np.asarray(arrays["contact.cs.cand_body"])',
+             '        cand = np.asarray(arrays["contact.cs.ant_body"])', ("tests/test_checkpoint_pieces.py",)),
+    Mutation("ck_set_by_largest_step", "checkpoint pieces: the newest set chosen by the largest step (an older run's "
+             "pieces in .prev win)", "fem_blocks/output/checkpoint.py",
+             "    for k, (p0, d0) in enumerate(valid.get(0, [])):",
+             '    for k, (p0, d0) in enumerate(sorted(valid.get(0, []), key=lambda x: -int(x[1]["sim.step"]))):',
+             ("tests/test_checkpoint_pieces.py",)),
 ]
 
 IGNORE = shutil.ignore_patterns(".git", "__pycache__", ".venv", "*.pyc", ".pytest_cache", "out", "*.egg-info")

@@ -8,7 +8,7 @@ ranks, in colour order, with exact sums in the stopping tests. So history.csv of
 serial file, byte for byte: a dry wall, a wall with mixed-mode cohesive joints, a 3D wall, and a brick on its
 foundation on 3 ranks (one rank owns no body). The exit status is the serial one on every rank (a solver policy
 stop: 1; invalid input: 2). A run killed by SIGKILL on one rank and resumed (--resume) on 2 ranks gives the
-uninterrupted serial history, byte for byte.
+uninterrupted serial history, byte for byte, and so does its checkpoint (one piece per rank) resumed on one process.
 
 One-line bugs these catch (checked): scattering the impulses after the sweep instead of after each colour (the
 ranks read stale interface impulses: histories differ on 2 ranks); summing the change per rank without the exact
@@ -86,12 +86,19 @@ def test_the_runs_do_not_converge_trivially_and_ranks_share_contacts(runs):
     import csv
     rows = list(csv.DictReader(open(d / "dry.3" / "history.csv")))
     assert min(int(r["sweeps"]) for r in rows[1:]) >= 5
-    ck = np.load(d / "dry.3" / "checkpoint.npz")
-    owner = ck["contact.body_owner"]
-    cand, ant = ck["contact.cs.cand_body"], ck["contact.cs.ant_body"]
+    pieces = [np.load(d / "dry.3" / f"checkpoint.rank{p}.npz") for p in range(3)]
+    owner = pieces[0]["contact.body_owner"]
     assert set(owner.tolist()) == {0, 1, 2}
+    cand, ant, ids = (np.concatenate([ck[k] for ck in pieces])
+                      for k in ("contact.cs.cand_body", "contact.cs.ant_body", "part.contacts"))
     assert np.count_nonzero(owner[cand] != owner[ant]) > 0
-    ck1 = np.load(d / "one_brick.3" / "checkpoint.npz")
+    assert sorted(ids.tolist()) == list(range(int(pieces[0]["part.n_contacts"])))  # each contact in one piece
+    for p, ck in enumerate(pieces):  # the piece of rank p: its contacts and bodies, with the partition
+        assert np.array_equal(ck["part.body_owner"], owner)
+        assert np.all(owner[ck["contact.cs.cand_body"]] == p) and len(ck["contact.P"]) == len(ck["part.contacts"])
+        assert {int(k.split(".")[1][4:]) for k in ck.files if k.startswith("sim.body")} == \
+            set(np.flatnonzero(owner == p).tolist())
+    ck1 = np.load(d / "one_brick.3" / "checkpoint.rank0.npz")
     assert len(set(ck1["contact.body_owner"].tolist())) <= 2  # two bodies on three ranks
 
 
@@ -126,14 +133,22 @@ def test_exit_status_is_the_same_on_every_rank(runs):
     assert (d / "dry.2" / "paraview" / "blocks.pvd").exists()
 
 
+def _wait_for_pieces(p, out, n):
+    """Wait until every rank of the launch `p` has written a checkpoint piece in `out`."""
+    t0 = time.time()
+    while not all((out / f"checkpoint.rank{r}.npz").exists() for r in range(n)) and p.poll() is None \
+            and time.time() - t0 < 300:
+        time.sleep(0.02)
+
+
 def test_resume_after_sigkill_of_one_rank_is_bitwise_the_uninterrupted_run(runs):
+    """Killed on 2 ranks, resumed on 2 ranks from the pieces (checkpoint.rank<p>.npz) and, from a copy, on one
+    process (the pieces merged): both give the serial history byte for byte."""
+    from fem_blocks import cli
     d, serial, codes, logs = runs
     out = d / "long.2"
     p = _mpirun(2, d, "long", wait=False)
-    ck = out / "checkpoint.npz"
-    t0 = time.time()
-    while not ck.exists() and p.poll() is None and time.time() - t0 < 300:
-        time.sleep(0.02)
+    _wait_for_pieces(p, out, 2)
     assert p.poll() is None, "the run ended before its first checkpoint"
     ranks = subprocess.run(["pgrep", "-P", str(p.pid)], capture_output=True, text=True).stdout.split()
     assert ranks, "no rank process found"
@@ -143,6 +158,11 @@ def test_resume_after_sigkill_of_one_rank_is_bitwise_the_uninterrupted_run(runs)
     rows = (out / "history.csv").read_bytes().count(b"\n") if (out / "history.csv").exists() else 0
     full = _history(d, "long", 1).count(b"\n")
     assert rows < full  # killed before the end
+    assert not (out / "checkpoint.npz").exists()
+    one = d / "long.2to1"
+    shutil.copytree(out, one)
+    assert cli.main(["run", str(d / "long.toml"), "--out", str(one), "--quiet", "--resume"]) == serial["long"]
+    assert (one / "history.csv").read_bytes() == _history(d, "long", 1)
     r = _mpirun(2, d, "long", "--resume")
     assert json.loads((d / "codes.2.resume.json").read_text())["long"] == [serial["long"]] * 2, \
         (r.stdout + r.stderr)[-3000:]
@@ -266,16 +286,14 @@ def test_paraview_pieces_per_rank_are_the_serial_grid(runs, n, name):
 
 def test_sigterm_to_one_rank_stops_every_rank_at_the_same_step(runs):
     """SIGTERM reaches one rank only: the ranks decide together, once per step, so every rank finishes the same
-    step, rank 0 writes the checkpoint and every rank exits with 143. Catches each rank acting on its own signal
-    (checked: rank 1 stops, rank 0 waits for it in the next sweep's exchange: the launch hangs and times out)."""
+    step, every rank writes its checkpoint piece and every rank exits with 143. Catches each rank acting on its own
+    signal (checked: rank 1 stops, rank 0 waits for it in the next sweep's exchange: the launch hangs and times
+    out)."""
     d, serial, codes, logs = runs
     out = d / "long.2"
     shutil.rmtree(out, ignore_errors=True)
     p = _mpirun(2, d, "long", wait=False)
-    ck = out / "checkpoint.npz"
-    t0 = time.time()
-    while not ck.exists() and p.poll() is None and time.time() - t0 < 300:
-        time.sleep(0.02)
+    _wait_for_pieces(p, out, 2)
     assert p.poll() is None, "the run ended before its first checkpoint"
     ranks = subprocess.run(["pgrep", "-P", str(p.pid)], capture_output=True, text=True).stdout.split()
     os.kill(int(ranks[-1]), signal.SIGTERM)

@@ -479,6 +479,16 @@ class ContactStep:
     def _CS(self):
         return tuple(f.name for f in dataclasses.fields(self._cs_cls))
 
+    # the checkpoint entries with one row per contact (the others: counters, the partition, 3D's rigid W); the
+    # last step's outputs ("contact.out.*", ContactResult.export) are per contact too
+    PER_CONTACT = ("contact.P", "contact.state", "contact.law", "contact.P_prev", "contact.gap_ref",
+                   "contact.g_built")
+
+    @classmethod
+    def per_contact_keys(cls, keys) -> list:
+        """The entries of `keys` (a checkpoint's) with one row per contact of the contact set."""
+        return [k for k in keys if k in cls.PER_CONTACT or k.startswith(("contact.cs.", "contact.out."))]
+
     def export_state(self) -> dict:
         """Arrays that determine the rest of the run: contact set, G blocks, reference gaps, impulses (warm
         start), law states and counters (the shuffled order's seed is `seed + steps`). The last step's outputs

@@ -124,8 +124,7 @@ def run_lab(lab: LabCase, out: str, quick: bool = False, quiet: bool = False, re
     OUT/TEST.png; return the exit status (the worst of the specimens'). comm: N > 1 MPI ranks running this same
     call (each specimen runs on all of them, runner.run_case; rank 0 writes the report)."""
     from ..case import quick as make_quick
-    from ..output.checkpoint import NAME as CK_NAME
-    from ..output.checkpoint import PREV as CK_PREV
+    from ..output.checkpoint import has_checkpoint
     from ..output.history import read_history
     from ..runner import RunStopped, convergence_line, run_case
     root = comm is None or comm.Get_rank() == 0
@@ -137,8 +136,7 @@ def run_lab(lab: LabCase, out: str, quick: bool = False, quiet: bool = False, re
             case = make_quick(case)
         d = os.path.join(out, label)
         # (N ranks: rank 0's view of the files decides for every rank)
-        has_ck = on_root(comm, lambda: resume and any(os.path.exists(os.path.join(d, f))
-                                                      for f in (CK_NAME, CK_PREV)))
+        has_ck = on_root(comm, lambda: resume and has_checkpoint(d))
         try:
             summ = run_case(case, d, progress=not quiet, resume=has_ck, force=force, comm=comm)
             st, line = int(summ.get("exit_status") or 0), convergence_line(summ.get("convergence"))

@@ -12,12 +12,21 @@ Contents (see `runner.run_case`): `run.*` counters of the runner (stage, step in
 `sim.*` the Simulation state (time, step count, work, displacements and velocities of every body, driver
 reactions) and `contact.*` the contact layer (contact set, G blocks, reference gaps, impulses for the warm
 start, every law's internal variables: β / damage, jumps u_N, u_T, dissipated energy).
+
+On N > 1 MPI ranks each rank p writes its piece, `DIR/checkpoint.rank<p>.npz` (and `.rank<p>.prev.npz`, kept the
+same way): the rows of the bodies and contacts it owns and every other entry (`split`); the pieces of one round of
+writes share a token (`part.token`). The newest complete set is the one of rank 0's newest piece when every rank
+holds a valid piece with its token, else the one of rank 0's previous piece: the ranks write each round together
+(distributed/checkpoint.py), so a run killed while they write leaves the set before complete. `merge` puts a set
+back together (any number of processes can read it); a run that writes a checkpoint removes the other layout's files
+once its own are complete, so a directory holds one run's checkpoints.
 """
 from __future__ import annotations
 
 import hashlib
 import io
 import os
+import re
 import sys
 import zipfile
 
@@ -28,6 +37,12 @@ from .atomic import atomic_write_bytes, fsync_dir
 
 NAME = "checkpoint.npz"
 PREV = "checkpoint.prev.npz"
+_PIECE = re.compile(r"^checkpoint\.rank(\d+)\.(prev\.)?npz$")
+
+
+def piece_names(rank: int) -> tuple[str, str]:
+    """(newest, previous) file names of rank `rank`'s checkpoint piece."""
+    return f"checkpoint.rank{rank}.npz", f"checkpoint.rank{rank}.prev.npz"
 
 
 def digest(arrays: dict) -> str:
@@ -44,14 +59,16 @@ def digest(arrays: dict) -> str:
     return h.hexdigest()
 
 
-def write_checkpoint(directory: str, arrays: dict) -> str:
-    """Write `arrays` (name -> numpy array or scalar) as DIR/checkpoint.npz, keeping the previous one."""
+def write_checkpoint(directory: str, arrays: dict, names: tuple[str, str] = (NAME, PREV)) -> str:
+    """Write `arrays` (name -> numpy array or scalar) as DIR/checkpoint.npz (names: (newest, previous); a rank's
+    piece: `piece_names`), keeping the previous one. One process (names = the default): the pieces of an earlier run
+    on N ranks are removed once the new file is complete."""
     arrays = {k: np.asarray(v) for k, v in arrays.items()}
     arrays["_digest"] = np.array(digest(arrays))
     buf = io.BytesIO()
     np.savez(buf, **arrays)
-    path = os.path.join(directory, NAME)
-    prev = os.path.join(directory, PREV)
+    path = os.path.join(directory, names[0])
+    prev = os.path.join(directory, names[1])
 
     def keep_previous():  # called once the new checkpoint is complete on disk, before it replaces the newest
         if not os.path.exists(path):
@@ -66,7 +83,22 @@ def write_checkpoint(directory: str, arrays: dict) -> str:
             os.replace(path, prev)
         fsync_dir(directory)
     atomic_write_bytes(path, buf.getvalue(), before_replace=keep_previous)
+    if names[0] == NAME:
+        remove_other_layout(directory, None)
     return path
+
+
+def remove_other_layout(directory: str, size: int | None) -> None:
+    """After a complete checkpoint of one process (size None): remove every rank's piece; after a complete set of
+    pieces of `size` ranks: remove the one-process files and the pieces of ranks >= size (an earlier run on more
+    ranks), so that no older checkpoint can be taken for the newest."""
+    names = [f for f in os.listdir(directory) if _PIECE.match(f)] if size is None else \
+        [NAME, PREV] + [f for f in os.listdir(directory) if _PIECE.match(f) and int(_PIECE.match(f)[1]) >= size]
+    for f in names:
+        try:
+            os.unlink(os.path.join(directory, f))
+        except FileNotFoundError:
+            pass
 
 
 def read_checkpoint(path: str) -> dict:
@@ -86,12 +118,67 @@ def read_checkpoint(path: str) -> dict:
     return d
 
 
-def latest_checkpoint(directory: str, warn=None) -> tuple[str, dict]:
-    """(path, arrays) of the newest valid checkpoint in `directory`; skipped files are reported via `warn`."""
-    warn = warn or (lambda msg: print(f"fem-blocks: warning: {msg}", file=sys.stderr))
-    errors = []
-    for name in (NAME, PREV):
-        p = os.path.join(directory, name)
+def split(arrays: dict, rank: int, size: int, token: str, body_owner, body_of, contact_keys) -> dict:
+    """Rank `rank`'s piece (of `size`) of the checkpoint `arrays`: the entries of the bodies it owns
+    (body_owner[body_of(key)] == rank; body_of(key) is None for an entry of no body), the rows of its contacts (those
+    whose candidate body it owns, "contact.cs.cand_body") of the per-contact entries `contact_keys`, and every other
+    entry; plus `part.*`: rank, size, token, the body partition, the contacts' numbers in the whole set (increasing)
+    and their count, the per-contact entries' names."""
+    owner = np.asarray(body_owner, dtype=np.int64)
+    keys = sorted(k for k in contact_keys if k in arrays)
+    out = {"part.rank": np.int64(rank), "part.size": np.int64(size), "part.token": np.array(str(token)),
+           "part.body_owner": owner}
+    ids = None
+    if keys:
+        cand = np.asarray(arrays["contact.cs.cand_body"])
+        ids = np.flatnonzero(owner[cand] == rank)
+        out.update({"part.contacts": ids, "part.n_contacts": np.int64(len(cand)), "part.contact_keys": np.array(keys)})
+    for k, v in arrays.items():
+        if ids is not None and k in keys:
+            out[k] = np.asarray(v)[ids]
+        else:
+            b = body_of(k)
+            if b is None or owner[b] == rank:
+                out[k] = v
+    return out
+
+
+def merge(pieces: list, label: str = "checkpoint") -> dict:
+    """The whole checkpoint from the pieces of one set (`split` on every rank), in any order; InputError naming
+    `label` if they are not one complete set (a rank missing or twice, another token, contacts missing or twice)."""
+    pieces = sorted(pieces, key=lambda d: int(d["part.rank"]))
+    size, token = int(pieces[0]["part.size"]), str(pieces[0]["part.token"])
+    if [int(d["part.rank"]) for d in pieces] != list(range(size)) or \
+            any(int(d["part.size"]) != size or str(d["part.token"]) != token for d in pieces):
+        raise InputError(f"{label}: not one complete set of checkpoint pieces (expected ranks 0..{size - 1} of one "
+                         "write)")
+    out = {}
+    for d in pieces:
+        for k, v in d.items():
+            if not k.startswith("part.") and k != "_digest":
+                out.setdefault(k, v)  # a body's entries are in one piece; the others are the same in every piece
+    if "part.contact_keys" in pieces[0]:
+        n = int(pieces[0]["part.n_contacts"])
+        ids = [np.asarray(d["part.contacts"], dtype=np.int64) for d in pieces]
+        if not np.array_equal(np.sort(np.concatenate(ids)), np.arange(n)):
+            raise InputError(f"{label}: the pieces do not hold each of the {n} contacts once")
+        for k in pieces[0]["part.contact_keys"]:
+            k = str(k)
+            first = np.asarray(pieces[0][k])
+            a = np.empty((n,) + first.shape[1:], dtype=first.dtype)
+            for d, i in zip(pieces, ids):
+                a[i] = d[k]
+            out[k] = a
+    return out
+
+
+def has_checkpoint(directory: str) -> bool:
+    """True when `directory` holds a checkpoint file of one process or a rank's piece (valid or not)."""
+    return os.path.isdir(directory) and any(f in (NAME, PREV) or _PIECE.match(f) for f in os.listdir(directory))
+
+
+def _first_valid(paths, warn, errors):
+    for p in paths:
         if not os.path.exists(p):
             continue
         try:
@@ -99,5 +186,71 @@ def latest_checkpoint(directory: str, warn=None) -> tuple[str, dict]:
         except InputError as e:
             errors.append(str(e))
             warn(f"{e}; trying the previous checkpoint")
-    why = "; ".join(errors) if errors else "no checkpoint.npz (set [output] checkpoint_every = N to write them)"
+    return None
+
+
+def _latest_set(directory: str, warn, errors):
+    """(paths, pieces) of the newest complete set of rank pieces (module docstring), or None."""
+    ranks = sorted({int(m[1]) for m in map(_PIECE.match, os.listdir(directory)) if m})
+    valid = {}
+    for r in ranks:
+        valid[r] = []
+        for p in (os.path.join(directory, f) for f in piece_names(r)):
+            if os.path.exists(p):
+                try:
+                    d = read_checkpoint(p)
+                    if not {"part.rank", "part.size", "part.token"} <= set(d) or int(d["part.rank"]) != r:
+                        raise InputError(f"{p}: not rank {r}'s piece of a checkpoint")
+                    valid[r].append((p, d))
+                except InputError as e:
+                    errors.append(str(e))
+                    warn(f"{e}; trying the previous checkpoint")
+    for k, (p0, d0) in enumerate(valid.get(0, [])):
+        token, size = str(d0["part.token"]), int(d0["part.size"])
+        chosen = []
+        for r in range(size):
+            match = [(p, d) for p, d in valid.get(r, []) if str(d["part.token"]) == token]
+            if not match:
+                msg = f"{p0}: rank {r}'s piece of this checkpoint is missing or invalid (the run stopped while the " \
+                      "ranks wrote it)"
+                errors.append(msg)
+                if k == 0:
+                    warn(f"{msg}; trying the previous checkpoint")
+                break
+            chosen.append(match[0])
+        else:
+            return [p for p, _ in chosen], [d for _, d in chosen]
+    return None
+
+
+def latest_checkpoint_files(directory: str, warn=None) -> tuple[str, list, dict]:
+    """(label, paths, arrays) of the newest valid checkpoint in `directory`: checkpoint.npz (or .prev) of one process,
+    or the newest complete set of rank pieces (merged), whichever was written last; skipped files are reported via
+    `warn`. `load_checkpoint(paths)` reads the same checkpoint again (another process)."""
+    warn = warn or (lambda msg: print(f"fem-blocks: warning: {msg}", file=sys.stderr))
+    errors = []
+    one = _first_valid([os.path.join(directory, n) for n in (NAME, PREV)], warn, errors) \
+        if os.path.isdir(directory) else None
+    many = _latest_set(directory, warn, errors) if os.path.isdir(directory) else None
+    if many is not None and (one is None or os.path.getmtime(many[0][0]) > os.path.getmtime(one[0])):
+        paths, pieces = many
+        label = os.path.join(directory, f"checkpoint.rank*.npz ({len(paths)} pieces)")
+        return label, paths, merge(pieces, label)
+    if one is not None:
+        return one[0], [one[0]], one[1]
+    why = "; ".join(errors) if errors else \
+        "no checkpoint.npz (set [output] checkpoint_every = N to write them) and no checkpoint.rank<p>.npz pieces"
     raise InputError(f"{directory}: cannot resume: {why}")
+
+
+def load_checkpoint(paths: list) -> dict:
+    """The checkpoint in the files `paths` (latest_checkpoint_files): one file, or the pieces of one set merged."""
+    if len(paths) == 1:
+        return read_checkpoint(paths[0])
+    return merge([read_checkpoint(p) for p in paths], os.path.dirname(paths[0]))
+
+
+def latest_checkpoint(directory: str, warn=None) -> tuple[str, dict]:
+    """(label, arrays) of the newest valid checkpoint in `directory` (latest_checkpoint_files)."""
+    label, _, arrays = latest_checkpoint_files(directory, warn)
+    return label, arrays

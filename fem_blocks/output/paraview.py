@@ -31,6 +31,12 @@ def piece_bodies(n_bodies: int, comm) -> range:
     p, n = comm.Get_rank(), comm.Get_size()
     return range(p * n_bodies // n, (p + 1) * n_bodies // n)
 
+
+def piece_owner(n_bodies: int, size: int) -> np.ndarray:
+    """The rank whose piece holds each body (piece_bodies on each of `size` ranks): the last p with p nb / N <= i."""
+    starts = np.arange(size, dtype=np.int64) * n_bodies // size
+    return np.searchsorted(starts, np.arange(n_bodies, dtype=np.int64), side="right").astype(np.int64) - 1
+
 # Voigt order of the stresses: 2D (xx, yy, xy), 3D (xx, yy, zz, yz, xz, xy)
 _VOIGT = {2: ((0, 0), (1, 1), (0, 1)), 3: ((0, 0), (1, 1), (2, 2), (1, 2), (0, 2), (0, 1))}
 
