@@ -20,7 +20,7 @@ the colours are those of the sequential greedy, on any number of ranks and for a
 The globally smallest uncoloured vertex is always ready, so every round colours at least one vertex; the rounds
 are about the number of times the longest increasing path of dependencies crosses between ranks (twice the courses
 of a wall cut into vertical strips). Before the rounds the edges are made symmetric: an edge (a, b) known only to
-the owner of a is sent to the owner of b (one all-to-all), so the graph is the union of every rank's edges in
+the owner of a is sent to the owner of b (an all-to-all of the counts, then one of the pairs), so the graph is the union of every rank's edges in
 either direction, as for pair_colouring. Memory per rank: its vertices, their edges and their neighbours' colours.
 """
 from __future__ import annotations
@@ -53,10 +53,15 @@ def greedy_colours(own, a, b, owner_of, comm):
     # 1. symmetric edges: (b, a) to the owner of b when b is another rank's ...
     far = ~np.isin(b, own)
     ob = np.asarray(owner_of(b[far]), dtype=np.int64)
-    send = [np.empty((0, 2), dtype=np.int64) if q == p else np.column_stack([b[far][ob == q], a[far][ob == q]])
-            for q in range(size)]
-    got = comm.alltoall(send)
-    extra = np.concatenate(got) if got else np.empty((0, 2), dtype=np.int64)
+    by = np.argsort(ob, kind="stable")  # (b, a) pairs grouped by the owner of b, in rank order
+    sbuf = np.ascontiguousarray(np.column_stack([b[far][by], a[far][by]]), dtype=np.int64).ravel()
+    scounts = 2 * np.bincount(ob, minlength=size).astype(np.int64)
+    rcounts = np.empty(size, dtype=np.int64)
+    comm.Alltoall(scounts, rcounts)
+    rbuf = np.empty(int(rcounts.sum()), dtype=np.int64)
+    comm.Alltoallv([sbuf, (scounts, np.cumsum(scounts) - scounts), MPI.INT64_T],
+                   [rbuf, (rcounts, np.cumsum(rcounts) - rcounts), MPI.INT64_T])
+    extra = rbuf.reshape(-1, 2)
     a, b = (np.concatenate([a, b[~far], extra[:, 0]]),  # ... and (b, a) here when b is this rank's
             np.concatenate([b, a[~far], extra[:, 1]]))
     # 2. local numbering: own vertices, then the ghosts (increasing global numbers in each part)
