@@ -147,6 +147,54 @@ def matvec_bcsr(indptr, indices, blocks, x, y):
                 y[dd * a + i] += s
 
 
+@njit(cache=True)
+def permute_rows(indptr, indices, blocks, perm, relabel):
+    """In place: the rows of a block-CSR put in the order `perm` (new row i = old row perm[i], each row's blocks in
+    their order) and every column index c replaced by relabel[c]; returns the new indptr. The blocks move along the
+    cycles of the permutation (one block held aside at a time), so no second copy of `blocks` is made: extra memory
+    is one int64 and one bool per block."""
+    n = perm.shape[0]
+    m = indices.shape[0]
+    new_ptr = np.empty(n + 1, dtype=np.int64)
+    new_ptr[0] = 0
+    for i in range(n):
+        a = perm[i]
+        new_ptr[i + 1] = new_ptr[i] + indptr[a + 1] - indptr[a]
+    dest = np.empty(m, dtype=np.int64)
+    for i in range(n):
+        a = perm[i]
+        off = new_ptr[i] - indptr[a]
+        for k in range(indptr[a], indptr[a + 1]):
+            dest[k] = k + off
+    for k in range(m):
+        indices[k] = relabel[indices[k]]
+    done = np.zeros(m, dtype=np.bool_)
+    held = np.empty(blocks.shape[1:])
+    swap = np.empty(blocks.shape[1:])
+    for s in range(m):
+        if done[s]:
+            continue
+        if dest[s] == s:
+            done[s] = True
+            continue
+        held[...] = blocks[s]
+        held_c = indices[s]
+        cur = s
+        while True:
+            t = dest[cur]
+            swap[...] = blocks[t]
+            swap_c = indices[t]
+            blocks[t] = held
+            indices[t] = held_c
+            done[t] = True
+            if t == s:
+                break
+            held[...] = swap
+            held_c = swap_c
+            cur = t
+    return new_ptr
+
+
 SMALL_SYSTEM = 1000  # dofs: below, PETSc LU is fastest; above, CHOLMOD Cholesky
 
 

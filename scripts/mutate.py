@@ -227,6 +227,13 @@ MUTATIONS = [
              "    for k, (p0, d0) in enumerate(valid.get(0, [])):",
              '    for k, (p0, d0) in enumerate(sorted(valid.get(0, []), key=lambda x: -int(x[1]["sim.step"]))):',
              ("tests/test_checkpoint_pieces.py",)),
+    Mutation("sweep_order_returned", "colour solver: the impulses returned in sweep order, not in contact order",
+             "fem_blocks/distributed/colour.py", "        out[self._back] = x\n",
+             "        out[:] = x\n", ("tests/test_colour.py",)),
+    Mutation("sweep_order_diagonal", "colour solver: the diagonal blocks' positions not moved with the rows",
+             "fem_blocks/distributed/colour.py",
+             "    diag = np.where(dpos >= 0, dpos - indptr[perm] + indptr_new[:-1], -1).astype(np.int64)",
+             "    diag = np.where(dpos >= 0, dpos, -1).astype(np.int64)", ("tests/test_colour.py",)),
 ]
 
 IGNORE = shutil.ignore_patterns(".git", "__pycache__", ".venv", "*.pyc", ".pytest_cache", "out", "*.egg-info")

@@ -91,10 +91,18 @@ def test_colours_separate_coupled_groups_and_keep_groups_whole():
 
 def test_serial_colour_solver_is_nlgs_sweeps_in_colour_order_with_exact_sums():
     """k sweeps of ColourSolver = k passes of nlgs.sweep over the contacts sorted by colour (stable), bitwise; the
-    reported change is sqrt(fsum(Δr²)/fsum(r²)) of the last sweep, bitwise. Catches a colour skipped or swept twice,
-    a sweep over the whole W instead of the coupling rows with another order, and a running (inexact) sum."""
+    reported change is sqrt(fsum(Δr²)/fsum(r²)) of the last sweep, bitwise. The solver sweeps its rows renumbered in
+    sweep order (a colour's rows contiguous): W is left as it was, and with take_rows=True (its arrays moved in place)
+    the iterates are the same. Catches a colour skipped or swept twice, a sweep over the whole W instead of the
+    coupling rows with another order, a running (inexact) sum, a row's blocks, diagonal or columns renumbered
+    wrongly, the impulses returned in sweep order instead of contact order, W changed without take_rows."""
     W, q, mu, cand, ant = problem()
+    keep = [np.array(getattr(W, k), copy=True) for k in ("indptr", "indices", "blocks", "diag_pos")]
     cs = ColourSolver(W, bodies=(cand, ant, 9))
+    for k, a in zip(("indptr", "indices", "blocks", "diag_pos"), keep):
+        assert np.array_equal(getattr(W, k), a), k
+    taken = ColourSolver(BlockCSR(*[a.copy() for a in keep]), bodies=(cand, ant, 9), take_rows=True)
+    assert not np.array_equal(taken._sweep, np.arange(W.n))  # the rows did move
     order = np.argsort(cs.colour, kind="stable").astype(np.int64)
     Wc = coupling_rows(W)
     for k in (1, 2, 7):
@@ -105,6 +113,7 @@ def test_serial_colour_solver_is_nlgs_sweeps_in_colour_order_with_exact_sums():
             nlgs.sweep(Wc.indptr, Wc.indices, Wc.blocks, Wc.diag_pos, q, mu, r, order)
         assert res.sweeps == k and not res.converged
         assert np.array_equal(res.r, r)
+        assert taken.solve(q, mu, tol=1e-300, max_sweeps=k).r.tobytes() == res.r.tobytes()
         dr = r - before
         assert res.change == math.sqrt(math.fsum(dr * dr) / math.fsum(r * r))
 
@@ -183,8 +192,20 @@ def test_colour_order_run_sweeps_the_delassus_arrays_without_a_copy(tmp_path):
     sim.step()
     step = model.contact
     W = step.Wdel
-    assert np.shares_memory(step._colours.rows[2], W.blocks)
+    ip, ix, bl, dp = step._colours.rows
+    assert np.shares_memory(bl, W.blocks) and np.shares_memory(ix, W.indices)  # W's arrays, put in sweep order
     whole = delassus.assemble(step.G, *step.scene.W_blocks(None), step.scene.nb)
     assert whole.indices.size > W.indices.size  # the foundation's blocks of zeros
-    for k in ("indptr", "indices", "blocks", "diag_pos"):
-        assert np.array_equal(getattr(W, k), getattr(coupling_rows(whole), k)), k
+    C = coupling_rows(whole)
+    sweep = step._colours._sweep  # the contact of each row, in sweep order
+    assert sorted(sweep.tolist()) == list(range(C.n))
+    for i, g in enumerate(sweep.tolist()):  # row i is contact g's row of the whole operator, blocks in order
+        a, b, c0, c1 = ip[i], ip[i + 1], C.indptr[g], C.indptr[g + 1]
+        assert np.array_equal(sweep[ix[a:b]], C.indices[c0:c1]) and np.array_equal(bl[a:b], C.blocks[c0:c1]), g
+        assert dp[i] - a == C.diag_pos[g] - c0
+    colour = step._colours.colour[sweep]
+    assert np.all(np.diff(colour) >= 0)  # a colour's rows one after the other ...
+    for c in range(step._colours.n_colours):  # ... in increasing contact number
+        assert np.all(np.diff(sweep[colour == c]) > 0)
+        assert np.array_equal(step._colours.order[c], np.flatnonzero(colour == c))
+

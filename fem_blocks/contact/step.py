@@ -258,7 +258,9 @@ class ContactStep:
 
     def _colour_solver(self):
         """order = "colours": the colour solver of the current Delassus operator (rebuilt with it); on N > 1
-        ranks each contact is owned by the rank of its candidate body."""
+        ranks each contact is owned by the rank of its candidate body. W's arrays are given to the solver
+        (take_rows: put in its sweep order in place, no second copy); in colour order nothing else reads them, and
+        `Wdel` then only identifies the operator the solver was built for."""
         if self.opts.order != "colours":
             return None
         if self._colours is not None and self._colours.W is self.Wdel:
@@ -270,11 +272,11 @@ class ContactStep:
             cs = self.cs
             self._colours = ColourSolver.from_rows(self.Wdel, self._local.own, self._local.L, len(cs.gap),
                                                    body_pair_groups(cs.cand_body, cs.ant_body, self.scene.nb)[0],
-                                                   self._owner(), self.comm)
+                                                   self._owner(), self.comm, take_rows=True)
             return self._colours
         owner = self._owner() if self.comm is not None else None
         self._colours = ColourSolver(self.Wdel, owner, self.comm,
-                                     bodies=(self.cs.cand_body, self.cs.ant_body, self.scene.nb))
+                                     bodies=(self.cs.cand_body, self.cs.ant_body, self.scene.nb), take_rows=True)
         return self._colours
 
     def mark_W_dirty(self):

@@ -127,13 +127,43 @@ def coupling_rows(W: BlockCSR) -> BlockCSR:
                     np.ascontiguousarray(W.blocks[keep]), diag)
 
 
+def _in_sweep_order(lr, colour_own, shared: bool, fresh_indices: bool = False):
+    """The rows `lr` (sweep.LocalRows) with the owned contacts renumbered in sweep order: by colour, increasing
+    contact number within a colour (the order the sweep visits them), so that the rows of a colour lie one after
+    the other in memory and a sweep streams through W instead of jumping between colours' rows. The rows move in
+    place (linalg.permute_rows; a copy first if `shared`: the blocks are still the caller's, or, without
+    `fresh_indices`, the column indices); the ghosts keep their numbers after the owned ones. Every row keeps its
+    blocks in their order, so each local velocity is summed as before and the iterates keep their bits. Returns
+    (LocalRows in sweep order, the colours of its owned contacts in that order)."""
+    from ..linalg import permute_rows
+    from .sweep import LocalRows
+    no = lr.owned.size
+    colour_own = np.asarray(colour_own, dtype=np.int64)
+    perm = np.argsort(colour_own, kind="stable").astype(np.int64)  # sweep position i <- local contact perm[i]
+    relabel = np.arange(no + lr.ghost.size, dtype=np.int64)
+    relabel[perm] = np.arange(no, dtype=np.int64)
+    blocks = lr.blocks.copy() if shared else lr.blocks
+    indices = lr.indices if fresh_indices or not shared else lr.indices.copy()
+    indptr = np.asarray(lr.indptr, dtype=np.int64)
+    dpos = lr.diag_pos[perm]
+    indptr_new = permute_rows(indptr, indices, blocks, perm, relabel)
+    diag = np.where(dpos >= 0, dpos - indptr[perm] + indptr_new[:-1], -1).astype(np.int64)
+    return (LocalRows(lr.owned[perm], lr.ghost, indptr_new, indices, blocks, diag, lr.q, lr.mu),
+            colour_own[perm])
+
+
 class ColourSolver:
     """The colour-order NLGS for one Delassus operator W (set up once per W; collective when `comm` has N > 1
     ranks). contact_owner: (nc,) rank of each contact (N > 1); comm: an mpi4py communicator or None (serial);
     bodies: (cand, ant, nb) the contacts' body pairs and the number of bodies (colours of body-pair groups,
-    `colour_groups`; every group must have one owner), or None (contacts coloured one by one)."""
+    `colour_groups`; every group must have one owner), or None (contacts coloured one by one).
 
-    def __init__(self, W: BlockCSR, contact_owner=None, comm=None, bodies=None):
+    The solver sweeps its rows in sweep order (`_in_sweep_order`: a colour's rows one after the other in memory).
+    take_rows=True gives it W's arrays: they are put in that order in place and W, kept as `self.W` only to
+    recognise the operator, is no longer a valid operator (the contact step, which assembles W for the solver
+    alone); otherwise the solver works on its own copy (W unchanged)."""
+
+    def __init__(self, W: BlockCSR, contact_owner=None, comm=None, bodies=None, take_rows: bool = False):
         self.W = W
         self.d = W.dim
         n = self.n = W.n
@@ -150,10 +180,16 @@ class ColourSolver:
         self.dist = None
         Wc = coupling_rows(W) if n else W
         if self.comm is None:
+            from .sweep import LocalRows
             self.owned = np.arange(n, dtype=np.int64)
             self.ghost = np.zeros(0, dtype=np.int64)
-            self.rows = (Wc.indptr, Wc.indices, Wc.blocks, Wc.diag_pos)
-            self.order = [np.ascontiguousarray(np.flatnonzero(colour == c), dtype=np.int64)
+            lr = LocalRows(self.owned, self.ghost, Wc.indptr, Wc.indices, Wc.blocks, Wc.diag_pos, np.zeros(0),
+                           np.zeros(0))
+            lr, c_sweep = _in_sweep_order(lr, colour, shared=Wc is W and not take_rows)
+            self._sweep = lr.owned
+            self._back = np.searchsorted(self.owned, self._sweep)  # sweep position -> position in `owned`
+            self.rows = (lr.indptr, lr.indices, lr.blocks, lr.diag_pos)
+            self.order = [np.ascontiguousarray(np.flatnonzero(c_sweep == c), dtype=np.int64)
                           for c in range(self.n_colours)]
             self.r = np.zeros(self.d * n)
             return
@@ -163,10 +199,11 @@ class ColourSolver:
             raise InputError(f"contact_owner: expected {n} ranks (one per contact), got shape {owner.shape}")
         lr = local_rows(Wc, np.zeros(self.d * n), np.zeros(n), np.flatnonzero(owner == self.comm.Get_rank()))
         del Wc
-        self._distribute(lr, colour[np.concatenate([lr.owned, lr.ghost])])
+        self._distribute(lr, colour[np.concatenate([lr.owned, lr.ghost])], shared=False)
 
     @classmethod
-    def from_rows(cls, rows: BlockCSR, owned, columns, n: int, group, owner, comm) -> "ColourSolver":
+    def from_rows(cls, rows: BlockCSR, owned, columns, n: int, group, owner, comm,
+                  take_rows: bool = False) -> "ColourSolver":
         """The colour solver of a run whose ranks hold only the rows of their own contacts (collective on `comm`,
         N > 1 ranks). rows: the rows of W of this rank's contacts `owned` (global numbers, increasing; row i is
         contact owned[i]), their column k meaning contact columns[k] (global numbers, increasing), as
@@ -175,7 +212,7 @@ class ColourSolver:
         every contact (one per group). The colours are those of `colour_groups` on the whole W: the greedy colouring
         of the group graph, each rank colouring its own groups from the nonzero blocks of its rows
         (distributed/greedy.py, no rank holds the whole graph), so the iterates are those of one process in colour
-        order, bitwise."""
+        order, bitwise. take_rows: as for the constructor."""
         from .greedy import greedy_colours
         from .sweep import localise
         self = cls.__new__(cls)
@@ -195,29 +232,35 @@ class ColourSolver:
         self.colour = None
         Wc = coupling_rows(rows)
         lr = localise(owned, Wc.indptr, columns[Wc.indices], Wc.blocks, Wc.diag_pos)
+        shared = Wc is rows and not take_rows
         del Wc
         g_local = group[np.concatenate([lr.owned, lr.ghost])]
         pos = np.minimum(np.searchsorted(ids, g_local), max(ids.size - 1, 0))
         if g_local.size and not np.array_equal(ids[pos], g_local):
             raise RuntimeError("ColourSolver.from_rows: a ghost contact whose group is not coupled to an own group "
                                "(the rows and the group graph disagree)")
-        self._distribute(lr, col[pos])
+        self._distribute(lr, col[pos], shared)
         return self
 
-    def _distribute(self, lr, colour_local):
-        """N > 1 ranks: this rank's rows `lr` (sweep.LocalRows), the colours of its owned then ghost contacts; the
-        PETSc scatters (sweep.DistSweep) and the layout of the Allgatherv of the owned rows (`gather`)."""
+    def _distribute(self, lr, colour_local, shared: bool):
+        """N > 1 ranks: this rank's rows `lr` (sweep.LocalRows; shared: its blocks are the caller's), the colours of
+        its owned then ghost contacts; the rows put in sweep order (`_in_sweep_order`), the PETSc scatters
+        (sweep.DistSweep) and the layout of the Allgatherv of the owned rows (`gather`)."""
         from .sweep import DistSweep
         self.dist = None
         self.owned, self.ghost = lr.owned, lr.ghost
+        lr, c_sweep = _in_sweep_order(lr, colour_local[:lr.owned.size], shared=shared, fresh_indices=True)
+        self._sweep = lr.owned
+        self._back = np.searchsorted(self.owned, self._sweep)  # sweep position -> position in `owned`
         self.rows = (lr.indptr, lr.indices, lr.blocks, lr.diag_pos)
-        self.dist = DistSweep(lr, colour_local, self.n_colours, self.comm)
+        self.dist = DistSweep(lr, np.concatenate([c_sweep, colour_local[self.owned.size:]]), self.n_colours,
+                              self.comm)
         self.order = self.dist.order
         self.r = self.dist.r  # owned then ghost impulses; the owned part is the PETSc vector's array
-        counts = np.array(self.comm.allgather(lr.owned.size), dtype=np.int64)
+        counts = np.array(self.comm.allgather(self.owned.size), dtype=np.int64)
         self._counts = counts
         self._displs = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
-        self._ids = np.concatenate(self.comm.allgather(lr.owned))  # gathered owned contacts, in rank order
+        self._ids = np.concatenate(self.comm.allgather(self.owned))  # gathered owned contacts, in rank order
 
     @property
     def n_owned(self) -> int:
@@ -280,7 +323,7 @@ class ColourSolver:
         r0 = np.zeros(d * n) if r0 is None else np.asarray(r0, dtype=np.float64).ravel()
         if r0.size != d * n or not np.all(np.isfinite(r0)):
             raise InputError(f"r0: expected {d * n} finite entries")
-        own, gh = self.owned, self.ghost
+        own, gh = self._sweep, self.ghost  # (own: this rank's contacts in sweep order)
         no = own.size
         R0 = r0.reshape(-1, d)
         self.r[:d * no] = R0[own].ravel()
@@ -328,12 +371,19 @@ class ColourSolver:
                    f"tolerance {tol:g} on the {criterion})")
         if d == 3 and cases[0]:
             msg += f"; {cases[0]} local solves without a positive diagonal block"
-        r_all = self.gather(self.r[:d * no], d).ravel()
-        u_all = self.gather(u, d).ravel()
+        r_all = self.gather(self._in_contact_order(self.r[:d * no], d), d).ravel()
+        u_all = self.gather(self._in_contact_order(u, d), d).ravel()
         out = SolverResult(r_all, u_all, int(sweeps), bool(converged), float(change), res, res_abs, msg,
                            cases if d == 3 else None)
         if coh is not None:
-            out.trial = self.gather(coh["trial"], 1).ravel()
+            out.trial = self.gather(self._in_contact_order(coh["trial"], 1), 1).ravel()
+        return out
+
+    def _in_contact_order(self, x, width: int) -> np.ndarray:
+        """Rows (n_own, width) of this rank's contacts in sweep order -> in `owned` order (increasing numbers)."""
+        x = np.asarray(x).reshape(-1, width)
+        out = np.empty_like(x)
+        out[self._back] = x
         return out
 
     def _u(self, qo, u):
