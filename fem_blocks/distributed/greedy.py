@@ -20,8 +20,9 @@ the colours are those of the sequential greedy, on any number of ranks and for a
 The globally smallest uncoloured vertex is always ready, so every round colours at least one vertex; the rounds
 are about the number of times the longest increasing path of dependencies crosses between ranks (twice the courses
 of a wall cut into vertical strips). Before the rounds the edges are made symmetric: an edge (a, b) known only to
-the owner of a is sent to the owner of b (an all-to-all of the counts, then one of the pairs), so the graph is the union of every rank's edges in
-either direction, as for pair_colouring. Memory per rank: its vertices, their edges and their neighbours' colours.
+the owner of a is sent to the owner of b (an all-to-all of the counts, then one of the pairs), so the graph is the
+union of every rank's edges in either direction, as for pair_colouring. Memory per rank: its vertices, their edges
+and their neighbours' colours.
 """
 from __future__ import annotations
 
