@@ -592,10 +592,16 @@ class ContactStep:
         ufree = s.gather("ufree")
         K = self._kin
         colours = self._colour_solver()
-        vfree = self._all_rows(K.local_velocity(self.G, ufree, s.U_offset))
-        vi = self._all_rows(K.local_velocity(self.G, s.gather("u"), s.U_offset))
+        # v_free = G u_free, v_i = G u_i and (frozen geometry) the normal jump (G q)_N, per contact of G; N > 1
+        # ranks: one gather of the three (_all_rows)
+        loc = [K.local_velocity(self.G, ufree, s.U_offset), K.local_velocity(self.G, s.gather("u"), s.U_offset)]
         if self.opts.geometry == "frozen":
-            gt = self.gap_ref + self._all_rows(K.local_velocity(self.G, s.gather("q"), s.U_offset)[:, :1])[:, 0]
+            loc.append(K.local_velocity(self.G, s.gather("q"), s.U_offset)[:, :1])
+        every = self._all_rows(np.hstack(loc)) if self._local is not None else None
+        vfree, vi = (loc[0], loc[1]) if every is None else (np.ascontiguousarray(every[:, :d]),
+                                                            np.ascontiguousarray(every[:, d:2 * d]))
+        if self.opts.geometry == "frozen":
+            gt = self.gap_ref + (loc[2] if every is None else every[:, 2 * d:])[:, 0]
         else:
             gt = cs.gap - cs.g0 - self.g_built  # as-built contacts of the initial set: g - g0 - g_built
         from ..laws import S_UP
