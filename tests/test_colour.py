@@ -209,3 +209,27 @@ def test_colour_order_run_sweeps_the_delassus_arrays_without_a_copy(tmp_path):
         assert np.all(np.diff(sweep[colour == c]) > 0)
         assert np.array_equal(step._colours.order[c], np.flatnonzero(colour == c))
 
+
+
+def test_a_step_after_close_assembles_w_again(tmp_path):
+    """The colour solver holds W's arrays in its own order (take_rows): after ContactStep.close() drops it, the next
+    step must assemble W again, not hand the reordered arrays to a new solver. Expectation: the same run without
+    close(), bitwise. Catches close() leaving W_dirty unset (the next solver reads the rows as if in contact order)."""
+    import dist_cases
+    from fem_blocks.case import load_case
+    from fem_blocks.dynamics import Simulation
+    from fem_blocks.expand import expand
+    from fem_blocks.model import build_model
+    path = tmp_path / "w.toml"
+    path.write_text(dist_cases.wall("w", courses=2, per=3))
+    got = []
+    for close in (False, True):
+        model = build_model(expand(load_case(str(path))))
+        sim = Simulation(model.bodies, h=1e-3, theta=1.0, gravity=model.gravity, velocity_reset=True,
+                         contact=model.contact)
+        sim.step()
+        if close:
+            model.contact.close()
+        sim.step()
+        got.append(sim.last_contact.P.tobytes())
+    assert got[0] == got[1]

@@ -250,10 +250,13 @@ class ContactStep:
                                     "nodes of one kind (same CPU, same BLAS), e.g. with OPENBLAS_CORETYPE set")
 
     def close(self):
-        """Release the PETSc objects of a run on N > 1 ranks (collective: every rank calls it at the end)."""
+        """Release the PETSc objects of a run on N > 1 ranks (collective: every rank calls it at the end). A step
+        after it assembles W again: the colour solver that goes held W's arrays in its own order (take_rows)."""
         for obj in (self._colours, self._linear):
             if obj is not None:
                 obj.destroy()
+        if self._colours is not None:
+            self.W_dirty = True
         self._colours = self._linear = None
 
     def _colour_solver(self):
