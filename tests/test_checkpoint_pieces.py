@@ -25,55 +25,12 @@ from fem_blocks.errors import InputError
 from fem_blocks.output.checkpoint import (NAME, PREV, latest_checkpoint_files, load_checkpoint, merge, piece_names,
                                           read_checkpoint, remove_other_layout, split, write_checkpoint)
 
-CASE = """name = "ck"
-gravity = [0.0, -9.81]
-[materials.brick]
-E = 5e9
-nu = 0.2
-rho = 1800.0
-thickness = 0.12
-[wall]
-type = "running_bond"
-material = "brick"
-brick_length = 0.25
-brick_height = 0.06
-courses = 3
-bricks_per_course = 2
-mesh_size = 0.03
-cell = "quad"
-group = "bricks"
-[wall.foundation]
-depth = 0.2
-overhang = 0.1
-[[interfaces]]
-name = "j"
-between = ["bricks", "bricks"]
-law = "mixed"
-k_n = 82e9
-k_s = 36e9
-f_t = 0.25e6
-c = 0.35e6
-G_I = 18.0
-G_II = 125.0
-tan_phi = 0.75
-[[interfaces]]
-name = "f"
-between = ["bricks", "foundation"]
-mu = 0.7
-[contact]
-geometry = "{geometry}"
-predictor = "extrapolated"
-tol = 1e-4
-max_sweeps = 3000
-[output]
-paraview = false
-[[stages]]
-name = "g"
-duration = 0.003
-h = 1e-3
-theta = 1.0
-velocity_reset = true
-"""
+def case(geometry):
+    """A wall with cohesive (mixed-mode) joints, 3 courses of 2 bricks, 3 steps of 1 ms (tests/dist_cases.py), in
+    `geometry` with the extrapolated predictor (the previous impulses checkpointed)."""
+    import dist_cases
+    text = dist_cases.wall("ck", joint=dist_cases.MIXED, tol=1e-4, max_sweeps=3000, duration=0.003)
+    return text.replace("[contact]\n", f'[contact]\ngeometry = "{geometry}"\npredictor = "extrapolated"\n', 1)
 
 
 @pytest.fixture(scope="module", params=["frozen", "updated"])
@@ -82,7 +39,7 @@ def real(request, tmp_path_factory):
     as-built offsets), and its contact and body counts."""
     from fem_blocks import cli
     d = tmp_path_factory.mktemp(f"ck_{request.param}")
-    (d / "ck.toml").write_text(CASE.format(geometry=request.param))
+    (d / "ck.toml").write_text(case(request.param))
     assert cli.main(["run", str(d / "ck.toml"), "--out", str(d / "out"), "--quiet"]) == 0
     ck = read_checkpoint(d / "out" / NAME)
     nc = len(ck["contact.cs.gap"])
@@ -220,21 +177,9 @@ def test_ranks_write_their_pieces_together_and_share_a_failure(tmp_path):
     """On 2 ranks (tests/_ck_pieces_mpi.py): a round of pieces merges back to the checkpoint written; in a second
     round rank 1 fails: it raises its error, rank 0 a RuntimeError naming rank 1, neither is left waiting, and the
     first round's set is still the newest complete one (rank 0's new piece has no partner)."""
-    import subprocess
-    import sys
-    if shutil.which("mpirun") is None:
-        pytest.skip("no mpirun")
-    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-    sys.path.insert(0, os.path.join(root, "tests"))
     import _ck_pieces_mpi
-    env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1",
-               OMPI_MCA_rmaps_base_oversubscribe="1", OMPI_MCA_btl_vader_single_copy_mechanism="none", PYTHONPATH=root)
-    try:
-        p = subprocess.run(["mpirun", "-n", "2", sys.executable, os.path.join(root, "tests", "_ck_pieces_mpi.py"),
-                            str(tmp_path)], capture_output=True, text=True, cwd=root, env=env, timeout=120)
-    except subprocess.TimeoutExpired as e:
-        pytest.fail(f"a rank was left waiting: the launch did not end in 120 s\n{e.stdout}\n{e.stderr}")
-    assert p.returncode == 0, (p.stdout + p.stderr)[-3000:]
+    from _mpi import run_helper
+    run_helper(2, "_ck_pieces_mpi.py", tmp_path)
     assert (tmp_path / "raised1.txt").read_text() == "ValueError: no room left"
     assert (tmp_path / "raised0.txt").read_text().startswith("RuntimeError: checkpoint: rank 1 could not write")
     warned = []

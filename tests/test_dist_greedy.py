@@ -11,19 +11,13 @@ given only to the owner of its first end. Catches: an edge not made symmetric (a
 lower neighbour it does not know of), a colour other than the smallest free one, a vertex coloured before its lower ghost neighbours' colours arrived, the
 colour of a ghost read from the wrong rank or position, a rank leaving the rounds early (hang: the launch times out).
 """
-import os
-import shutil
-import subprocess
-import sys
-
 import numpy as np
 import pytest
 
 from fem_blocks.solver.parallel import pair_colouring
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-sys.path.insert(0, os.path.join(ROOT, "tests"))
-import _greedy_mpi  # noqa: E402
+import _greedy_mpi  # noqa: E402 (tests/ is on sys.path: tests/conftest.py)
+from _mpi import run_helper  # noqa: E402
 
 
 def greedy_by_definition(n, a, b):
@@ -41,16 +35,7 @@ def greedy_by_definition(n, a, b):
 
 @pytest.mark.parametrize("size", [1, 2, 3])
 def test_distributed_greedy_colours_are_the_serial_greedy(tmp_path, size):
-    if shutil.which("mpirun") is None:
-        pytest.skip("no mpirun")
-    env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1",
-               OMPI_MCA_rmaps_base_oversubscribe="1", OMPI_MCA_btl_vader_single_copy_mechanism="none", PYTHONPATH=ROOT)
-    try:
-        p = subprocess.run(["mpirun", "-n", str(size), sys.executable, os.path.join(ROOT, "tests", "_greedy_mpi.py"),
-                            str(tmp_path)], capture_output=True, text=True, cwd=ROOT, env=env, timeout=120)
-    except subprocess.TimeoutExpired as e:
-        pytest.fail(f"a rank was left waiting: the launch did not end in 120 s\n{e.stdout}\n{e.stderr}")
-    assert p.returncode == 0, (p.stdout + p.stderr)[-3000:]
+    run_helper(size, "_greedy_mpi.py", tmp_path)
     got = [np.load(tmp_path / f"rank{r}.npz") for r in range(size)]
     for k in range(4):
         n, a, b, owner = _greedy_mpi.graph(k, size)

@@ -22,6 +22,7 @@ from fem_blocks.distributed.linear import DistBlockSolver, has_mumps
 from fem_blocks.linalg import to_block_csr
 from fem_blocks.solver import newton
 
+from _mpi import ENV  # noqa: E402
 from _paths import FCLIB, ROOT  # noqa: E402
 
 FCLIB_DIR = FCLIB if os.path.isdir(FCLIB) else os.environ.get("FEM_BLOCKS_FCLIB", FCLIB)
@@ -97,10 +98,8 @@ def test_one_process_equals_spsolve_and_reuses_the_pattern(method):
 
 
 def _mpirun(n, *args, timeout=300):
-    env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1",
-               OMPI_MCA_rmaps_base_oversubscribe="1", OMPI_MCA_btl_vader_single_copy_mechanism="none", PYTHONPATH=ROOT)
     p = subprocess.run(["mpirun", "-n", str(n), sys.executable, DRIVER, *map(str, args)], capture_output=True,
-                       text=True, cwd=ROOT, env=env, timeout=timeout)
+                       text=True, cwd=ROOT, env=ENV, timeout=timeout)
     assert p.returncode == 0, p.stdout + p.stderr
     return p
 

@@ -16,7 +16,6 @@ Expectations, each from a source independent of the code under test:
   {j not owned by p: d(i, j) <= r for an owned i} from the brute force, edge cut = the brute-force cut; 3 ranks on
   a 2-body case: a rank with no bodies, no ghosts, no contacts.
 """
-import os
 import shutil
 import subprocess
 import sys
@@ -29,6 +28,7 @@ from fem_blocks.expand import expand
 from fem_blocks.model import build_model
 from fem_blocks.distributed import partition as dp
 
+from _mpi import ENV  # noqa: E402
 from _paths import ROOT  # noqa: E402
 
 CASE = """name = "w"
@@ -165,11 +165,8 @@ def test_check_catches_a_missing_ghost(tmp_path):
 
 
 def run_mpi(n, case, out, tmp_path):
-    env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1",
-               OMPI_MCA_rmaps_base_oversubscribe="1", OMPI_MCA_btl_vader_single_copy_mechanism="none",
-               PYTHONPATH=ROOT)
     p = subprocess.run(["mpirun", "-n", str(n), sys.executable, "-m", "fem_blocks.distributed.partition", case, out],
-                       capture_output=True, text=True, cwd=ROOT, env=env, timeout=300)
+                       capture_output=True, text=True, cwd=ROOT, env=ENV, timeout=300)
     assert p.returncode == 0, p.stdout + p.stderr
     return [dict(np.load(f"{out}.rank{k}.npz")) for k in range(n)]
 

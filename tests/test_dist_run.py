@@ -25,6 +25,7 @@ import time
 import numpy as np
 import pytest
 
+from _mpi import ENV
 from _paths import ROOT
 
 sys.path.insert(0, os.path.dirname(__file__))
@@ -32,8 +33,6 @@ import dist_cases  # noqa: E402
 
 pytestmark = pytest.mark.skipif(shutil.which("mpirun") is None, reason="no mpirun")
 
-ENV = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1",
-           OMPI_MCA_rmaps_base_oversubscribe="1", OMPI_MCA_btl_vader_single_copy_mechanism="none", PYTHONPATH=ROOT)
 DRIVER = os.path.join(os.path.dirname(__file__), "dist_cases.py")
 SERIAL = ("dry", "mixed", "wall3d", "one_brick", "fail", "bad", "long", "newton")
 

@@ -26,6 +26,7 @@ from fem_blocks.distributed.colour import ColourSolver
 from fem_blocks.linalg import matvec_bcsr, to_block_csr
 from fem_blocks.solver import nlgs, parallel
 
+from _mpi import ENV  # noqa: E402
 from _paths import FCLIB, ROOT  # noqa: E402
 
 FCLIB_DIR = FCLIB if os.path.isdir(FCLIB) else os.environ.get("FEM_BLOCKS_FCLIB", FCLIB)
@@ -188,8 +189,6 @@ def launches(tmp_path_factory):
         paths[name] = str(d / f"{name}.npz")
         np.savez(paths[name], indptr=W.indptr, indices=W.indices, blocks=W.blocks, diag_pos=W.diag_pos, q=q, mu=mu,
                  tol=tol)
-    env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1",
-               OMPI_MCA_rmaps_base_oversubscribe="1", OMPI_MCA_btl_vader_single_copy_mechanism="none", PYTHONPATH=ROOT)
     outs = {}
     for n in sorted({r[0] for r in RUNS}):
         runs = []
@@ -200,7 +199,7 @@ def launches(tmp_path_factory):
         try:
             p = subprocess.run(["mpirun", "-n", str(n), sys.executable,
                                 os.path.join(ROOT, "tests", "_dist_sweep_mpi.py"), str(d / f"runs{n}.json")],
-                               capture_output=True, text=True, cwd=ROOT, env=env, timeout=120)
+                               capture_output=True, text=True, cwd=ROOT, env=ENV, timeout=120)
         except subprocess.TimeoutExpired as e:
             pytest.fail(f"{n} ranks: the launch did not end in 120 s (a rank left waiting in a collective, e.g. ranks "
                         f"whose stopping decisions differ)\n{e.stdout}\n{e.stderr}")

@@ -18,6 +18,7 @@ from numba import njit
 
 from fem_blocks.distributed import exact
 
+from _mpi import ENV  # noqa: E402
 from _paths import ROOT  # noqa: E402
 
 MAX = sys.float_info.max
@@ -199,10 +200,8 @@ def test_add_in_a_numba_loop_equals_accumulate_and_exact_sums():
 
 
 def _mpirun(n, out):
-    env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1",
-               OMPI_MCA_rmaps_base_oversubscribe="1", OMPI_MCA_btl_vader_single_copy_mechanism="none", PYTHONPATH=ROOT)
     p = subprocess.run(["mpirun", "-n", str(n), sys.executable, os.path.join(ROOT, "tests", "_exact_mpi.py"),
-                        str(out)], capture_output=True, text=True, cwd=ROOT, env=env, timeout=300)
+                        str(out)], capture_output=True, text=True, cwd=ROOT, env=ENV, timeout=300)
     assert p.returncode == 0, p.stdout + p.stderr
     return np.load(out)
 

@@ -22,16 +22,11 @@ One-line bugs, each made in root.py and seen to fail here (what fails in bracket
 """
 import json
 import os
-import shutil
-import subprocess
-import sys
 
 import pytest
 
 from fem_blocks.distributed.root import on_root
 from fem_blocks.errors import InputError
-
-from _paths import ROOT
 
 
 class _Size1:
@@ -79,17 +74,9 @@ def test_one_process_is_a_plain_call(comm):
 @pytest.fixture(scope="module")
 def ranks(tmp_path_factory):
     """What rank 0 and rank 1 got, case by case (one mpirun -n 2 launch)."""
-    if shutil.which("mpirun") is None:
-        pytest.skip("no mpirun")
+    from _mpi import run_helper
     d = tmp_path_factory.mktemp("on_root")
-    env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1",
-               OMPI_MCA_rmaps_base_oversubscribe="1", OMPI_MCA_btl_vader_single_copy_mechanism="none", PYTHONPATH=ROOT)
-    try:
-        p = subprocess.run(["mpirun", "-n", "2", sys.executable, os.path.join(ROOT, "tests", "_on_root_mpi.py"),
-                            str(d)], capture_output=True, text=True, cwd=ROOT, env=env, timeout=120)
-    except subprocess.TimeoutExpired as e:
-        pytest.fail(f"a rank was left waiting: the launch did not end in 120 s\n{e.stdout}\n{e.stderr}")
-    assert p.returncode == 0, (p.stdout + p.stderr)[-3000:]
+    run_helper(2, "_on_root_mpi.py", d)
     return [json.loads((d / f"rank{r}.json").read_text()) for r in (0, 1)]
 
 
