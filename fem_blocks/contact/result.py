@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 OUT_FIELDS = ("gt_end", "v", "r", "status")  # checkpointed under "contact.out.<name>" (the last step's outputs)
+OUT_PREFIX = "contact.out."  # the prefix of those checkpoint entries
 
 
 @dataclass
@@ -53,4 +54,4 @@ class ContactResult:
 
     def export(self) -> dict:
         """The per-contact outputs for a checkpoint ("contact.out.<name>")."""
-        return {f"contact.out.{k}": getattr(self, k) for k in OUT_FIELDS if getattr(self, k) is not None}
+        return {OUT_PREFIX + k: getattr(self, k) for k in OUT_FIELDS if getattr(self, k) is not None}

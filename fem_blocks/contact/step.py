@@ -51,7 +51,7 @@ from . import detection_3d as det3
 from . import kinematics_2d as kin
 from . import kinematics_3d as kin3
 from .matching import match
-from .result import OUT_FIELDS, ContactResult
+from .result import OUT_FIELDS, OUT_PREFIX, ContactResult
 from .scene import ContactScene
 
 STATUS_NAMES = ("open", "stick", "slip")
@@ -492,7 +492,7 @@ class ContactStep:
     @classmethod
     def per_contact_keys(cls, keys) -> list:
         """The entries of `keys` (a checkpoint's) with one row per contact of the contact set."""
-        return [k for k in keys if k in cls.PER_CONTACT or k.startswith(("contact.cs.", "contact.out."))]
+        return [k for k in keys if k in cls.PER_CONTACT or k.startswith(("contact.cs.", OUT_PREFIX))]
 
     def export_state(self) -> dict:
         """Arrays that determine the rest of the run: contact set, G blocks, reference gaps, impulses (warm
@@ -552,7 +552,7 @@ class ContactStep:
         self.W_dirty = True  # rebuilt at the next step (new scene); 3D: with the rigid W in use at the export
         self._rigid_W_restored = (np.array(d["contact.rigid_W"]) if "contact.rigid_W" in d
                                   and not bool(d["contact.W_dirty"]) else None)
-        out = {k: np.array(d[f"contact.out.{k}"]) for k in OUT_FIELDS if f"contact.out.{k}" in d}
+        out = {k: np.array(d[OUT_PREFIX + k]) for k in OUT_FIELDS if OUT_PREFIX + k in d}
         return ContactResult(self.dim, {}, cs=self.cs, P=self.P.copy(), law=self.law.copy(),
                              state=self.state.copy(), friction_total=self.friction_total, **out)
 

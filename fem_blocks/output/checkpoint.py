@@ -92,8 +92,8 @@ def remove_other_layout(directory: str, size: int | None) -> None:
     """After a complete checkpoint of one process (size None): remove every rank's piece; after a complete set of
     pieces of `size` ranks: remove the one-process files and the pieces of ranks >= size (an earlier run on more
     ranks), so that no older checkpoint can be taken for the newest."""
-    names = [f for f in os.listdir(directory) if _PIECE.match(f)] if size is None else \
-        [NAME, PREV] + [f for f in os.listdir(directory) if _PIECE.match(f) and int(_PIECE.match(f)[1]) >= size]
+    pieces = [(m[0], int(m[1])) for m in map(_PIECE.match, os.listdir(directory)) if m]
+    names = [f for f, _ in pieces] if size is None else [NAME, PREV] + [f for f, r in pieces if r >= size]
     for f in names:
         try:
             os.unlink(os.path.join(directory, f))
@@ -177,34 +177,34 @@ def has_checkpoint(directory: str) -> bool:
     return os.path.isdir(directory) and any(f in (NAME, PREV) or _PIECE.match(f) for f in os.listdir(directory))
 
 
-def _first_valid(paths, warn, errors):
+def _valid(paths, warn, errors, check=None):
+    """(path, arrays) of each of `paths` that exists and reads as a checkpoint (read_checkpoint) and passes
+    `check(path, arrays)` (which raises InputError otherwise), in order and as they are read; the others are reported
+    through `warn` and listed in `errors`."""
     for p in paths:
         if not os.path.exists(p):
             continue
         try:
-            return p, read_checkpoint(p)
+            d = read_checkpoint(p)
+            if check is not None:
+                check(p, d)
+            yield p, d
         except InputError as e:
             errors.append(str(e))
             warn(f"{e}; trying the previous checkpoint")
-    return None
 
 
 def _latest_set(directory: str, warn, errors):
     """(paths, pieces) of the newest complete set of rank pieces (module docstring), or None."""
     ranks = sorted({int(m[1]) for m in map(_PIECE.match, os.listdir(directory)) if m})
-    valid = {}
-    for r in ranks:
-        valid[r] = []
-        for p in (os.path.join(directory, f) for f in piece_names(r)):
-            if os.path.exists(p):
-                try:
-                    d = read_checkpoint(p)
-                    if not {"part.rank", "part.size", "part.token"} <= set(d) or int(d["part.rank"]) != r:
-                        raise InputError(f"{p}: not rank {r}'s piece of a checkpoint")
-                    valid[r].append((p, d))
-                except InputError as e:
-                    errors.append(str(e))
-                    warn(f"{e}; trying the previous checkpoint")
+
+    def piece_of(r):
+        def check(p, d):
+            if not {"part.rank", "part.size", "part.token"} <= set(d) or int(d["part.rank"]) != r:
+                raise InputError(f"{p}: not rank {r}'s piece of a checkpoint")
+        return check
+    valid = {r: list(_valid([os.path.join(directory, f) for f in piece_names(r)], warn, errors, piece_of(r)))
+             for r in ranks}
     for k, (p0, d0) in enumerate(valid.get(0, [])):
         token, size = str(d0["part.token"]), int(d0["part.size"])
         chosen = []
@@ -229,7 +229,7 @@ def latest_checkpoint_files(directory: str, warn=None) -> tuple[str, list, dict]
     `warn`. `load_checkpoint(paths)` reads the same checkpoint again (another process)."""
     warn = warn or (lambda msg: print(f"fem-blocks: warning: {msg}", file=sys.stderr))
     errors = []
-    one = _first_valid([os.path.join(directory, n) for n in (NAME, PREV)], warn, errors) \
+    one = next(_valid([os.path.join(directory, n) for n in (NAME, PREV)], warn, errors), None) \
         if os.path.isdir(directory) else None
     many = _latest_set(directory, warn, errors) if os.path.isdir(directory) else None
     if many is not None and (one is None or os.path.getmtime(many[0][0]) > os.path.getmtime(one[0])):
