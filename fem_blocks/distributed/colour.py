@@ -307,40 +307,48 @@ class ColourSolver:
 
     # ------------------------------------------------------------------ the solve
     def solve(self, q, mu, r0=None, tol: float = 1e-8, max_sweeps: int = 10000, omega: float = 1.0,
-              criterion: str = "change", check_every: int = 10, laws=None) -> SolverResult:
-        """Colour-order NLGS from r0 (global, the same on every rank; zeros by default). laws: an
-        solver.problem.InterfaceLaws (interface laws) or None (Signorini–Coulomb). Returns the global r and
-        u = W r + q on every rank (SolverResult; with laws, `trial` the internal variables to commit)."""
+              criterion: str = "change", check_every: int = 10, laws=None, own_rows: bool = False) -> SolverResult:
+        """Colour-order NLGS from r0 (zeros by default). laws: an solver.problem.InterfaceLaws (interface laws) or
+        None (Signorini–Coulomb). q, mu, r0 and the laws' arrays hold the rows of every contact (the same on every
+        rank), or, with own_rows (the same on every rank), those of this rank's own contacts only (`owned`,
+        increasing numbers: a run whose ranks hold their own contacts' values, contact/step.py). Returns r and
+        u = W r + q for the same rows (SolverResult; with laws, `trial` the internal variables to commit): every
+        contact's, gathered on every rank, or the own contacts'."""
         if criterion not in ("change", "residual"):
             raise InputError(f"criterion = {criterion!r}: expected 'change' or 'residual'")
         d, n = self.d, self.n
         q = np.ascontiguousarray(q, dtype=np.float64).ravel()
-        mu = np.ascontiguousarray(np.broadcast_to(np.asarray(mu, dtype=np.float64).ravel(), (n,)))
-        if q.size != d * n:
-            raise InputError(f"q: expected {d * n} entries ({d} per contact), got {q.size}")
-        if not (tol > 0) or int(max_sweeps) < 1 or not (0 < omega <= 2) or int(check_every) < 1:
-            raise InputError("expected tol > 0, max_sweeps >= 1, 0 < omega <= 2, check_every >= 1")
-        r0 = np.zeros(d * n) if r0 is None else np.asarray(r0, dtype=np.float64).ravel()
-        if r0.size != d * n or not np.all(np.isfinite(r0)):
-            raise InputError(f"r0: expected {d * n} finite entries")
         own, gh = self._sweep, self.ghost  # (own: this rank's contacts in sweep order)
         no = own.size
+        whole = not own_rows
+        m, pick = (n, own) if whole else (no, self._back)  # rows given; the rows of the sweep among them
+        mu = np.ascontiguousarray(np.broadcast_to(np.asarray(mu, dtype=np.float64).ravel(), (m,)))
+        if q.size != d * m:
+            raise InputError(f"q: expected {d * m} entries ({d} per contact of {m}), got {q.size}")
+        if not (tol > 0) or int(max_sweeps) < 1 or not (0 < omega <= 2) or int(check_every) < 1:
+            raise InputError("expected tol > 0, max_sweeps >= 1, 0 < omega <= 2, check_every >= 1")
+        r0 = np.zeros(d * m) if r0 is None else np.asarray(r0, dtype=np.float64).ravel()
+        if r0.size != d * m or not np.all(np.isfinite(r0)):
+            raise InputError(f"r0: expected {d * m} finite entries")
         R0 = r0.reshape(-1, d)
-        self.r[:d * no] = R0[own].ravel()
-        self.r[d * no:] = R0[gh].ravel()
-        qo = np.ascontiguousarray(q.reshape(-1, d)[own]).ravel()
-        muo = np.ascontiguousarray(mu[own])
+        self.r[:d * no] = R0[pick].ravel()
+        if whole:
+            self.r[d * no:] = R0[gh].ravel()
+        else:  # the ghosts' r0 from their owners: every colour's exchange once
+            for c in range(self.n_colours):
+                self._exchange(c)
+        qo = np.ascontiguousarray(q.reshape(-1, d)[pick]).ravel()
+        muo = np.ascontiguousarray(mu[pick])
         coh = None
         if laws is not None:
             from ..laws import step_start
-            law = np.ascontiguousarray(laws.law, dtype=np.int64)
-            par = np.ascontiguousarray(laws.par, dtype=np.float64)
-            st = np.ascontiguousarray(laws.state, dtype=np.float64)
-            trial = np.ascontiguousarray(step_start(law, par, st, float(laws.h)))  # committed x (or IMPL-EX)
-            coh = dict(law=np.ascontiguousarray(law[own]), par=np.ascontiguousarray(par[own]),
-                       st=np.ascontiguousarray(st[own]), trial=np.ascontiguousarray(trial[own]),
-                       ueff=np.ascontiguousarray(np.asarray(laws.ueff, dtype=np.float64)[own]),
-                       area=np.ascontiguousarray(np.asarray(laws.area, dtype=np.float64)[own]),
+            law = np.ascontiguousarray(np.asarray(laws.law, dtype=np.int64)[pick])
+            par = np.ascontiguousarray(np.asarray(laws.par, dtype=np.float64)[pick])
+            st = np.ascontiguousarray(np.asarray(laws.state, dtype=np.float64)[pick])
+            coh = dict(law=law, par=par, st=st,
+                       trial=np.ascontiguousarray(step_start(law, par, st, float(laws.h))),  # committed x (IMPL-EX)
+                       ueff=np.ascontiguousarray(np.asarray(laws.ueff, dtype=np.float64)[pick]),
+                       area=np.ascontiguousarray(np.asarray(laws.area, dtype=np.float64)[pick]),
                        h=float(laws.h), theta=float(laws.theta))
         qnorm = float(np.sqrt(exact_sums([qo * qo], self.comm)[0])) or 1.0
         cases = np.zeros(6, dtype=np.int64)
@@ -371,12 +379,12 @@ class ColourSolver:
                    f"tolerance {tol:g} on the {criterion})")
         if d == 3 and cases[0]:
             msg += f"; {cases[0]} local solves without a positive diagonal block"
-        r_all = self.gather(self._in_contact_order(self.r[:d * no], d), d).ravel()
-        u_all = self.gather(self._in_contact_order(u, d), d).ravel()
-        out = SolverResult(r_all, u_all, int(sweeps), bool(converged), float(change), res, res_abs, msg,
-                           cases if d == 3 else None)
+        rows = (lambda x, w: self.gather(self._in_contact_order(x, w), w).ravel()) if whole else \
+            (lambda x, w: self._in_contact_order(x, w).ravel())
+        out = SolverResult(rows(self.r[:d * no], d), rows(u, d), int(sweeps), bool(converged), float(change), res,
+                           res_abs, msg, cases if d == 3 else None)
         if coh is not None:
-            out.trial = self.gather(self._in_contact_order(coh["trial"], 1), 1).ravel()
+            out.trial = rows(coh["trial"], 1)
         return out
 
     def _in_contact_order(self, x, width: int) -> np.ndarray:

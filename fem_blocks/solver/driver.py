@@ -46,7 +46,10 @@ def solve(problem: ContactProblem, options: SolverOptions | None = None, r0=None
         if colours.W is not W:
             raise InputError("colours: built for another Delassus operator than problem.W")
         return colours.solve(q, mu, r0=r0, tol=o.tol, max_sweeps=o.max_sweeps, omega=o.omega, criterion=o.criterion,
-                             check_every=o.check_every, laws=L)
+                             check_every=o.check_every, laws=L, own_rows=problem.own_rows)
+    if problem.own_rows:
+        raise InputError("own_rows: a problem of a rank's own contacts is solved in colour order only; expected "
+                         "options.order = 'colours'")
     if o.coarse != "none" and coarse is None:
         raise InputError(f"coarse = None: options.coarse = {o.coarse!r} needs the coarse space (solver/coarse.py)")
     if coarse is not None and (L is not None or o.solver != "nlgs" or o.fallback != "none"):

@@ -37,13 +37,16 @@ class ContactProblem:
     """u = W r + q with Signorini–Coulomb (laws = None) or interface laws per contact.
 
     W: a BlockCSR, or a dense / scipy matrix of size dim * nc (converted by linalg.to_block_csr); q (dim * nc,);
-    mu: a scalar or nc friction coefficients >= 0; dim: 2 or 3 (None: from W's blocks, else 2)."""
+    mu: a scalar or nc friction coefficients >= 0; dim: 2 or 3 (None: from W's blocks, else 2). own_rows: q, mu and
+    the laws' arrays hold the rows of this rank's own contacts only, and so will the result (a problem shared by
+    N > 1 MPI ranks in colour order, W the rows of those contacts: contact/step.py); else those of every contact."""
 
     W: BlockCSR
     q: np.ndarray
     mu: np.ndarray | float
     dim: int | None = None
     laws: InterfaceLaws | None = None
+    own_rows: bool = False
 
     def __post_init__(self):
         if self.dim is not None and self.dim not in (2, 3):
