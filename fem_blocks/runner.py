@@ -17,7 +17,6 @@ from .errors import InputError
 from .bodies import Driver
 from .dynamics import Simulation
 from .expand import expand
-from .laws import S_DISS
 from .model import Model, build_model
 from .output.history import HistoryWriter
 from .output.checkpoint import write_checkpoint
@@ -167,7 +166,7 @@ def _gauge_names(model: Model, gauges) -> list[str]:
 def _joint_values(model: Model, sim, joints) -> dict:
     """history.csv values of the `[output] joints` pairs at the last step (output/joints.py)."""
     from .output.joints import history_values, record_joints
-    rec = None if sim is None else sim.last_contact
+    rec = None if sim is None or sim.last_contact is None else sim.last_contact.whole()  # (N ranks: collective)
     two_d = len(model.dofs) == 3
     res = record_joints(rec, model.contact.contact_points if two_d else None,
                         model.contact.joint_lengths if two_d else None)
@@ -238,11 +237,11 @@ def history_row(model: Model, info, stage_index: int, sim=None, h=None, rotation
 
 def _dissipated(sim) -> float:
     """The contacts' dissipated energy so far [J]: the sum of the law state's S_DISS (decohesion and crushing;
-    friction is not in it), the history column `dissipated`."""
+    friction is not in it) over every contact (ContactResult.dissipated), the history column `dissipated`."""
     res = None if sim is None else sim.last_contact
-    if res is None or res.state is None or len(res.state) == 0:
+    if res is None or res.state is None:
         return 0.0
-    return float(res.state[:, S_DISS].sum())
+    return float(res.dissipated)
 
 
 def _new_cstats() -> dict:
@@ -461,8 +460,8 @@ class _Guards:
       only dissipate or store) above `max_energy_growth` x (K_0 + E_el,0 + |V - V_0| + |W_ext| + |W_drivers|).
     """
 
-    def __init__(self, case: Case, model: Model, names):
-        self.names = names
+    def __init__(self, case: Case, model: Model, names, comm=None):
+        self.names, self.comm = names, comm
         self.max_pen = case.checks.get("max_penetration")
         self.growth = case.checks.get("max_energy_growth", default_of(ChecksSpec, "max_energy_growth"))
         self.model = model
@@ -476,23 +475,27 @@ class _Guards:
                 a = getattr(b, name)
                 if not np.all(np.isfinite(a)):
                     return f"{'displacement' if name == 'q' else 'velocity'} of body {self.names[i]!r} is NaN/Inf"
-        c = sim.last_contact  # the record of the step (contact/result.py)
+        c = sim.last_contact  # the record of the step (contact/result.py; N ranks: each rank its own contacts' rows)
         if c is not None and c.cs is not None and len(c.cs.gap) and c.P is not None:
-            if not np.all(np.isfinite(c.P)):
-                a = int(np.flatnonzero(~np.isfinite(c.P).all(axis=1))[0])
-                return f"contact impulse at contact {a} (bodies {self._pair(c, a)}) is NaN/Inf"
+            ids = np.arange(len(c.cs.gap)) if c.rows is None else c.rows  # the contacts of the record's rows
+            nan = np.flatnonzero(~np.isfinite(c.P).all(axis=1))
+            a = self._agree((0.0, int(ids[nan[0]]), None) if nan.size else None)  # the first of every rank's
+            if a is not None:
+                return f"contact impulse at contact {a[1]} (bodies {self._pair(c, a[1])}) is NaN/Inf"
             gt = c.gt_end
-            if gt is not None and len(gt) == len(c.cs.gap):
+            if gt is not None and len(gt) == len(ids):
                 from .laws import ELASTIC, MIXED
                 compliant = (c.law == ELASTIC) | (c.law == MIXED)
-                pen = np.where(compliant, -(gt + c.cs.g0), -gt)
+                pen = np.where(compliant, -(gt + c.cs.g0[ids]), -gt)
                 lim = (np.full(len(gt), self.max_pen) if self.max_pen is not None
-                       else self.alert[c.cs.interface])
+                       else self.alert[c.cs.interface[ids]])
                 bad = pen > lim
-                if np.any(bad):
-                    a = int(np.argmax(np.where(bad, pen / lim, -np.inf)))
-                    return (f"penetration {pen[a]:.3g} m at contact {a} (bodies {self._pair(c, a)}) exceeds "
-                            f"{lim[a]:.3g} m ([checks] max_penetration)")
+                k = int(np.argmax(np.where(bad, pen / lim, -np.inf))) if np.any(bad) else None
+                a = self._agree(None if k is None else (-float(pen[k] / lim[k]), int(ids[k]),
+                                                        (float(pen[k]), float(lim[k]))))  # the worst of every rank's
+                if a is not None:
+                    return (f"penetration {a[2][0]:.3g} m at contact {a[1]} (bodies {self._pair(c, a[1])}) exceeds "
+                            f"{a[2][1]:.3g} m ([checks] max_penetration)")
         K0, El0, V0 = e0
         dE = info.total_energy - (K0 + El0 + V0) - sim.external_work - sim.driver_work
         scale = K0 + El0 + abs(info.gravity_potential - V0) + abs(sim.external_work) + abs(sim.driver_work)
@@ -507,6 +510,14 @@ class _Guards:
 
     def _pair(self, c, a) -> str:
         return f"{self.names[c.cs.cand_body[a]]} / {self.names[c.cs.ant_body[a]]}"
+
+    def _agree(self, found):
+        """What a check found on this rank's contacts, (key, contact, payload) or None, agreed by every rank: of
+        those found, the one with the smallest (key, contact number), or None (key -ratio: the worst penetration,
+        the first contact among equals, as one process's argmax over every contact). N > 1 ranks: one all-gather."""
+        every = [found] if self.comm is None else self.comm.allgather(found)
+        found = [x for x in every if x is not None]
+        return min(found, key=lambda x: (x[0], x[1])) if found else None
 
 
 class _MissedContactWatch:
@@ -532,7 +543,7 @@ class _MissedContactWatch:
 
     def __init__(self, model: Model, names, state: dict | None = None):
         self.names = names
-        ct = model.contact
+        ct = self.step = model.contact
         self.active = ct is not None and getattr(ct.opts, "geometry", "frozen") == "updated"
         self.itf_names = [i.name for i in ct.interfaces] if ct is not None else []
         self.alert = np.array([i.alert for i in ct.interfaces], dtype=float) if ct is not None else None
@@ -548,7 +559,9 @@ class _MissedContactWatch:
         ub = cs.g0 - cs.gap  # >= p0 (g0 >= 0): the common case, nothing near the threshold, in two array passes
         if float(ub.max()) <= self.FRACTION * float(self.alert.min()):
             return None
-        compliant = (c.law == ELASTIC) | (c.law == MIXED)
+        # every contact's law codes (the contact set is whole on every rank; the record's rows may be a rank's own)
+        law = self.step.law_codes(cs)
+        compliant = (law == ELASTIC) | (law == MIXED)
         p0 = np.where(compliant, -cs.gap, ub)
         ratio = p0 / self.alert[cs.interface]
         a = int(np.argmax(ratio))
@@ -917,19 +930,26 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
         hist = _NoHistory()
     cstats = run["cstats"]
     names = list(model.names)
-    guards = _Guards(case, model, names)
+    guards = _Guards(case, model, names, comm)
     watch = _RotationWatch(sim, names, run.get("rotation"))  # the small-rotation bound (resumed: its record)
     run["rotation"] = watch.state
     missed = _MissedContactWatch(model, names, run.get("missed_contacts"))  # contacts missed by fast bodies
     run["missed_contacts"] = missed.state
     bar = Progress(progress and root)
     info = sim.info()
+
+    def write_contacts():
+        """A frame of contacts.pvd (rank 0) from the record of every contact (N ranks: gathered, every rank)."""
+        if case.output["paraview"] and model.contact is not None:
+            rec = None if sim.last_contact is None else sim.last_contact.whole()
+            if pc:
+                pc.write(sim.time, rec)
+
     if ck is None:
         hist.write(history_row(model, info, 0, sim, rotations=rot_ids, joints=joint_ids, gauges=gauge_ids))
         if pv:
             pv.write(sim.time)
-        if pc:
-            pc.write(sim.time, sim.last_contact)
+        write_contacts()
         run["frames"] = 1
         run["e0"] = (info.kinetic, info.elastic, info.gravity_potential)
 
@@ -947,10 +967,12 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
                      ContactStep.per_contact_keys(arrays), before=hist.flush)
 
     def finish(status: str, code: int | None = None) -> dict:
-        # (N ranks: rank 0 writes the summary and figures; every rank returns the summary, or raises)
-        return on_root(comm, _finish, status, code)
+        # (N ranks: rank 0 writes the summary and figures, from the record of every contact gathered by every rank;
+        # every rank returns the summary, or raises)
+        last = None if sim.last_contact is None else sim.last_contact.whole()
+        return on_root(comm, _finish, status, code, last)
 
-    def _finish(status: str, code: int | None = None) -> dict:
+    def _finish(status: str, code: int | None, last) -> dict:
         conv = convergence_report(case, run["cstats"], model.contact is not None)
         if status == "completed" and conv["unconverged_steps"]:
             status = "completed with unconverged steps"
@@ -967,7 +989,7 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
         if comm is not None:
             summary["mpi_ranks"] = comm.Get_size()
             summary["outputs"]["checkpoint"] = "checkpoint.rank<p>.npz"  # (one piece per rank)
-        summary.update(_figures(case, sim, model, out_dir, hist.columns_dict(), conv, summary.get("stages")))
+        summary.update(_figures(case, sim, model, out_dir, hist.columns_dict(), conv, summary.get("stages"), last))
         write_summary(os.path.join(out_dir, "summary.json"), summary)
         return summary
 
@@ -1041,8 +1063,7 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
                     if failure is not None:
                         if pv:
                             pv.write(sim.time)
-                            if pc:
-                                pc.write(sim.time, sim.last_contact)
+                            write_contacts()
                         checkpoint(good)
                         raise RunStopped(f"stage {st.name!r}, step {k} (t = {sim.time:.6g} s): {failure}. Outputs "
                                          f"so far are in {out_dir}; the checkpoint holds the last good step "
@@ -1073,8 +1094,7 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
                     interrupted = received is not None
                     if pv and (k % st.output_every == 0 or last or interrupted):
                         pv.write(sim.time)
-                        if pc:
-                            pc.write(sim.time, sim.last_contact)
+                        write_contacts()
                         run["frames"] += 1
                     extra = f" sweeps {c['sweeps']}" if c else ""
                     if level:
@@ -1201,8 +1221,7 @@ def _summary(case, model, sim, info, run, t_start, t_setup, pv, pc, status) -> d
                                 history="history.csv", checkpoint="checkpoint.npz"))
     res = sim.last_contact
     if model.contact is not None and res is not None and res.state is not None:
-        from .laws import S_DISS
-        summary["dissipated_energy_J"] = float(res.state[:, S_DISS].sum())
+        summary["dissipated_energy_J"] = float(res.dissipated)
     if model.contact is not None and res is not None:
         summary["friction_dissipated_J"] = float(res.friction_total)  # contact/friction.py
     return summary
@@ -1278,12 +1297,14 @@ def _joints_writer(case, model, pdir, resume, t_resume):
                         model.contact.joint_lengths if two_d else None, append=resume, keep_until_time=t_resume)
 
 
-def _figures(case, sim, model, out_dir, hist: dict, conv=None, stages=()) -> dict:
+def _figures(case, sim, model, out_dir, hist: dict, conv=None, stages=(), contact=None) -> dict:
     """force_displacement.png and crack_pattern.png, and the curve's peak figures for summary.json (keys named
     with their unit: translations mm / forces kN, rotations rad / moments kN·m; figures.dof_unit). `hist`: the
     run's history columns (HistoryWriter.columns_dict: the rows of history.csv, kept in memory); with `[output]
     rotations`, rotations.png (figures.write_rotations; `stages`: summary.json "stages", their stops at a rotation).
+    `contact`: the last step's record of every contact (ContactResult.whole(); None: sim.last_contact).
     """
+    contact = contact if contact is not None or sim is None else sim.last_contact
     from .output.figures import curve_data, dof_unit, post_peak, post_peak_summary, write_crack_pattern, write_curve
     out = {}
     if case.dimension == 3:  # deformed blocks, off-screen (pyvista when installed, else matplotlib)
@@ -1292,16 +1313,16 @@ def _figures(case, sim, model, out_dir, hist: dict, conv=None, stages=()) -> dic
         out["blocks_png"] = "blocks.png"
     elif case.output.get("crack_pattern", default_of(OutputSpec, "crack_pattern")) \
             and any(b.kind == 0 for b in model.bodies):
-        d = write_crack_pattern(os.path.join(out_dir, "crack_pattern.png"), sim, sim.last_contact, model.contact,
+        d = write_crack_pattern(os.path.join(out_dir, "crack_pattern.png"), sim, contact, model.contact,
                                 title=case.name)
         out["crack_pattern"] = "crack_pattern.png"
         out.update(_cracked_bricks(d["bricks"]))
     elif getattr(model, "contact", None) is not None and sim is not None:  # no figure: the count all the same
         from .output.figures import brick_cracks
-        out.update(_cracked_bricks(brick_cracks(sim.last_contact, model.contact)))
+        out.update(_cracked_bricks(brick_cracks(contact, model.contact)))
     if case.output.get("line_of_thrust") and case.dimension == 2 and model.contact is not None:
         from .output.figures import write_line_of_thrust
-        d = write_line_of_thrust(os.path.join(out_dir, "line_of_thrust.png"), sim, sim.last_contact, model.contact,
+        d = write_line_of_thrust(os.path.join(out_dir, "line_of_thrust.png"), sim, contact, model.contact,
                                  names=model.names, title=case.name)
         out["line_of_thrust"] = dict(png="line_of_thrust.png", joints=d["n_joints"], compressed=d["n_compressed"],
                                      outside=d["outside"])

@@ -234,6 +234,21 @@ MUTATIONS = [
              "fem_blocks/distributed/colour.py",
              "    diag = np.where(dpos >= 0, dpos - indptr[perm] + indptr_new[:-1], -1).astype(np.int64)",
              "    diag = np.where(dpos >= 0, dpos, -1).astype(np.int64)", ("tests/test_colour.py",)),
+    Mutation("own_rows_ghost_warm_start", "N ranks, own rows: the ghosts' warm start left at zero, not exchanged",
+             "fem_blocks/distributed/colour.py", "                self._exchange(c)\n        qo = ",
+             "                pass\n        qo = ", ("tests/test_dist_own_rows.py",)),
+    Mutation("own_rows_gathered_in_rank_order", "N ranks, own rows: the step's record left in rank order, not put "
+             "back in contact order", "fem_blocks/contact/step.py", "    out[order] = buf\n",
+             "    out[:] = buf\n", ("tests/test_dist_own_rows.py",)),
+    Mutation("own_rows_redetect_whole_index", "N ranks, own rows: a re-detected contact's impulse carried from its "
+             "old number in the whole set, not from the old own rows", "fem_blocks/contact/step.py",
+             "                if self._local is not None:  # the old arrays hold the old own contacts' rows",
+             "                if False:  # the old arrays hold the old own contacts' rows",
+             ("tests/test_dist_own_rows.py",)),
+    Mutation("own_rows_L_not_scattered", "N ranks, own rows: the impulses of the contacts L owned elsewhere not "
+             "scattered (zero in H P)", "fem_blocks/contact/step.py",
+             "        out[other] = gvec.getArray().reshape(-1, d)\n", "        out[other] = 0.0\n",
+             ("tests/test_dist_own_rows.py",)),
 ]
 
 IGNORE = shutil.ignore_patterns(".git", "__pycache__", ".venv", "*.pyc", ".pytest_cache", "out", "*.egg-info")

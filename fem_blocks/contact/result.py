@@ -14,11 +14,17 @@ P impulses (nc, d) [N s], r = P / h reactions [N], v the shifted local velocity 
 (normal v_N + gs / (h theta), contact/step.py), gt_end = gbar + h theta v_N the joint-corrected gap g - g0 at the
 end of the step [m],
 status 0 open / 1 stick / 2 slip, law codes and the committed law state (laws.py columns), the step's frictional
-dissipation per contact `friction` = -r̃_T · Δu_T [J] and its running total `friction_total` (contact/friction.py).
+dissipation per contact `friction` = -r̃_T · Δu_T [J] and its running total `friction_total` (contact/friction.py);
+`dissipated` the law states' dissipated energy Σ_α S_DISS [J] (decohesion and crushing) over every contact.
+
+Rows: on N > 1 MPI ranks in colour order (contact/step.py ContactStep._own_rows) a rank's record holds the rows of
+its own contacts only (`rows`: their numbers in the contact set `cs`, which every rank holds whole); `whole()`
+gathers every contact's rows (collective: every rank calls it together). The statistics, `friction_total` and
+`dissipated` are of every contact on every rank.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -43,6 +49,9 @@ class ContactResult:
     rigid_impulse: np.ndarray = None  # (n_rigid, rigid ndof) contact impulse p on each rigid body
     friction: np.ndarray = None       # (nc,) frictional dissipation of this step per contact [J] (contact/friction.py)
     friction_total: float = 0.0       # frictional dissipation of every step of the contact step so far [J]
+    dissipated: float = 0.0           # Σ over every contact of the law state's S_DISS [J] (decohesion, crushing)
+    rows: np.ndarray = None           # None: the rows of every contact; else the contacts (numbers in cs) held here
+    gather: object = None             # rows given: gather(x) -> every contact's rows of x (collective; Allgatherv)
 
     @property
     def n_contacts(self) -> int:
@@ -52,6 +61,24 @@ class ContactResult:
         """True when the record holds per-contact arrays for a non-empty contact set."""
         return self.n_contacts > 0 and self.r is not None and len(self.r) == self.n_contacts
 
+    def whole(self) -> "ContactResult":
+        """The record with the rows of every contact: itself when it holds them; else (a rank's rows, N > 1 ranks)
+        one gather of the per-contact arrays side by side. COLLECTIVE in that case: every rank calls it together."""
+        if self.rows is None:
+            return self
+        names = [k for k in ("P", "r", "v", "gt_end", "status", "law", "state", "friction")
+                 if getattr(self, k) is not None]
+        cols = [np.asarray(getattr(self, k), dtype=np.float64) for k in names]
+        cols = [c.reshape(len(self.rows), int(np.prod(c.shape[1:], dtype=np.int64))) for c in cols]
+        every = self.gather(np.hstack(cols) if cols else np.zeros((len(self.rows), 0)))
+        out, j = {}, 0
+        for k, c in zip(names, cols):
+            x = every[:, j:j + c.shape[1]]
+            j += c.shape[1]
+            x = x.reshape((-1,) + np.shape(getattr(self, k))[1:])
+            out[k] = np.ascontiguousarray(x.astype(np.int64) if k in ("status", "law") else x)
+        return replace(self, rows=None, gather=None, **out)
+
     def export(self) -> dict:
-        """The per-contact outputs for a checkpoint ("contact.out.<name>")."""
+        """The per-contact outputs for a checkpoint ("contact.out.<name>"; a rank's rows on N > 1 ranks: its piece)."""
         return {OUT_PREFIX + k: getattr(self, k) for k in OUT_FIELDS if getattr(self, k) is not None}

@@ -181,13 +181,15 @@ class ContactStep:
         (global numbers, increasing). L holds every contact coupled to one of A (W_αβ needs a shared body) and every
         contact acting on a body of O (its impulse reaches that body)."""
         cs, p = self.cs, self.comm.Get_rank()
-        own = np.flatnonzero(self._owner() == p)
+        owner = self._owner()
+        own = np.flatnonzero(owner == p)
         mine = self.body_owner == p
         near = mine.copy()
         near[cs.cand_body[own]] = True
         near[cs.ant_body[own]] = True
         L = np.flatnonzero(near[cs.cand_body] | near[cs.ant_body])
-        return _RankContacts(L, own, np.searchsorted(L, own), np.repeat(mine, self.scene.W_size))
+        return _RankContacts(L, own, np.searchsorted(L, own), np.repeat(mine, self.scene.W_size),
+                             np.argsort(owner, kind="stable"), np.bincount(owner, minlength=self.comm.Get_size()))
 
     def _build_G(self, centers, new_set: bool):
         """The G blocks of the contact set (N > 1 ranks in colour order: of this rank's contacts L only). new_set: the
@@ -195,30 +197,106 @@ class ContactStep:
         pairs and their order stay, and so does L."""
         s, cs = self.scene, self.cs
         if new_set:
+            if self._local is not None:
+                self._local.destroy()
             self._local = self._rank_contacts() if self._split() else None
         if self._local is not None:
             cs = cs.subset(self._local.L)
         self.G = self._kin.build_G(cs, s.kind, s.rot, centers, s.bnode_index_flat, s.bnode_offset)
 
-    def _all_rows(self, x: np.ndarray) -> np.ndarray:
-        """Per-contact values x (nG, k), one row per contact of G, as the values (nc, k) of every contact: N > 1 ranks in
-        colour order, the rows of this rank's own contacts gathered from every rank (ColourSolver.gather); else x."""
+    # the step's arrays with one row per contact: N > 1 ranks in colour order, of this rank's own contacts only
+    # (`_own_rows`); else of every contact
+    ROWS = ("P", "P_prev", "state", "law", "par", "mu", "gap_ref", "g_built")
+
+    def _own_rows(self):
+        """N > 1 ranks in colour order: cut the step's per-contact arrays (ROWS) of every contact (a new contact set,
+        a checkpoint) to the rows of this rank's own contacts (`_local.own`, increasing numbers); arrays already of
+        those rows (a snapshot of this run, taken on the same ranks) stay. (When a rank owns every contact both are
+        the same.) Each contact's values are then computed, solved and committed by its owner alone."""
         if self._local is None:
-            return x
-        return self._colours.gather(np.ascontiguousarray(x[self._local.own_pos]), x.shape[1])
+            return
+        n, own = len(self.cs.gap), self._local.own
+        for name in self.ROWS:
+            a = getattr(self, name, None)
+            if a is None or len(a) == own.size:
+                continue
+            if len(a) != n:
+                raise RuntimeError(f"contact step: {name} has {len(a)} rows, neither the {n} contacts nor the "
+                                   f"{own.size} of this rank")
+            setattr(self, name, np.ascontiguousarray(a[own]))
+
+    def _whole(self, x: np.ndarray) -> np.ndarray:
+        """Per-contact rows of the step's arrays (ROWS' layout) as the rows of every contact, in contact order, on
+        every rank: N > 1 ranks in colour order, one Allgatherv of the own contacts' rows; else x itself."""
+        return x if self._local is None else self._gather()(x)
+
+    def _gather(self):
+        """N > 1 ranks in colour order: the gather of the own rows of the current contact set (`gather_rows` bound
+        to its layout: a record keeps the gather of its own contact set)."""
+        import functools
+        return functools.partial(gather_rows, self.comm, self._local.order, self._local.counts)
+
+    def _record_rows(self) -> dict:
+        """The rows a step's record holds (contact/result.py): those of every contact, or on N > 1 ranks in colour
+        order this rank's own, with the gather of the others'."""
+        if self._local is None:
+            return {}
+        return dict(rows=self._local.own, gather=self._gather())
+
+    def _dissipated(self) -> float:
+        """Σ over every contact of the committed law state's S_DISS [J], in contact order (N > 1 ranks: the own rows
+        of every rank gathered, so the sum is one process's, bitwise)."""
+        from ..laws import S_DISS
+        return float(np.ascontiguousarray(self._whole(np.ascontiguousarray(self.state[:, S_DISS]))).sum())
+
+    def law_codes(self, cs) -> np.ndarray:
+        """The law code of every contact of the current contact set `cs` (its interfaces' laws)."""
+        return self._codes[cs.interface]
 
     def _impulse(self, P: np.ndarray) -> np.ndarray:
-        """H P, the contact impulses on the bodies (flat W-numbered vector). N > 1 ranks in colour order: each rank
-        sums the impulses on its own bodies from its contacts L (all that act on them, in increasing contact number,
-        as one process does), and an all-reduce of the vectors, zero elsewhere, gives every rank the same bits."""
+        """H P, the contact impulses on the bodies (flat W-numbered vector), P the impulses of the step's rows. N > 1
+        ranks in colour order: the impulses of the contacts L not owned come from their owners (`_L_impulses`, a
+        PETSc scatter); each rank sums the impulses on its own bodies from its contacts L (all that act on them, in
+        increasing contact number, as one process does), and an all-reduce of the vectors, zero elsewhere, gives
+        every rank the same bits."""
         s, K = self.scene, self._kin
         if self._local is None:
             return K.accumulate_impulse(self.G, P, s.n_udof, s.U_offset)
         from mpi4py import MPI
-        imp = K.accumulate_impulse(self.G, P[self._local.L], s.n_udof, s.U_offset)
+        imp = K.accumulate_impulse(self.G, self._L_impulses(P), s.n_udof, s.U_offset)
         imp[~self._local.dofs] = 0.0
         self.comm.Allreduce(MPI.IN_PLACE, imp, op=MPI.SUM)
         return imp
+
+    def _L_impulses(self, P_own: np.ndarray) -> np.ndarray:
+        """The impulses (len(L), d) of this rank's contacts L from those of its own contacts: the others' from their
+        owners by one PETSc scatter (built once per contact set: a distributed vector of every rank's own rows, in
+        rank order, scattered to the rows of L that another rank owns)."""
+        from petsc4py import PETSc
+        loc, d = self._local, self.dim
+        if loc.scatter is None:
+            n = int(loc.counts.sum())
+            pos = np.empty(n, dtype=np.int64)
+            pos[loc.order] = np.arange(n)  # each contact's row in the distributed vector (rank order)
+            other = np.setdiff1d(np.arange(loc.L.size), loc.own_pos, assume_unique=True)
+            pc = PETSc.Comm(self.comm)
+            vec = PETSc.Vec().createMPI((d * loc.own.size, d * n), bsize=d, comm=pc)
+            gvec = PETSc.Vec().createSeq(d * other.size, bsize=d, comm=PETSc.COMM_SELF)
+            isf = PETSc.IS().createBlock(d, pos[loc.L[other]].astype(PETSc.IntType), comm=PETSc.COMM_SELF)
+            ist = PETSc.IS().createBlock(d, np.arange(other.size, dtype=PETSc.IntType), comm=PETSc.COMM_SELF)
+            loc.scatter = (PETSc.Scatter().create(vec, isf, gvec, ist), vec, gvec, other)
+            isf.destroy()
+            ist.destroy()
+        sc, vec, gvec, other = loc.scatter
+        out = np.empty((loc.L.size, d))
+        out[loc.own_pos] = P_own
+        vec.placeArray(np.ascontiguousarray(P_own, dtype=np.float64).ravel())
+        try:
+            sc.scatter(vec, gvec)
+        finally:
+            vec.resetArray()
+        out[other] = gvec.getArray().reshape(-1, d)
+        return out
 
     def _linear_solver(self):
         """N > 1 ranks and a Newton solver: the distributed solve of J Δr = -F on the Delassus operator's pattern
@@ -252,7 +330,7 @@ class ContactStep:
     def close(self):
         """Release the PETSc objects of a run on N > 1 ranks (collective: every rank calls it at the end). A step
         after it assembles W again: the colour solver that goes held W's arrays in its own order (take_rows)."""
-        for obj in (self._colours, self._linear):
+        for obj in (self._colours, self._linear, self._local):
             if obj is not None:
                 obj.destroy()
         if self._colours is not None:
@@ -332,6 +410,7 @@ class ContactStep:
         rows = [pack(itf.law, itf.law_values) for itf in self.interfaces]
         codes = np.array([c for c, _ in rows], dtype=np.int64)
         pars = np.array([p for _, p in rows])
+        self._codes = codes  # (per interface: the law code of every contact is codes[cs.interface], law_codes)
         self.law = codes[cs.interface]
         self.par = np.ascontiguousarray(pars[cs.interface])
         self.mu = self.par[:, 0].copy()
@@ -381,10 +460,19 @@ class ContactStep:
             if old is not None and oldP is not None and nc:
                 m = match(old, self.cs)
                 ok = m >= 0
-                self.P[ok] = oldP[m[ok]]
-                st[ok] = self.state[m[ok]]
+                src = m[ok]
+                if self._local is not None:  # the old arrays hold the old own contacts' rows: a contact continues
+                    # one with the same candidate point, so of the same candidate body and owner; the others'
+                    # rows are another rank's (and cut at _own_rows)
+                    old_own = self._local.own
+                    pos = np.minimum(np.searchsorted(old_own, src), max(old_own.size - 1, 0))
+                    hit = old_own[pos] == src if old_own.size else np.zeros(src.size, dtype=bool)
+                    ok[ok] = hit
+                    src = pos[hit]
+                self.P[ok] = oldP[src]
+                st[ok] = self.state[src]
                 if self.g_built is not None:
-                    built[ok] = self.g_built[m[ok]]
+                    built[ok] = self.g_built[src]
             self.state = st
             if ref:  # frozen geometry: reference gaps; "as_built" joints are closed in the initial configuration
                 self.gap_ref = self.cs.gap - self.cs.g0
@@ -398,6 +486,8 @@ class ContactStep:
             self.cs = self._det.update_geometry(self.cs, s.positions(), s.bedges if self.dim == 2 else s.bfaces)
         if redetect or updated:
             self._build_G(s.centers(reference=redetect and first and not updated), new_set=redetect)
+            if redetect:
+                self._own_rows()
             self.mark_W_dirty()
         if self.W_dirty:
             from time import perf_counter
@@ -549,12 +639,16 @@ class ContactStep:
         # G: frozen geometry, from the reference placement as at the first step (the frames of the scene, never
         # refreshed); updated geometry rebuilds it at the next step
         self._build_G(self.scene.centers(reference=self.opts.geometry == "frozen"), new_set=True)
+        self._own_rows()
         self.W_dirty = True  # rebuilt at the next step (new scene); 3D: with the rigid W in use at the export
         self._rigid_W_restored = (np.array(d["contact.rigid_W"]) if "contact.rigid_W" in d
                                   and not bool(d["contact.W_dirty"]) else None)
         out = {k: np.array(d[OUT_PREFIX + k]) for k in OUT_FIELDS if OUT_PREFIX + k in d}
-        return ContactResult(self.dim, {}, cs=self.cs, P=self.P.copy(), law=self.law.copy(),
-                             state=self.state.copy(), friction_total=self.friction_total, **out)
+        if self._local is not None:  # (the record of a rank's own rows: a checkpoint's whole arrays cut to them)
+            out = {k: (x[self._local.own] if len(x) == len(self.cs.gap) else x) for k, x in out.items()}
+        return ContactResult(self.dim, {}, cs=self.cs, P=self.P.copy(), law=self.law.copy(), state=self.state.copy(),
+                             friction_total=self.friction_total, dissipated=self._dissipated(),
+                             **self._record_rows(), **out)
 
     # ------------------------------------------------------------------ the step
     def warm_start(self, h: float) -> np.ndarray:
@@ -591,22 +685,24 @@ class ContactStep:
             return ContactResult(d, dict(contacts=0, active=0, sweeps=0, change=0.0, residual=0.0, converged=True,
                                          solver="none", message="no contact"), cs=cs, P=self.P.copy(),
                                  law=self.law.copy(), state=self.state.copy(), group_corr=gc, rigid_corr=rc,
-                                 rigid_impulse=ri, friction=np.zeros(0), friction_total=self.friction_total)
+                                 rigid_impulse=ri, friction=np.zeros(0), friction_total=self.friction_total,
+                                 **self._record_rows())
         ufree = s.gather("ufree")
         K = self._kin
         colours = self._colour_solver()
-        # v_free = G u_free, v_i = G u_i and (frozen geometry) the normal jump (G q)_N, per contact of G; N > 1
-        # ranks: one gather of the three (_all_rows)
-        loc = [K.local_velocity(self.G, ufree, s.U_offset), K.local_velocity(self.G, s.gather("u"), s.U_offset)]
+        # the step's contacts: every contact, or on N > 1 ranks in colour order this rank's own contacts (the rows of
+        # the step's arrays, ROWS); `own` picks them from arrays of every contact, `mine` from arrays of G's rows
+        loc = self._local
+        own = (lambda x: x) if loc is None else (lambda x: x[loc.own])
+        mine = (lambda x: x) if loc is None else (lambda x: np.ascontiguousarray(x[loc.own_pos]))
+        # v_free = G u_free, v_i = G u_i and (frozen geometry) the normal jump (G q)_N
+        vfree = mine(K.local_velocity(self.G, ufree, s.U_offset))
+        vi = mine(K.local_velocity(self.G, s.gather("u"), s.U_offset))
         if self.opts.geometry == "frozen":
-            loc.append(K.local_velocity(self.G, s.gather("q"), s.U_offset)[:, :1])
-        every = self._all_rows(np.hstack(loc)) if self._local is not None else None
-        vfree, vi = (loc[0], loc[1]) if every is None else (np.ascontiguousarray(every[:, :d]),
-                                                            np.ascontiguousarray(every[:, d:2 * d]))
-        if self.opts.geometry == "frozen":
-            gt = self.gap_ref + (loc[2] if every is None else every[:, 2 * d:])[:, 0]
+            gt = self.gap_ref + mine(K.local_velocity(self.G, s.gather("q"), s.U_offset))[:, 0]
         else:
-            gt = cs.gap - cs.g0 - self.g_built  # as-built contacts of the initial set: g - g0 - g_built
+            gt = own(cs.gap) - own(cs.g0) - self.g_built  # as-built contacts of the initial set: g - g0 - g_built
+        area = own(cs.area)
         from ..laws import S_UP
         gt = gt - self.state[:, S_UP]  # crushed joints: the contact surface moved by the plastic closure u_p <= 0
         gbar = gt + h * (1 - th) * vi[:, 0]
@@ -624,19 +720,20 @@ class ContactStep:
             from ..laws import NSTATE, S_UN, S_UT
             ueff = self.state[:, [S_UN, S_UT] + ([NSTATE] if d == 3 else [])] + h * (1 - th) * vi
             ueff[:, 0] -= gs  # u = u_eff + h theta v_shifted (v_shifted = v_N + gs/(h theta))
-            laws = InterfaceLaws(self.law, self.par, self.state, ueff, cs.area, h, th)
+            laws = InterfaceLaws(self.law, self.par, self.state, ueff, area, h, th)
         coarse = None
         if self.opts.coarse == "interfaces":
             if self._coarse is None:
                 from ..solver.coarse import InterfaceCoarse
                 self._coarse = InterfaceCoarse.from_contacts(cs, self.opts.coarse_every)
             coarse = self._coarse
-        res = solve(ContactProblem(self.Wdel, q.ravel(), self.mu, laws=laws),
+        # (N > 1 ranks in colour order: the problem's rows are the own contacts', and so are the solution's)
+        res = solve(ContactProblem(self.Wdel, q.ravel(), self.mu, laws=laws, own_rows=loc is not None),
                     dataclasses.replace(self.opts, seed=self.opts.seed + self.steps), r0=self.warm_start(h).ravel(),
                     coarse=coarse, colours=colours, linear=self._linear_solver())
         if self.cohesive:
             from ..laws import commit_step  # crushing at the cap, then the laws' commit (any dimension)
-            commit_step(self.law, self.par, self.state, res.trial, ueff, res.r, res.u, cs.area, h, th)
+            commit_step(self.law, self.par, self.state, res.trial, ueff, res.r, res.u, area, h, th)
         else:
             from ..laws import NSTATE, S_UN, S_UT
             vs = res.u.reshape(-1, d)
@@ -648,24 +745,28 @@ class ContactStep:
         P = res.r.reshape(-1, d)
         self.P_prev, self.h_prev, self.h_last = self.P, self.h_last, h
         self.P = P
-        v = res.u.reshape(-1, d).copy()
+        v = res.u.reshape(-1, d)
         from .friction import friction_work  # -r̃_T · Δu_T per contact, from the committed state
-        friction = friction_work(self.law, self.par, self.state, P, v, vi, cs.area, h, th)
-        self.friction_total += float(friction.sum())
+        friction = friction_work(self.law, self.par, self.state, P, v, vi, area, h, th)
+        status = np.zeros(len(P), dtype=np.int64)  # 0 open, 1 stick, 2 slip
+        closed = P[:, 0] > 0
+        status[closed] = 1
+        status[closed & (np.linalg.norm(P[:, 1:], axis=1) >= self.mu * P[:, 0] * (1 - 1e-9))
+               & (np.linalg.norm(v[:, 1:], axis=1) > 1e-12)] = 2
+        # the totals over every contact, in contact order (N > 1 ranks in colour order: the own rows' dissipation
+        # gathered, one Allgatherv; the counts summed)
+        self.friction_total += float(np.ascontiguousarray(self._whole(friction)).sum())
+        counts = np.array([np.count_nonzero(status), np.count_nonzero(status == 2)], dtype=np.int64)
+        if loc is not None:
+            from mpi4py import MPI
+            self.comm.Allreduce(MPI.IN_PLACE, counts, op=MPI.SUM)
         imp = self._impulse(P)
         gc, rc, ri = s.corrections(imp)
         tm["correction"] += perf_counter() - c3
-        status = np.zeros(nc, dtype=np.int64)
-        closed = P[:, 0] > 0
-        slip = (closed & (np.linalg.norm(P[:, 1:], axis=1) >= self.mu * P[:, 0] * (1 - 1e-9))
-                & (np.linalg.norm(v[:, 1:], axis=1) > 1e-12))
-        status[closed] = 1
-        status[slip] = 2
         if not res.converged:
             self.n_unconverged += 1
-        stats = dict(contacts=nc, active=int(closed.sum()), slip=int(slip.sum()), sweeps=int(res.sweeps),
-                     change=float(res.change), residual=float(res.residual), converged=bool(res.converged),
-                     solver=res.solver, message=str(res.message))
+        stats = dict(contacts=nc, active=int(counts[0]), slip=int(counts[1]), sweeps=int(res.sweeps), change=float(res.change), residual=float(res.residual),
+                     converged=bool(res.converged), solver=res.solver, message=str(res.message))
         if not res.converged and self.opts.on_nonconvergence == "fail":
             from ..errors import ConvergenceError
             raise ConvergenceError(f"step {sim.step_count + 1} (t = {t1:.6g} s): {stats['solver']} did not "
@@ -673,17 +774,47 @@ class ContactStep:
                                    f"{res.sweeps} sweeps (change {res.change:.3g}, residual {res.residual:.3g})")
         # v is the shifted normal velocity v_N + gs / (h theta): g~_{i+1} = gbar + h theta v_N
         return ContactResult(d, stats, cs=cs, P=P.copy(), r=P / h, v=v, gt_end=h * th * v[:, 0] + (gbar - gs),
-                             status=status,
-                             law=self.law.copy(), state=self.state.copy(), group_corr=gc, rigid_corr=rc,
-                             rigid_impulse=ri, friction=friction, friction_total=self.friction_total)
+                             status=status, law=self.law.copy(), state=self.state.copy(), group_corr=gc,
+                             rigid_corr=rc, rigid_impulse=ri, friction=friction, friction_total=self.friction_total,
+                             dissipated=self._dissipated(), **self._record_rows())
+
+
+def gather_rows(comm, order, counts, x: np.ndarray) -> np.ndarray:
+    """COLLECTIVE: the rows x (n_own, ...) of every rank's own contacts as the rows of every contact in contact order,
+    on every rank (one Allgatherv). order: every contact grouped by owner rank (each rank's own contacts increasing),
+    counts: the number each rank owns (_RankContacts)."""
+    from mpi4py import MPI
+    x = np.ascontiguousarray(x)
+    shape = x.shape[1:]
+    width = int(np.prod(shape, dtype=np.int64))
+    buf = np.empty((int(counts.sum()),) + shape, dtype=x.dtype)
+    displs = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    mt = MPI.DOUBLE if x.dtype == np.float64 else MPI.INT64_T
+    comm.Allgatherv(x.ravel(), [buf.reshape(-1), counts * width, displs * width, mt])
+    out = np.empty_like(buf)
+    out[order] = buf
+    return out
 
 
 @dataclasses.dataclass
 class _RankContacts:
     """A rank's part of the contact set (N > 1 ranks in colour order, ContactStep._rank_contacts): L its contacts
     (global numbers, increasing: its own and those sharing a body with them or acting on its bodies), own its own
-    contacts (global), own_pos their positions in L, dofs the mask of its bodies' dofs in the flat W numbering."""
+    contacts (global), own_pos their positions in L, dofs the mask of its bodies' dofs in the flat W numbering;
+    order every contact grouped by owner rank (rank 0's own contacts, then rank 1's, ..., each increasing) and counts
+    the number each rank owns: the layout of the gather of the own rows (ContactStep._whole)."""
     L: np.ndarray
     own: np.ndarray
     own_pos: np.ndarray
     dofs: np.ndarray
+    order: np.ndarray
+    counts: np.ndarray
+    scatter: tuple = None  # the PETSc scatter of the impulses of L's contacts owned elsewhere (_L_impulses)
+
+    def destroy(self):
+        """Release the PETSc objects (collective, as their creation)."""
+        if self.scatter is not None:
+            sc, vec, gvec, _ = self.scatter
+            for obj in (sc, vec, gvec):
+                obj.destroy()
+            self.scatter = None

@@ -123,7 +123,9 @@ def split(arrays: dict, rank: int, size: int, token: str, body_owner, body_of, c
     (body_owner[body_of(key)] == rank; body_of(key) is None for an entry of no body), the rows of its contacts (those
     whose candidate body it owns, "contact.cs.cand_body") of the per-contact entries `contact_keys`, and every other
     entry; plus `part.*`: rank, size, token, the body partition, the contacts' numbers in the whole set (increasing)
-    and their count, the per-contact entries' names."""
+    and their count, the per-contact entries' names. A per-contact entry holds the rows of every contact, or already
+    those of this rank's contacts only (the contact step's and its record's on N ranks; when the rank owns every
+    contact the two are the same)."""
     owner = np.asarray(body_owner, dtype=np.int64)
     keys = sorted(k for k in contact_keys if k in arrays)
     out = {"part.rank": np.int64(rank), "part.size": np.int64(size), "part.token": np.array(str(token)),
@@ -135,7 +137,11 @@ def split(arrays: dict, rank: int, size: int, token: str, body_owner, body_of, c
         out.update({"part.contacts": ids, "part.n_contacts": np.int64(len(cand)), "part.contact_keys": np.array(keys)})
     for k, v in arrays.items():
         if ids is not None and k in keys:
-            out[k] = np.asarray(v)[ids]
+            v = np.asarray(v)
+            if len(v) not in (len(cand), len(ids)):
+                raise RuntimeError(f"checkpoint: {k} has {len(v)} rows, neither the {len(cand)} contacts nor the "
+                                   f"{len(ids)} of rank {rank}")
+            out[k] = v if len(v) == len(ids) else v[ids]  # (already its rows: the contact step's on N ranks)
         else:
             b = body_of(k)
             if b is None or owner[b] == rank:

@@ -1,0 +1,74 @@
+"""Run by tests/test_dist_own_rows.py, on one process or under mpirun: steps the case CASE.toml three times,
+takes the runner's snapshot after step 2 (the state a refined or adaptive step goes back to), restores it and steps
+again; writes OUT.<rank>.json with, per rank, the rows the contact step holds and the record's digests.
+
+Usage: [mpirun -n N] python tests/_own_rows_mpi.py CASE.toml OUT
+"""
+import hashlib
+import json
+import sys
+
+import numpy as np
+
+
+def digest(*arrays) -> str:
+    h = hashlib.sha1()
+    for a in arrays:
+        h.update(np.ascontiguousarray(a).tobytes())
+    return h.hexdigest()
+
+
+def record(sim, step) -> dict:
+    """The step's record of every contact (ContactResult.whole(), in contact order), its totals and statistics, the
+    rows the record itself holds, and the bodies' velocities, as digests."""
+    own = sim.last_contact
+    c = own.whole()
+    return dict(P=digest(c.P), r=digest(c.r), v=digest(c.v), state=digest(c.state), gt_end=digest(c.gt_end),
+                status=digest(c.status), friction=digest(c.friction), law=digest(c.law),
+                friction_total=float(c.friction_total), dissipated=float(c.dissipated),
+                stats=[own.stats.get(k) for k in ("contacts", "active", "slip", "sweeps")],
+                u=digest(*[b.u for b in sim.bodies]), warm=digest(step.P), record_rows=int(len(own.P)))
+
+
+def main(path, out):
+    from mpi4py import MPI
+    from fem_blocks.case import load_case
+    from fem_blocks.dynamics import Simulation
+    from fem_blocks.expand import expand
+    from fem_blocks.model import build_model
+    comm = MPI.COMM_WORLD
+    case = expand(load_case(path))
+    model = build_model(case)
+    st = case.stages[0]
+    sim = Simulation(model.bodies, h=st.h, theta=st.theta, gravity=model.gravity, velocity_reset=st.velocity_reset,
+                     contact=model.contact)
+    step = model.contact
+    step.use_comm(comm)
+    res = dict(rank=comm.Get_rank(), size=comm.Get_size(), steps=[])
+    for k in range(3):
+        if k == 2:  # the runner's snapshot of the last good state (runner._snapshot)
+            snap = sim.export_state()
+            snap.update({key: (v.copy() if isinstance(v, np.ndarray) else v)
+                         for key, v in step.export_state().items()})
+            res["snapshot_rows"] = int(len(snap["contact.P"]))
+        sim.step()
+        res["steps"].append(record(sim, step))
+    sim.restore_state(snap)
+    back = sim.last_contact.whole()
+    res["restored"] = dict(P=digest(back.P), state=digest(back.state))
+    sim.step()
+    res["again"] = record(sim, step)
+    cs = step.cs
+    n = len(cs.gap)
+    own = (np.arange(n) if step.body_owner is None
+           else np.flatnonzero(np.asarray(step.body_owner)[cs.cand_body] == comm.Get_rank()))
+    res.update(n_contacts=n, own=own.tolist(),
+               rows={name: (None if getattr(step, name, None) is None else int(len(getattr(step, name))))
+                     for name in step.ROWS})
+    step.close()
+    with open(f"{out}.{comm.Get_rank()}.json", "w") as f:
+        json.dump(res, f)
+
+
+if __name__ == "__main__":
+    main(sys.argv[1], sys.argv[2])

@@ -1,0 +1,76 @@
+"""On N > 1 ranks in colour order each rank holds the contact step's per-contact arrays (impulses, warm start, law
+state and parameters, reference gaps) for its own contacts only, and computes, solves and commits those rows alone;
+so does the step's record (contact/result.py: `rows`), whose whole() gathers every contact's rows on demand; per
+step only the totals cross ranks (contact/step.py ContactStep.ROWS, _own_rows, _whole, _L_impulses).
+
+Expectation (from outside the distributed code): the same steps on ONE process in colour order. After each of 3
+steps the record of every contact (impulses, reactions, velocities, law state, end gaps, status, dissipation, law
+codes), its totals and statistics and the bodies' velocities are the serial ones bit for bit on every rank; each rank
+and its record hold exactly the rows of the contacts whose candidate body it owns (their union is every contact
+once); the runner's snapshot of a step (what a refined or
+adaptive step restores) holds those rows, and restoring it and stepping again gives the same step again, bitwise.
+Cases: a wall with mixed-mode cohesive joints (law state carried and committed per rank) in frozen geometry, and a
+dry wall in updated geometry re-detected every step (the impulses carried to the new contact set by their owners).
+
+One-line bugs these catch (checked): the ghosts' warm start left at zero instead of exchanged (the iterates differ
+from the second step); the own rows gathered in rank order but not put back in contact order; a re-detected
+contact's impulse carried from the old position in the whole set instead of the old own rows; the impulses of the
+contacts L owned elsewhere not scattered (the bodies' velocities differ).
+"""
+import json
+import os
+import subprocess
+import sys
+
+import pytest
+
+import dist_cases
+from _mpi import ENV, run_helper
+from _paths import ROOT
+
+HELPER = "_own_rows_mpi.py"
+CASES = {
+    "mixed": dist_cases.wall("mixed", courses=3, per=3, joint=dist_cases.MIXED),
+    "updated": dist_cases.wall("updated", courses=3, per=3).replace(
+        "[contact]\n", '[contact]\ngeometry = "updated"\nredetect_every = 1\npredictor = "extrapolated"\n'),
+}
+
+
+def _read(out, size):
+    return [json.loads(open(f"{out}.{r}.json").read()) for r in range(size)]
+
+
+@pytest.fixture(scope="module", params=sorted(CASES))
+def serial(request, tmp_path_factory):
+    d = tmp_path_factory.mktemp("own")
+    path = d / f"{request.param}.toml"
+    path.write_text(CASES[request.param])
+    p = subprocess.run([sys.executable, os.path.join(ROOT, "tests", HELPER), str(path), str(d / "serial")],
+                       capture_output=True, text=True, cwd=ROOT, env=ENV, timeout=300)
+    assert p.returncode == 0, (p.stdout + p.stderr)[-3000:]
+    return path, _read(d / "serial", 1)[0]
+
+
+@pytest.mark.parametrize("n", [2, 3])
+def test_each_rank_holds_and_steps_its_own_contacts_rows(serial, n, tmp_path):
+    path, one = serial
+    run_helper(n, HELPER, path, tmp_path / "out", timeout=300)
+    ranks = _read(tmp_path / "out", n)
+    nc = one["n_contacts"]
+    assert nc > 20 and all(r["n_contacts"] == nc for r in ranks)
+    owns = [r["own"] for r in ranks]
+    assert sorted(sum(owns, [])) == list(range(nc))  # every contact held by one rank
+    assert sum(1 for o in owns if o) >= 2  # the contacts are shared
+    for r in ranks:
+        k = len(r["own"])
+        assert r["rows"]["P"] == r["rows"]["state"] == r["rows"]["par"] == r["rows"]["mu"] == k
+        assert r["snapshot_rows"] == k
+        for mine, ref in zip(r["steps"], one["steps"]):
+            assert mine["record_rows"] == k  # the record holds the rank's own rows; whole(), every contact's
+            assert {key: v for key, v in mine.items() if key not in ("warm", "record_rows")} == \
+                {key: v for key, v in ref.items() if key not in ("warm", "record_rows")}
+        assert r["restored"] == {key: one["steps"][1][key] for key in ("P", "state")}
+        assert r["again"] == r["steps"][2]
+    assert one["again"] == one["steps"][2]
+    assert len(set(s["P"] for s in one["steps"])) == 3  # the steps differ (not a trivial state)
+    assert all(s["record_rows"] == nc for s in one["steps"])
