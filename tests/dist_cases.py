@@ -117,6 +117,7 @@ CASES = {
     "long": wall("long", ck=2, duration=0.012, paraview="true"),  # checkpoints every 2 steps (the resume test)
     "newton": wall("newton").replace('order = "colours"', 'solver = "newton"\ncriterion = "residual"')
                             .replace("tol = 1e-05", "tol = 1e-08"),  # the Newton's linear solves shared by the ranks
+    "guard": wall("guard").replace("[contact]", "[checks]\nmax_penetration = 1e-9\n[contact]", 1),  # a run check stops
 }
 
 

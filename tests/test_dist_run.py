@@ -7,7 +7,7 @@ are split by contact owner (the rank of the candidate body, PT-Scotch partition)
 ranks, in colour order, with exact sums in the stopping tests. So history.csv of N = 2 and 3 ranks must be the
 serial file, byte for byte: a dry wall, a wall with mixed-mode cohesive joints, a 3D wall, and a brick on its
 foundation on 3 ranks (one rank owns no body). The exit status is the serial one on every rank (a solver policy
-stop: 1; invalid input: 2). A run killed by SIGKILL on one rank and resumed (--resume) on 2 ranks gives the
+stop: 1; invalid input: 2), and a run check that stops the run names the serial contact on 3 ranks. A run killed by SIGKILL on one rank and resumed (--resume) on 2 ranks gives the
 uninterrupted serial history, byte for byte, and so does its checkpoint (one piece per rank) resumed on one process.
 
 One-line bugs these catch (checked): scattering the impulses after the sweep instead of after each colour (the
@@ -34,7 +34,7 @@ import dist_cases  # noqa: E402
 pytestmark = pytest.mark.skipif(shutil.which("mpirun") is None, reason="no mpirun")
 
 DRIVER = os.path.join(os.path.dirname(__file__), "dist_cases.py")
-SERIAL = ("dry", "mixed", "wall3d", "one_brick", "fail", "bad", "long", "newton")
+SERIAL = ("dry", "mixed", "wall3d", "one_brick", "fail", "bad", "long", "newton", "guard")
 
 
 def _mpirun(n, d, *names, wait=True):
@@ -53,7 +53,7 @@ def runs(tmp_path_factory):
     dist_cases.write_cases(d, dist_cases.CASES)
     serial = {n: cli.main(["run", str(d / f"{n}.toml"), "--out", str(d / f"{n}.1"), "--quiet"]) for n in SERIAL}
     p2 = _mpirun(2, d, "dry", "mixed", "wall3d", "fail", "bad", "newton")
-    p3 = _mpirun(3, d, "dry", "one_brick")
+    p3 = _mpirun(3, d, "dry", "one_brick", "guard")
     logs = {2: p2.stdout + p2.stderr, 3: p3.stdout + p3.stderr}
     codes = {}
     for n in (2, 3):
@@ -130,6 +130,18 @@ def test_exit_status_is_the_same_on_every_rank(runs):
     assert codes[2]["fail"] == [1, 1] and codes[2]["bad"] == [2, 2]
     assert json.loads((d / "fail.2" / "summary.json").read_text())["exit_status"] == 1
     assert (d / "dry.2" / "paraview" / "blocks.pvd").exists()
+
+
+def test_a_run_check_stops_every_rank_naming_the_serial_contact(runs):
+    """The penetration check on 3 ranks ([checks] max_penetration below the first step's penetrations): each rank
+    checks the rows of its own contacts and the ranks agree on the contact to name (runner._Guards._agree), the one
+    one process names (the worst ratio of penetration to bound, the first among equals). Expectation: the serial
+    run's stop message (contact number, bodies, depth, bound) and exit status 1 on every rank."""
+    d, serial, codes, logs = runs
+    assert serial["guard"] == 1 and codes[3]["guard"] == [1, 1, 1]
+    one, three = (json.loads((d / f"guard.{n}" / "summary.json").read_text())["status"] for n in (1, 3))
+    assert "penetration" in one and "at contact" in one
+    assert three.replace(str(d / "guard.3"), "OUT") == one.replace(str(d / "guard.1"), "OUT")
 
 
 def _wait_for_pieces(p, out, n):
