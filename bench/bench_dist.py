@@ -12,10 +12,12 @@ Rank 0 prints one markdown row per wall: ranks, bricks, contacts, colours, conta
 timer / sweeps), of which in the per-colour exchanges (max over ranks), bytes sent / received per sweep per rank
 (max), messages per sweep per rank (max), peak RSS per rank [MB] (max), the blocks of W held per rank (max: each
 rank assembles the rows of its own contacts), and the sha1 of the floor's reaction and
-the sweep counts of the timed steps (equal sha1 on any N: the same iterates).
+the sweep counts of the timed steps (equal sha1 on any N: the same iterates); then a line with the resident memory
+per rank after the steps (min–max: what the run holds, where the peak may be the set-up's).
 
-With --checkpoint DIR, the state after the steps is also written as a checkpoint, as one file by rank 0 and as one
-piece per rank (best of 3 each; the sizes of the file and of the pieces).
+With --checkpoint DIR, the state after the steps is also written as a checkpoint, one piece per rank (best of 3; the
+sizes of the pieces). (Until the contact step held its own contacts' rows only, it was also written as one file by
+rank 0, the layout before the pieces: rank 0 no longer holds the whole state.)
 
 Usage: mpirun -n N .venv/bin/python bench/bench_dist.py [n_bricks ...] [--steps S] [--warm W] [--max-sweeps K]
                                                         [--checkpoint DIR]
@@ -51,35 +53,34 @@ velocity_reset = true
 """
 
 
+def rss_now() -> float:
+    """This process's resident memory now [MB] (VmRSS of /proc/self/status; the peak is ru_maxrss)."""
+    with open("/proc/self/status") as f:
+        return next(int(line.split()[1]) for line in f if line.startswith("VmRSS:")) / 1024
+
+
 def checkpoint_times(sim, model, comm, directory, repeat=3):
-    """After the steps: the run's checkpoint (Simulation and contact step state) written `repeat` times as one file
-    by rank 0 (output/checkpoint.write_checkpoint, the layout before the pieces) and as one piece per rank
-    (distributed/checkpoint.write_pieces). Returns (best seconds of the one file, its MB, best seconds of the pieces
-    (the slowest rank), MB of the largest and the smallest piece)."""
+    """After the steps: the run's checkpoint (Simulation and contact step state) written `repeat` times as one piece
+    per rank (distributed/checkpoint.write_pieces). Returns (best seconds (the slowest rank), MB of the largest and
+    the smallest piece)."""
     from fem_blocks.contact.step import ContactStep
     from fem_blocks.distributed.checkpoint import write_pieces
     from fem_blocks.dynamics import body_of_key
-    from fem_blocks.output.checkpoint import NAME, piece_names, write_checkpoint
+    from fem_blocks.output.checkpoint import piece_names
     arrays = {**sim.export_state(), **model.contact.export_state()}
     owner = model.contact.body_owner if model.contact.body_owner is not None else np.zeros(len(model.bodies), int)
-    one, many = os.path.join(directory, "one"), os.path.join(directory, "pieces")
+    many = os.path.join(directory, "pieces")
     if comm.rank == 0:
-        os.makedirs(one, exist_ok=True)
         os.makedirs(many, exist_ok=True)
-    t_one, t_many = [], []
+    t_many = []
     for _ in range(repeat):
         comm.Barrier()
-        c = time.perf_counter()
-        if comm.rank == 0:
-            write_checkpoint(one, arrays)
-        comm.Barrier()
-        t_one.append(time.perf_counter() - c)
         c = time.perf_counter()
         write_pieces(comm, many, arrays, owner, body_of_key, ContactStep.per_contact_keys(arrays))
         comm.Barrier()
         t_many.append(time.perf_counter() - c)
     sizes = [os.path.getsize(os.path.join(many, piece_names(p)[0])) / 1e6 for p in range(comm.size)]
-    return min(t_one), os.path.getsize(os.path.join(one, NAME)) / 1e6, min(t_many), max(sizes), min(sizes)
+    return min(t_many), max(sizes), min(sizes)
 
 
 def run(n_bricks, comm, steps, warm, show=True, max_sweeps=1000, ck_dir=None):
@@ -112,7 +113,8 @@ def run(n_bricks, comm, steps, warm, show=True, max_sweeps=1000, ck_dir=None):
     dist = col.dist
     rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     mine = (col.n_owned, t_setup, t_steps, t_nlgs, 8 * dist.entries_sent if dist else 0,
-            8 * dist.entries_recv if dist else 0, dist.messages if dist else 0, rss, cs.Wdel.blocks.shape[0])
+            8 * dist.entries_recv if dist else 0, dist.messages if dist else 0, rss, cs.Wdel.blocks.shape[0],
+            rss_now())
     rows = np.array(comm.gather(mine), dtype=float) if comm.size > 1 else np.array([mine], dtype=float)
     if comm.rank == 0 and show:
         nsw = sum(sweeps)
@@ -122,11 +124,13 @@ def run(n_bricks, comm, steps, warm, show=True, max_sweeps=1000, ck_dir=None):
               f"{1e3 * rows[:, 2].max() / steps:.1f} | {nsw / steps:.1f} | {1e3 * rows[:, 3].max() / max(nsw, 1):.3f} | "
               f"{rows[:, 4].max():.0f} / {rows[:, 5].max():.0f} | {rows[:, 6].max():.0f} | {rows[:, 7].max():.0f} | "
               f"{rows[:, 8].max():.0f} | {h} |", flush=True)
+        print(f"\nRSS after the steps per rank: {rows[:, 9].min():.0f}–{rows[:, 9].max():.0f} MB (the peak above may "
+              "be the set-up's)", flush=True)
     if ck_dir is not None:
-        t1, mb1, tn, mbmax, mbmin = checkpoint_times(sim, model, comm, ck_dir)
+        tn, mbmax, mbmin = checkpoint_times(sim, model, comm, ck_dir)
         if comm.rank == 0:
-            print(f"\ncheckpoint of the {n_bricks}-brick wall on {comm.size} ranks: one file by rank 0 {t1:.3f} s "
-                  f"({mb1:.1f} MB); one piece per rank {tn:.3f} s (pieces {mbmin:.1f}–{mbmax:.1f} MB)\n", flush=True)
+            print(f"\ncheckpoint of the {n_bricks}-brick wall on {comm.size} ranks: one piece per rank {tn:.3f} s "
+                  f"(pieces {mbmin:.1f}–{mbmax:.1f} MB)\n", flush=True)
     col.destroy()
 
 
@@ -138,7 +142,7 @@ if __name__ == "__main__":
     ap.add_argument("--warm", type=int, default=2)
     ap.add_argument("--max-sweeps", type=int, default=1000, help="[contact] max_sweeps of the wall's steps")
     ap.add_argument("--checkpoint", metavar="DIR", help="also time the checkpoint after the steps, written in DIR "
-                    "as one file by rank 0 and as one piece per rank")
+                    "as one piece per rank")
     a = ap.parse_args()
     comm = MPI.COMM_WORLD
     if comm.rank == 0:
