@@ -830,9 +830,10 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
     comm: an mpi4py communicator of N > 1 ranks running this same call (`mpirun -n N fem-blocks run`). Every rank
     builds the model and steps it; the contact solve is shared (contact/step.py ContactStep.use_comm: the
     Gauss–Seidel sweeps split by contact owner, in colour order); every rank writes the ParaView piece of its block
-    of bodies (blocks_<frame>_p<rank>.vtu; output/paraview.py) and its piece of each checkpoint (its bodies and
-    contacts: distributed/checkpoint.py), rank 0 the .pvtu/.pvd series and every other output; every rank returns
-    the same summary (and raises the same RunStopped).
+    of bodies (blocks_<frame>_p<rank>.vtu; output/paraview.py) and of its own contacts (contacts_<frame>_p<rank>.vtu;
+    output/contacts.py) and its piece of each checkpoint (its bodies and contacts: distributed/checkpoint.py), rank 0
+    the .pvtu/.pvd series and every other output; every rank returns the same summary (and raises the same
+    RunStopped).
 
     resume=True continues from the newest valid checkpoint in `out_dir` (refused if the case file or its meshes
     changed since, unless force=True); history.csv and the .pvd series are cut back to the checkpoint and
@@ -901,10 +902,12 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
     # (N ranks: every rank writes the piece of its block of bodies, rank 0 also the .pvtu and .pvd; paraview.py)
     pv = Bodies(sim, pdir, stress=case.output["stress"], append=resume, keep_until_time=t_resume, comm=comm) \
         if case.output["paraview"] else None
+    # (N ranks: every rank writes the piece of its contacts, rank 0 the .pvtu and .pvd, and the joints from the
+    # record of every contact: write_contacts)
+    jw = _joints_writer(case, model, pdir, resume, t_resume) if root else None
     pc = ContactsWriter(pdir, case.dimension, locate=model.contact.contact_points if case.dimension == 2 else None,
-                        append=resume, keep_until_time=t_resume, joints=_joints_writer(case, model, pdir, resume,
-                                                                                       t_resume)) \
-        if case.output["paraview"] and model.contact is not None and root else None
+                        append=resume, keep_until_time=t_resume, joints=jw if comm is None else None, comm=comm) \
+        if case.output["paraview"] and model.contact is not None else None
     ckpt_every = case.output.get("checkpoint_every", default_of(OutputSpec, "checkpoint_every"))
     cv = case.output.get("curve")
     curve_body = model.bodies[model.index(cv["body"])] if cv else None
@@ -939,11 +942,16 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
     info = sim.info()
 
     def write_contacts():
-        """A frame of contacts.pvd (rank 0) from the record of every contact (N ranks: gathered, every rank)."""
-        if case.output["paraview"] and model.contact is not None:
+        """A frame of contacts.pvd (N ranks: each rank the piece of its contacts) and, with `[output]
+        joints_paraview`, of joints.pvd (N ranks: rank 0, from the record of every contact, gathered by every
+        rank)."""
+        if pc is None:
+            return
+        if comm is not None and case.output.get("joints_paraview"):
             rec = None if sim.last_contact is None else sim.last_contact.whole()
-            if pc:
-                pc.write(sim.time, rec)
+            if jw is not None:
+                jw.write(sim.time, rec)
+        pc.write(sim.time, sim.last_contact)
 
     if ck is None:
         hist.write(history_row(model, info, 0, sim, rotations=rot_ids, joints=joint_ids, gauges=gauge_ids))

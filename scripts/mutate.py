@@ -253,6 +253,10 @@ MUTATIONS = [
              "every rank's", "fem_blocks/runner.py",
              "        return min(found, key=lambda x: (x[0], x[1])) if found else None\n",
              "        return found[0] if found else None\n", ("tests/test_dist_run.py",)),
+    Mutation("contacts_pieces_whole", "N ranks: every rank writes the ParaView piece of every contact, not of its own",
+             "fem_blocks/runner.py", "        pc.write(sim.time, sim.last_contact)\n",
+             "        pc.write(sim.time, None if sim.last_contact is None else sim.last_contact.whole())\n",
+             ("tests/test_dist_run.py",)),
 ]
 
 IGNORE = shutil.ignore_patterns(".git", "__pycache__", ".venv", "*.pyc", ".pytest_cache", "out", "*.egg-info")

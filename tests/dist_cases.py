@@ -118,6 +118,8 @@ CASES = {
     "newton": wall("newton").replace('order = "colours"', 'solver = "newton"\ncriterion = "residual"')
                             .replace("tol = 1e-05", "tol = 1e-08"),  # the Newton's linear solves shared by the ranks
     "guard": wall("guard").replace("[contact]", "[checks]\nmax_penetration = 1e-9\n[contact]", 1),  # a run check stops
+    "joints": wall("joints", joint=MIXED, paraview="true").replace(  # the joints' outputs from the gathered record
+        "[output]\n", '[output]\njoints = [["brick0", "brick2"], ["brick1", "brick3"]]\njoints_paraview = true\n', 1),
 }
 
 

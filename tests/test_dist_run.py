@@ -7,8 +7,10 @@ are split by contact owner (the rank of the candidate body, PT-Scotch partition)
 ranks, in colour order, with exact sums in the stopping tests. So history.csv of N = 2 and 3 ranks must be the
 serial file, byte for byte: a dry wall, a wall with mixed-mode cohesive joints, a 3D wall, and a brick on its
 foundation on 3 ranks (one rank owns no body). The exit status is the serial one on every rank (a solver policy
-stop: 1; invalid input: 2), and a run check that stops the run names the serial contact on 3 ranks. A run killed by SIGKILL on one rank and resumed (--resume) on 2 ranks gives the
-uninterrupted serial history, byte for byte, and so does its checkpoint (one piece per rank) resumed on one process.
+stop: 1; invalid input: 2), and a run check that stops the run names the serial contact on 3 ranks. A run killed
+by SIGKILL on one rank and resumed (--resume) on 2 ranks gives the uninterrupted serial history, byte for byte, and so
+does its checkpoint (one piece per rank) resumed on one process. The ParaView pieces of the bodies and of the
+contacts are the serial frames'.
 
 One-line bugs these catch (checked): scattering the impulses after the sweep instead of after each colour (the
 ranks read stale interface impulses: histories differ on 2 ranks); summing the change per rank without the exact
@@ -34,7 +36,7 @@ import dist_cases  # noqa: E402
 pytestmark = pytest.mark.skipif(shutil.which("mpirun") is None, reason="no mpirun")
 
 DRIVER = os.path.join(os.path.dirname(__file__), "dist_cases.py")
-SERIAL = ("dry", "mixed", "wall3d", "one_brick", "fail", "bad", "long", "newton", "guard")
+SERIAL = ("dry", "mixed", "wall3d", "one_brick", "fail", "bad", "long", "newton", "guard", "joints")
 
 
 def _mpirun(n, d, *names, wait=True):
@@ -52,7 +54,7 @@ def runs(tmp_path_factory):
     d = tmp_path_factory.mktemp("dist")
     dist_cases.write_cases(d, dist_cases.CASES)
     serial = {n: cli.main(["run", str(d / f"{n}.toml"), "--out", str(d / f"{n}.1"), "--quiet"]) for n in SERIAL}
-    p2 = _mpirun(2, d, "dry", "mixed", "wall3d", "fail", "bad", "newton")
+    p2 = _mpirun(2, d, "dry", "mixed", "wall3d", "fail", "bad", "newton", "joints")
     p3 = _mpirun(3, d, "dry", "one_brick", "guard")
     logs = {2: p2.stdout + p2.stderr, 3: p3.stdout + p3.stderr}
     codes = {}
@@ -67,7 +69,8 @@ def _history(d, name, n):
     return (d / f"{name}.{n}" / "history.csv").read_bytes()
 
 
-@pytest.mark.parametrize("n,name", [(2, "dry"), (2, "mixed"), (2, "wall3d"), (3, "dry"), (3, "one_brick")])
+@pytest.mark.parametrize("n,name", [(2, "dry"), (2, "mixed"), (2, "wall3d"), (3, "dry"), (3, "one_brick"),
+                                    (2, "joints")])
 def test_history_on_n_ranks_is_the_serial_colour_order_history_bitwise(runs, n, name):
     d, serial, codes, logs = runs
     assert codes[n][name] == [serial[name]] * n, logs[n][-3000:]
@@ -294,6 +297,65 @@ def test_paraview_pieces_per_rank_are_the_serial_grid(runs, n, name):
     assert codes[n][name] == [serial[name]] * n, logs[n][-3000:]
     assert not list((d / f"{name}.1" / "paraview").glob("*.pvtu"))  # one process: the serial files
     _check_pieces(d, name, n)
+
+def _contact_rows(path):
+    """The contacts of a contacts .vtu as rows of floats, each a contact's point then its point arrays (by name),
+    sorted (a piece holds a rank's own contacts; the order of the rows is not compared), and the arrays' names."""
+    import xml.etree.ElementTree as ET
+    if ET.parse(path).getroot().find("UnstructuredGrid/Piece").get("NumberOfPoints") == "0":
+        return np.zeros((0, 0)), []
+    pts, _, pdat, _ = _read_vtu(path)
+    n = len(pts)
+    rows = np.hstack([pts.reshape(n, -1)] + [np.asarray(pdat[k], dtype=float).reshape(n, -1) for k in sorted(pdat)])
+    return rows[np.lexsort(rows.T[::-1])], sorted(pdat)
+
+
+@pytest.mark.parametrize("n,name", [(2, "dry"), (3, "dry"), (2, "wall3d")])
+def test_contact_pieces_per_rank_are_the_serial_contacts(runs, n, name):
+    """On N ranks contacts.pvd lists one .pvtu per frame at the serial run's times; each rank writes the piece of its
+    own contacts (its record's rows), the ranks with no contact none (a frame without contacts: rank 0's empty piece);
+    the pieces of a frame hold, contact by contact, the serial frame's points and point arrays bitwise, each contact
+    once; VTK's parallel reader reads every contact. One-line bugs this catches (checked): every rank writing the
+    rows of every contact (each contact N times)."""
+    import xml.etree.ElementTree as ET
+    import vtk
+    d, serial, codes, logs = runs
+    ser, par = d / f"{name}.1" / "paraview", d / f"{name}.{n}" / "paraview"
+    fs, fp = _frames(ser / "contacts.pvd"), _frames(par / "contacts.pvd")
+    assert [t for t, _ in fp] == [t for t, _ in fs] and len(fs) >= 2
+    shared = 0
+    for (_, vtu), (_, pvtu) in zip(fs, fp):
+        assert pvtu.endswith(".pvtu")
+        sources = [p.get("Source") for p in ET.parse(par / pvtu).getroot().find("PUnstructuredGrid").findall("Piece")]
+        whole, names = _contact_rows(ser / vtu)
+        parts = [_contact_rows(par / s) for s in sources]
+        if len(whole) == 0:
+            assert sources == [pvtu[:-5] + "_p0.vtu"] and len(parts[0][0]) == 0
+            continue
+        assert all(nm == names for _, nm in parts) and len(parts) >= 2  # the contacts are shared among ranks
+        shared += 1
+        got = np.vstack([a for a, _ in parts])
+        assert np.array_equal(got[np.lexsort(got.T[::-1])], whole), pvtu
+        reader = vtk.vtkXMLPUnstructuredGridReader()  # ParaView's reader of .pvtu files
+        reader.SetFileName(str(par / pvtu))
+        reader.Update()
+        assert reader.GetErrorCode() == 0 and reader.GetOutput().GetNumberOfPoints() == len(whole)
+    assert shared >= 1
+
+
+def test_joint_outputs_on_2_ranks_are_the_serial_files(runs):
+    """`[output] joints` and `joints_paraview` on 2 ranks: the joints' resultants come from the record of every
+    contact, gathered by every rank (ContactResult.whole()), and rank 0 writes joints.pvd. Expectation: the serial
+    run's joints.pvd and every frame's .vtu, byte for byte (the history's joint columns: the bitwise history test)."""
+    d, serial, codes, logs = runs
+    assert codes[2]["joints"] == [serial["joints"]] * 2, logs[2][-3000:]
+    ser, par = d / "joints.1" / "paraview", d / "joints.2" / "paraview"
+    frames = _frames(ser / "joints.pvd")
+    assert len(frames) >= 2 and _frames(par / "joints.pvd") == frames
+    for _, f in frames:
+        assert (par / f).read_bytes() == (ser / f).read_bytes(), f
+    assert "brick0|brick2.N" in (d / "joints.2" / "history.csv").read_text().splitlines()[0]
+
 
 def test_sigterm_to_one_rank_stops_every_rank_at_the_same_step(runs):
     """SIGTERM reaches one rank only: the ranks decide together, once per step, so every rank finishes the same

@@ -765,8 +765,9 @@ class ContactStep:
         tm["correction"] += perf_counter() - c3
         if not res.converged:
             self.n_unconverged += 1
-        stats = dict(contacts=nc, active=int(counts[0]), slip=int(counts[1]), sweeps=int(res.sweeps), change=float(res.change), residual=float(res.residual),
-                     converged=bool(res.converged), solver=res.solver, message=str(res.message))
+        stats = dict(contacts=nc, active=int(counts[0]), slip=int(counts[1]), sweeps=int(res.sweeps),
+                     change=float(res.change), residual=float(res.residual), converged=bool(res.converged),
+                     solver=res.solver, message=str(res.message))
         if not res.converged and self.opts.on_nonconvergence == "fail":
             from ..errors import ConvergenceError
             raise ConvergenceError(f"step {sim.step_count + 1} (t = {t1:.6g} s): {stats['solver']} did not "

@@ -7,7 +7,8 @@ interface (interface/law id), area (tributary area, m²), and the interface-law 
 joints), opening u_N and slip u_T (jumps since the reference state, m), dissipated (J). One writer for 2D and 3D
 (`ContactsWriter(directory, dim)`, `.write(time, result)` with a contact.result.ContactResult); 3D adds the
 second tangent s and r_local. With `joints` (output.joints.JointsWriter, `[output] joints_paraview`) each frame
-also writes the joint resultants to `joints.pvd`.""" 
+also writes the joint resultants to `joints.pvd`. On N > 1 MPI ranks (`comm`) each rank writes the piece of its
+record's rows (its own contacts: ContactResult.rows) and rank 0 the .pvtu of each frame (output/pvd.py)."""
 from __future__ import annotations
 
 import numpy as np
@@ -39,20 +40,23 @@ class ContactsWriter(SeriesWriter):
     status (-1 when the record has none), interface, area and, with a law state, law_state_fields."""
 
     def __init__(self, directory: str, dim: int, locate=None, append: bool = False, basename: str = "contacts",
-                 keep_until_time: float | None = None, joints=None):
+                 keep_until_time: float | None = None, joints=None, comm=None):
         if dim not in (2, 3):
             from ..errors import InputError
             raise InputError(f"ContactsWriter: dim = {dim!r}: expected 2 or 3")
         self.dim, self.locate = dim, locate
         self.joints = joints  # output.joints.JointsWriter or None: the joint resultants, a frame with each frame
-        super().__init__(directory, basename, append, keep_until_time)
+        super().__init__(directory, basename, append, keep_until_time, comm=comm)
 
     def arrays(self, result):
-        """(points (nc, dim), point data) of `result`; (empty, {}) without contacts."""
+        """(points (nc, dim), point data) of the rows of `result` (every contact's, or a rank's: `result.rows`);
+        (empty, {}) without contacts."""
         d = self.dim
-        if result is None or not result.has_contacts():
+        rows = None if result is None else result.rows
+        if result is None or result.r is None or result.n_contacts == 0 or \
+                len(result.r) != (result.n_contacts if rows is None else len(rows)) or len(result.r) == 0:
             return np.zeros((0, d)), {}
-        cs = result.cs
+        cs = result.cs if rows is None else result.cs.subset(rows)
         nc = len(cs.gap)
         x = np.asarray(cs.point if self.locate is None else self.locate(cs), dtype=float).reshape(nc, d)
         r = np.asarray(result.r, dtype=float).reshape(nc, d)
@@ -75,7 +79,15 @@ class ContactsWriter(SeriesWriter):
         return x, data
 
     def write(self, time: float, result) -> str:
+        """One frame of `result` (N ranks: every rank, each its record's rows; a rank without contacts writes no
+        piece). The joints (`joints`, one process) take the record of every contact."""
         x, data = self.arrays(result)
         if self.joints is not None:
             self.joints.write(time, result)
-        return self.write_frame(time, x, [("vertex", np.arange(len(x)))], point_data=data)
+        if self.comm is None:
+            return self.write_frame(time, x, [("vertex", np.arange(len(x)))], point_data=data)
+        from mpi4py import MPI
+        anyone = self.comm.allreduce(len(x), op=MPI.MAX) > 0
+        if len(x) or (not anyone and self.comm.Get_rank() == 0):  # (a frame without contacts: rank 0's empty piece)
+            return self.write_frame(time, x, [("vertex", np.arange(len(x)))], point_data=data)
+        return self.write_frame(time, None, None)
