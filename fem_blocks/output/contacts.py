@@ -53,8 +53,8 @@ class ContactsWriter(SeriesWriter):
         (empty, {}) without contacts."""
         d = self.dim
         rows = None if result is None else result.rows
-        if result is None or result.r is None or result.n_contacts == 0 or \
-                len(result.r) != (result.n_contacts if rows is None else len(rows)) or len(result.r) == 0:
+        if result is None or result.r is None or len(result.r) == 0 or \
+                len(result.r) != (result.n_contacts if rows is None else len(rows)):
             return np.zeros((0, d)), {}
         cs = result.cs if rows is None else result.cs.subset(rows)
         nc = len(cs.gap)
