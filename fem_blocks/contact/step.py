@@ -215,15 +215,19 @@ class ContactStep:
         the same.) Each contact's values are then computed, solved and committed by its owner alone."""
         if self._local is None:
             return
-        n, own = len(self.cs.gap), self._local.own
         for name in self.ROWS:
-            a = getattr(self, name, None)
-            if a is None or len(a) == own.size:
-                continue
-            if len(a) != n:
-                raise RuntimeError(f"contact step: {name} has {len(a)} rows, neither the {n} contacts nor the "
-                                   f"{own.size} of this rank")
-            setattr(self, name, np.ascontiguousarray(a[own]))
+            setattr(self, name, self._to_own(name, getattr(self, name, None)))
+
+    def _to_own(self, name: str, a):
+        """Per-contact rows `a` (named `name`) as those of this rank's own contacts: the rows of every contact cut,
+        the own rows (or None) as they are (N > 1 ranks in colour order, `_local` set)."""
+        n, own = len(self.cs.gap), self._local.own
+        if a is None or len(a) == own.size:
+            return a
+        if len(a) != n:
+            raise RuntimeError(f"contact step: {name} has {len(a)} rows, neither the {n} contacts nor the "
+                               f"{own.size} of this rank")
+        return np.ascontiguousarray(a[own])
 
     def _whole(self, x: np.ndarray) -> np.ndarray:
         """Per-contact rows of the step's arrays (ROWS' layout) as the rows of every contact, in contact order, on
@@ -231,9 +235,10 @@ class ContactStep:
         return x if self._local is None else self._gather()(x)
 
     def _gather(self):
-        """N > 1 ranks in colour order: the gather of the own rows of the current contact set (`gather_rows` bound
-        to its layout: a record keeps the gather of its own contact set)."""
+        """N > 1 ranks in colour order: the gather of the own rows of the current contact set (distributed/sweep.py
+        `gather_rows` bound to its layout: a record keeps the gather of its own contact set)."""
         import functools
+        from ..distributed.sweep import gather_rows
         return functools.partial(gather_rows, self.comm, self._local.order, self._local.counts)
 
     def _record_rows(self) -> dict:
@@ -243,11 +248,13 @@ class ContactStep:
             return {}
         return dict(rows=self._local.own, gather=self._gather())
 
-    def _dissipated(self) -> float:
-        """Σ over every contact of the committed law state's S_DISS [J], in contact order (N > 1 ranks: the own rows
-        of every rank gathered, so the sum is one process's, bitwise)."""
+    def _totals(self, friction=None) -> list:
+        """[Σ S_DISS of the committed law states (+ Σ friction, the step's frictional work per contact, when given)]
+        over every contact, each summed in contact order [J] (N > 1 ranks: the own rows of every rank gathered side
+        by side, one Allgatherv, so the sums are one process's, bitwise)."""
         from ..laws import S_DISS
-        return float(np.ascontiguousarray(self._whole(np.ascontiguousarray(self.state[:, S_DISS]))).sum())
+        every = self._whole(np.column_stack([self.state[:, S_DISS]] + ([friction] if friction is not None else [])))
+        return [float(np.ascontiguousarray(every[:, k]).sum()) for k in range(every.shape[1])]
 
     def law_codes(self, cs) -> np.ndarray:
         """The law code of every contact of the current contact set `cs` (its interfaces' laws)."""
@@ -645,9 +652,9 @@ class ContactStep:
                                   and not bool(d["contact.W_dirty"]) else None)
         out = {k: np.array(d[OUT_PREFIX + k]) for k in OUT_FIELDS if OUT_PREFIX + k in d}
         if self._local is not None:  # (the record of a rank's own rows: a checkpoint's whole arrays cut to them)
-            out = {k: (x[self._local.own] if len(x) == len(self.cs.gap) else x) for k, x in out.items()}
+            out = {k: self._to_own(OUT_PREFIX + k, x) for k, x in out.items()}
         return ContactResult(self.dim, {}, cs=self.cs, P=self.P.copy(), law=self.law.copy(), state=self.state.copy(),
-                             friction_total=self.friction_total, dissipated=self._dissipated(),
+                             friction_total=self.friction_total, dissipated=self._totals()[0],
                              **self._record_rows(), **out)
 
     # ------------------------------------------------------------------ the step
@@ -753,9 +760,10 @@ class ContactStep:
         status[closed] = 1
         status[closed & (np.linalg.norm(P[:, 1:], axis=1) >= self.mu * P[:, 0] * (1 - 1e-9))
                & (np.linalg.norm(v[:, 1:], axis=1) > 1e-12)] = 2
-        # the totals over every contact, in contact order (N > 1 ranks in colour order: the own rows' dissipation
+        # the totals over every contact, in contact order (N > 1 ranks in colour order: the own rows' dissipations
         # gathered, one Allgatherv; the counts summed)
-        self.friction_total += float(np.ascontiguousarray(self._whole(friction)).sum())
+        dissipated, friction_step = self._totals(friction)
+        self.friction_total += friction_step
         counts = np.array([np.count_nonzero(status), np.count_nonzero(status == 2)], dtype=np.int64)
         if loc is not None:
             from mpi4py import MPI
@@ -777,24 +785,7 @@ class ContactStep:
         return ContactResult(d, stats, cs=cs, P=P.copy(), r=P / h, v=v, gt_end=h * th * v[:, 0] + (gbar - gs),
                              status=status, law=self.law.copy(), state=self.state.copy(), group_corr=gc,
                              rigid_corr=rc, rigid_impulse=ri, friction=friction, friction_total=self.friction_total,
-                             dissipated=self._dissipated(), **self._record_rows())
-
-
-def gather_rows(comm, order, counts, x: np.ndarray) -> np.ndarray:
-    """COLLECTIVE: the rows x (n_own, ...) of every rank's own contacts as the rows of every contact in contact order,
-    on every rank (one Allgatherv). order: every contact grouped by owner rank (each rank's own contacts increasing),
-    counts: the number each rank owns (_RankContacts)."""
-    from mpi4py import MPI
-    x = np.ascontiguousarray(x)
-    shape = x.shape[1:]
-    width = int(np.prod(shape, dtype=np.int64))
-    buf = np.empty((int(counts.sum()),) + shape, dtype=x.dtype)
-    displs = np.concatenate([[0], np.cumsum(counts)[:-1]])
-    mt = MPI.DOUBLE if x.dtype == np.float64 else MPI.INT64_T
-    comm.Allgatherv(x.ravel(), [buf.reshape(-1), counts * width, displs * width, mt])
-    out = np.empty_like(buf)
-    out[order] = buf
-    return out
+                             dissipated=dissipated, **self._record_rows())
 
 
 @dataclasses.dataclass

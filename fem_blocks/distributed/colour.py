@@ -259,7 +259,6 @@ class ColourSolver:
         self.r = self.dist.r  # owned then ghost impulses; the owned part is the PETSc vector's array
         counts = np.array(self.comm.allgather(self.owned.size), dtype=np.int64)
         self._counts = counts
-        self._displs = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
         self._ids = np.concatenate(self.comm.allgather(self.owned))  # gathered owned contacts, in rank order
 
     @property
@@ -281,15 +280,8 @@ class ColourSolver:
         rank (one Allgatherv)."""
         if self.comm is None:
             return x_own.reshape(-1, width).copy()
-        from mpi4py import MPI
-        n = self.n
-        buf = np.empty(n * width, dtype=x_own.dtype)
-        mt = MPI.DOUBLE if x_own.dtype == np.float64 else MPI.INT64_T
-        self.comm.Allgatherv(np.ascontiguousarray(x_own).ravel(),
-                             [buf, self._counts * width, self._displs * width, mt])
-        out = np.empty((n, width), dtype=x_own.dtype)
-        out[self._ids] = buf.reshape(-1, width)
-        return out
+        from .sweep import gather_rows
+        return gather_rows(self.comm, self._ids, self._counts, np.asarray(x_own).reshape(-1, width))
 
     def _max(self, x: float) -> float:
         if self.comm is None:

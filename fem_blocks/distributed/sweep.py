@@ -156,6 +156,23 @@ class DistSweep:
         self.gvec.destroy()
 
 
+def gather_rows(comm, order, counts, x: np.ndarray) -> np.ndarray:
+    """COLLECTIVE: the rows x (n_own, ...) of every rank's own contacts as the rows of every contact in contact order,
+    on every rank (one Allgatherv). order: every contact grouped by owner rank (rank 0's own contacts, then rank
+    1's, ..., each rank's in the order of its rows), counts: the number each rank owns."""
+    from mpi4py import MPI
+    x = np.ascontiguousarray(x)
+    shape = x.shape[1:]
+    width = int(np.prod(shape, dtype=np.int64))
+    buf = np.empty((int(counts.sum()),) + shape, dtype=x.dtype)
+    displs = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    mt = MPI.DOUBLE if x.dtype == np.float64 else MPI.INT64_T
+    comm.Allgatherv(x.ravel(), [buf.reshape(-1), counts * width, displs * width, mt])
+    out = np.empty_like(buf)
+    out[order] = buf
+    return out
+
+
 def ownership(n: int, size: int, kind: str = "blocks") -> np.ndarray:
     """Owner rank per contact: "blocks" contiguous blocks in contact order, "cyclic" contact a on rank a mod size,
     "skip0" contiguous blocks on ranks 1..size-1 and none on rank 0 (size >= 2); "ptscotch": see
