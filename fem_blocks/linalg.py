@@ -260,8 +260,9 @@ class Factor:
         n, k = b.shape
         if k == 0:
             return np.zeros((n, 0))
-        if k == 1:
-            return self.solve(b[:, 0])[:, None]
+        # every k through MatMatSolve, one column at a time inside: each column's x the same double whatever the
+        # other columns (a body's free velocity does not depend on the bodies solved beside it, dynamics.py); the
+        # vector solve above rounds otherwise
         B = PETSc.Mat().createDense((n, k), array=np.asfortranarray(b), comm=PETSc.COMM_SELF)
         X = PETSc.Mat().createDense((n, k), comm=PETSc.COMM_SELF)
         X.setUp()

@@ -28,6 +28,20 @@ def test_factor_solves(method, n):
     assert np.allclose(X[:, 0], F.solve(B[:, 0]), rtol=1e-12, atol=0)
 
 
+@pytest.mark.parametrize("n", [30, 900])
+def test_petsc_lu_solves_each_column_alone(n):
+    """PETSc's LU (the block types below SMALL_SYSTEM dofs): each column of a multi-column solve is the same double
+    for any set of columns beside it, one column included (a body's free velocity does not depend on the bodies
+    solved with it: docs/scaling.md "Sums over bodies"). Catches one column solved by the vector solve, which rounds
+    otherwise. (CHOLMOD's and MUMPS's multi-column solves do not have this property.)"""
+    F = Factor(spd(n), "petsc-lu")
+    B = np.random.default_rng(2).standard_normal((n, 7))
+    X = F.solve(B)
+    for cols in ([0], [6], [3, 1], [5, 0, 2], list(range(6, -1, -1))):
+        assert np.array_equal(F.solve(B[:, cols]), X[:, cols])
+    assert np.array_equal(F.solve(np.asfortranarray(B[:, [4]])), X[:, [4]])
+
+
 def nonsymmetric(n, seed=0):
     """A block-sparse non-symmetric matrix like Newton's J = D + E W (2x2 blocks, diagonally dominant)."""
     rng = np.random.default_rng(seed)
