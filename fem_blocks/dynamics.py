@@ -50,6 +50,16 @@ W_I is attributed to the driven dofs that move in the step, in proportion to |R_
 stored as `body.reaction_inertia` (0 on free dofs). With one moving driven dof, I_k = W_I / dq_k is exactly the
 part of R_k that the inertia forces produce through the step's displacement field (virtual work with dq as the
 virtual field): for a rigid block of mass m pushed from rest by dq in a step, I = m dq / h^2.
+
+Sums over bodies (the energies of `info`, the step's external work, driver work and W_I): each is
+
+    S = fsum over bodies b of s_b,
+
+s_b the body's term from its own arrays only (elementwise products, then its column of dofs added row by row,
+`_column_sums`; a rigid body's few dofs by np.dot) and the sum exact, rounded once (distributed/exact.py: math.fsum
+of the terms, bitwise). So S is the same double whatever the grouping of the bodies (block types, members' order)
+and, on N > 1 ranks with the bodies partitioned (the contact step's `body_partition`), whatever the partition: each
+rank adds the terms of its own bodies and one Allreduce of the exact accumulators gives every rank S.
 """
 from __future__ import annotations
 
@@ -59,9 +69,45 @@ import numpy as np
 
 from . import corotational
 from .bodies import DeformableBody, DeformableBody3D, RigidBody, RigidBody3D, check_step
+from .distributed.exact import exact_sums
 from .errors import InputError
 
 _BODY_KEY = "sim.body"  # a body's checkpoint entries: "sim.body<i>.<name>" (Simulation.export_state)
+
+
+def _column_sums(X: np.ndarray) -> np.ndarray:
+    """Σ_i X[i, j] for each column j (a body of a group), its rows added one by one in order: each column's sum is
+    the same double whatever the other columns (NumPy's reductions pick their order from the array's shape and
+    layout, so a body's sum would depend on the bodies beside it). The same additions two ways, for speed: a loop
+    over the rows for many columns, np.add.accumulate (sequential by definition) for a few."""
+    n, k = X.shape
+    if n == 0:
+        return np.zeros(k)
+    if k < 64:
+        return np.add.accumulate(X, axis=0)[-1]
+    out = X[0].copy()
+    for row in X[1:]:
+        out += row
+    return out
+
+
+def _cols(A: np.ndarray, c) -> np.ndarray:
+    """The columns c (the members of a group to add; None: all) of a group's (ndof, k) array, C-ordered (NumPy's
+    A[:, c] is Fortran-ordered: the products and sparse products after it would run strided)."""
+    return A if c is None else A.take(c, axis=1)
+
+
+def _joined(terms: list) -> np.ndarray:
+    """The per-body terms of a sum, as one array (empty: no term)."""
+    return np.concatenate([np.ravel(t) for t in terms]) if terms else np.zeros(0)
+
+
+def _dot_last(A: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """Σ_j A[..., j] x[..., j], the terms added in order of j (per body, as `_column_sums`)."""
+    out = np.zeros(np.broadcast_shapes(A.shape, x.shape)[:-1])
+    for j in range(A.shape[-1]):
+        out += A[..., j] * x[..., j]
+    return out
 
 
 def body_of_key(key: str) -> int | None:
@@ -327,14 +373,18 @@ class Simulation:
         if self.contact is not None:
             res = self.contact.solve(self, t0, t1)  # ContactResult: corrections W H (h r), impulses, ...
         gcorr = res.group_corr if res is not None else [None] * len(self.groups)
-        work = wdrv = winert = dmax = 0.0
-        for gr, Ucorr in zip(self.groups, gcorr):
+        cols, mine, comm = self._own_bodies()
+        work, wdrv, winert = [], [], []  # the own bodies' terms (module docstring, "Sums over bodies")
+        dmax = 0.0
+        for gr, Ucorr, c in zip(self.groups, gcorr, cols):
             Unew = gr.Ufree if Ucorr is None else gr.Ufree + Ucorr
             dQ = h * ((1 - th) * gr.U + th * Unew)
             dmax = max(dmax, float(np.max(np.abs(dQ), initial=0.0)))
+            dQc = _cols(dQ, c)
             if not self.static:
-                winert += float(np.sum(dQ * (gr.type.M @ (Unew - gr.U)))) / h
-            work += float(np.sum(gr.Ftheta * dQ) - np.sum(gr.Fg * dQ))
+                dU = _cols(Unew, c) - _cols(gr.U, c)
+                winert.append(_column_sums(dQc * (gr.type.M @ dU)) / h)
+            work.append(_column_sums(_cols(gr.Ftheta, c) * dQc) - _column_sums(_cols(gr.Fg, c) * dQc))
             if gr.framed:
                 self._frame_update(gr, Unew)
             else:
@@ -349,15 +399,17 @@ class Simulation:
             react = inert - b.Ftheta - cimp / h
             b.reaction = np.where(b.driven, react, 0.0)
             dq = h * ((1 - th) * b.u + th * unew)
-            winert += float(np.dot(dq, inert))
             size = np.abs(dq) * self._dof_lengths(b)  # translations [m], rotations x radius [m]
             dmax = max(dmax, float(size.max()))
             drv_moves.append((b, np.where(b.driven, dq, 0.0), size))
-            gforce = self._rigid_gravity_force(b)
-            work += float(np.dot(np.where(b.driven, 0.0, b.Ftheta - gforce), dq))
-            wdrv += float(np.dot(b.reaction, dq))
+            if mine[i]:
+                gforce = self._rigid_gravity_force(b)
+                winert.append([np.dot(dq, inert)])
+                work.append([np.dot(np.where(b.driven, 0.0, b.Ftheta - gforce), dq)])
+                wdrv.append([np.dot(b.reaction, dq)])
             self._move_rigid(b, dq, t1)
             b.u[:] = unew
+        work, wdrv, winert = exact_sums([_joined(x) for x in (work, wdrv, winert)], comm)
         self._attribute_inertia(winert, drv_moves, dmax)
         self.time, self.step_count = t1, self.step_count + 1
         self.external_work += work
@@ -429,29 +481,46 @@ class Simulation:
             self.last_contact = self.contact.restore_state(self, d)
 
     # -------------------------------------------------------------- diagnostics
+    def _own_bodies(self):
+        """The bodies whose terms this process adds in the sums over bodies (module docstring): (per group the
+        columns of its members to add (None: all), the mask (nb,) of the bodies to add, the communicator of the
+        sum). On N > 1 ranks with the bodies partitioned (the contact step's `body_partition()`), this rank's
+        bodies and the ranks' communicator; else every body and None."""
+        part = getattr(self.contact, "body_partition", lambda: None)()
+        if part is None:
+            return [None] * len(self.groups), np.ones(len(self.bodies), dtype=bool), None
+        comm, mine = part
+        return [np.flatnonzero(mine[gr.members]) for gr in self.groups], mine, comm
+
     def energies(self):
-        """(kinetic, elastic, gravity potential) = (1/2 u.Mu, 1/2 q.Kq, -F_g.q) summed over bodies; kinetic = 0 in a
-        static step (the model has no inertia; u = dq/h is a pseudo-velocity)."""
-        kin = ela = pot = 0.0
-        for gr in self.groups:
-            kin += 0.0 if self.static else 0.5 * float(np.sum(gr.U * (gr.type.M @ gr.U)))
-            ela += 0.5 * float(np.sum(gr.Q * (gr.type.K @ gr.Q)))
+        """(kinetic, elastic, gravity potential) = (1/2 u.Mu, 1/2 q.Kq, -F_g.q) summed over bodies, each an exact
+        sum of per-body terms (module docstring, "Sums over bodies"; collective on N > 1 ranks with the bodies
+        partitioned); kinetic = 0 in a static step (the model has no inertia; u = dq/h is a pseudo-velocity)."""
+        cols, mine, comm = self._own_bodies()
+        kin, ela, pot = [], [], []
+        for gr, c in zip(self.groups, cols):
+            U, Q = _cols(gr.U, c), _cols(gr.Q, c)
+            if not self.static:
+                kin.append(0.5 * _column_sums(U * (gr.type.M @ U)))
+            ela.append(0.5 * _column_sums(Q * (gr.type.K @ Q)))
             if gr.framed:  # -Σ m_a g·(x_a - x_a,ref), global: -g·(R Σ m (X + q) + m p - R0 Σ m X - m p0)
                 mp = gr.type.mass_properties
-                k = len(gr.members)
                 n, dd = mp.r0.shape
-                sY = np.einsum("n,kni->ki", mp.m, gr.type.mesh.points[None] + gr.Q.T.reshape(k, n, dd))
+                X = gr.type.mesh.points
+                sY = np.stack([_column_sums(mp.m[:, None] * (X[:, i, None] + Q[i::dd])) for i in range(dd)], axis=1)
                 sX = mp.mass * mp.Xbar
-                dx = (np.einsum("kij,kj->ki", gr.R, sY) + mp.mass * gr.pos
-                      - np.einsum("kij,j->ki", gr.R0, sX) - mp.mass * gr.pos0)
-                pot -= float(np.sum(dx @ self.g))
+                R, R0, pos, pos0 = (A if c is None else A[c] for A in (gr.R, gr.R0, gr.pos, gr.pos0))
+                dx = _dot_last(R, sY[:, None, :]) + mp.mass * pos - _dot_last(R0, sX) - mp.mass * pos0
+                pot.append(-_dot_last(dx, self.g))
             else:
-                pot -= float(np.sum(gr.Fg * gr.Q))
+                pot.append(-_column_sums(_cols(gr.Fg, c) * Q))
         for i in self.rigid:
-            b = self.bodies[i]
-            kin += 0.0 if self.static else 0.5 * float(np.dot(b.u, self._rigid_mass_times(b, b.u)))
-            pot -= float(np.dot(self._rigid_gravity_force(b), b.q))
-        return kin, ela, pot
+            if mine[i]:
+                b = self.bodies[i]
+                if not self.static:
+                    kin.append([0.5 * np.dot(b.u, self._rigid_mass_times(b, b.u))])
+                pot.append([-np.dot(self._rigid_gravity_force(b), b.q)])
+        return tuple(exact_sums([_joined(x) for x in (kin, ela, pot)], comm))
 
     def rotations(self) -> np.ndarray:
         """Rotation of every body since its placement, batched per group (`body.rotation()` of each deformable body,

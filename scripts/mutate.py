@@ -257,6 +257,21 @@ MUTATIONS = [
              "fem_blocks/runner.py", "        pc.write(sim.time, sim.last_contact)\n",
              "        pc.write(sim.time, None if sim.last_contact is None else sim.last_contact.whole())\n",
              ("tests/test_dist_run.py",)),
+    Mutation("body_sum_group_numpy", "sums over bodies: a group's kinetic energy summed by NumPy over its (ndof, k) array",
+             "fem_blocks/dynamics.py", "                kin.append(0.5 * _column_sums(U * (gr.type.M @ U)))\n",
+             "                kin.append([0.5 * float(np.sum(U * (gr.type.M @ U)))])\n", ("tests/test_body_sums.py",)),
+    Mutation("body_sum_every_body_per_rank", "N ranks: each rank adds every body's terms to the sums over bodies",
+             "fem_blocks/dynamics.py",
+             "        return [np.flatnonzero(mine[gr.members]) for gr in self.groups], mine, comm\n",
+             "        return [slice(None)] * len(self.groups), np.ones(len(self.bodies), dtype=bool), comm\n",
+             ("tests/test_body_sums.py", "tests/test_dist_run.py")),
+    Mutation("body_sum_rigid_every_rank", "N ranks: the rigid bodies' energies added on every rank",
+             "fem_blocks/dynamics.py", "            if mine[i]:\n                b = self.bodies[i]\n",
+             "            if True:\n                b = self.bodies[i]\n", ("tests/test_body_sums.py",)),
+    Mutation("factor_one_column_vector_solve", "one right-hand side solved by the vector solve, several by MatMatSolve",
+             "fem_blocks/linalg.py", "        if k == 0:\n            return np.zeros((n, 0))\n",
+             "        if k == 0:\n            return np.zeros((n, 0))\n        if k == 1:\n"
+             "            return self.solve(b[:, 0])[:, None]\n", ("tests/test_linalg.py", "tests/test_body_sums.py")),
 ]
 
 IGNORE = shutil.ignore_patterns(".git", "__pycache__", ".venv", "*.pyc", ".pytest_cache", "out", "*.egg-info")

@@ -170,6 +170,14 @@ class ContactStep:
             self.body_owner = partition_graph(*g, self.comm)
         return self.body_owner[self.cs.cand_body]
 
+    def body_partition(self):
+        """(comm, mine): on N > 1 ranks in colour order, once the bodies are partitioned (`_owner`, at the first step
+        or a restore), the ranks' communicator and the mask (nb,) of this rank's bodies; else None. The simulation
+        adds its own bodies' terms in its sums over bodies (dynamics.py)."""
+        if self._local is None:
+            return None
+        return self.comm, self.body_owner == self.comm.Get_rank()
+
     def _split(self) -> bool:
         """N > 1 ranks in colour order: each rank holds the G blocks of its contacts and their neighbours only, and
         the Delassus rows of its own contacts (docs/scaling.md "Phase B1")."""
