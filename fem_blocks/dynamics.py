@@ -56,7 +56,7 @@ Sums over bodies (the energies of `info`, the step's external work, driver work 
     S = fsum over bodies b of s_b,
 
 s_b the body's term from its own arrays only (elementwise products, then its column of dofs added row by row,
-`_column_sums`; a rigid body's few dofs by np.dot) and the sum exact, rounded once (distributed/exact.py: math.fsum
+`column_sums`; a rigid body's few dofs by np.dot) and the sum exact, rounded once (distributed/exact.py: math.fsum
 of the terms, bitwise). So S is the same double whatever the grouping of the bodies (block types, members' order)
 and, on N > 1 ranks with the bodies partitioned (the contact step's `body_partition`), whatever the partition: each
 rank adds the terms of its own bodies and one Allreduce of the exact accumulators gives every rank S.
@@ -75,7 +75,7 @@ from .errors import InputError
 _BODY_KEY = "sim.body"  # a body's checkpoint entries: "sim.body<i>.<name>" (Simulation.export_state)
 
 
-def _column_sums(X: np.ndarray) -> np.ndarray:
+def column_sums(X: np.ndarray) -> np.ndarray:
     """Σ_i X[i, j] for each column j (a body of a group), its rows added one by one in order: each column's sum is
     the same double whatever the other columns (NumPy's reductions pick their order from the array's shape and
     layout, so a body's sum would depend on the bodies beside it). The same additions two ways, for speed: a loop
@@ -102,8 +102,16 @@ def _joined(terms: list) -> np.ndarray:
     return np.concatenate([np.ravel(t) for t in terms]) if terms else np.zeros(0)
 
 
+def _largest(x: float, comm) -> float:
+    """The largest of every rank's x (comm None: x)."""
+    if comm is None:
+        return x
+    from mpi4py import MPI
+    return comm.allreduce(x, op=MPI.MAX)
+
+
 def _dot_last(A: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """Σ_j A[..., j] x[..., j], the terms added in order of j (per body, as `_column_sums`)."""
+    """Σ_j A[..., j] x[..., j], the terms added in order of j (per body, as `column_sums`)."""
     out = np.zeros(np.broadcast_shapes(A.shape, x.shape)[:-1])
     for j in range(A.shape[-1]):
         out += A[..., j] * x[..., j]
@@ -373,18 +381,18 @@ class Simulation:
         if self.contact is not None:
             res = self.contact.solve(self, t0, t1)  # ContactResult: corrections W H (h r), impulses, ...
         gcorr = res.group_corr if res is not None else [None] * len(self.groups)
-        cols, mine, comm = self._own_bodies()
+        cols, mine, comm = self.own_bodies()
         work, wdrv, winert = [], [], []  # the own bodies' terms (module docstring, "Sums over bodies")
         dmax = 0.0
         for gr, Ucorr, c in zip(self.groups, gcorr, cols):
             Unew = gr.Ufree if Ucorr is None else gr.Ufree + Ucorr
             dQ = h * ((1 - th) * gr.U + th * Unew)
-            dmax = max(dmax, float(np.max(np.abs(dQ), initial=0.0)))
             dQc = _cols(dQ, c)
+            dmax = max(dmax, float(np.max(np.abs(dQc), initial=0.0)))
             if not self.static:
                 dU = _cols(Unew, c) - _cols(gr.U, c)
-                winert.append(_column_sums(dQc * (gr.type.M @ dU)) / h)
-            work.append(_column_sums(_cols(gr.Ftheta, c) * dQc) - _column_sums(_cols(gr.Fg, c) * dQc))
+                winert.append(column_sums(dQc * (gr.type.M @ dU)) / h)
+            work.append(column_sums(_cols(gr.Ftheta, c) * dQc) - column_sums(_cols(gr.Fg, c) * dQc))
             if gr.framed:
                 self._frame_update(gr, Unew)
             else:
@@ -410,7 +418,7 @@ class Simulation:
             self._move_rigid(b, dq, t1)
             b.u[:] = unew
         work, wdrv, winert = exact_sums([_joined(x) for x in (work, wdrv, winert)], comm)
-        self._attribute_inertia(winert, drv_moves, dmax)
+        self._attribute_inertia(winert, drv_moves, _largest(dmax, comm))
         self.time, self.step_count = t1, self.step_count + 1
         self.external_work += work
         self.driver_work += wdrv
@@ -481,7 +489,7 @@ class Simulation:
             self.last_contact = self.contact.restore_state(self, d)
 
     # -------------------------------------------------------------- diagnostics
-    def _own_bodies(self):
+    def own_bodies(self):
         """The bodies whose terms this process adds in the sums over bodies (module docstring): (per group the
         columns of its members to add (None: all), the mask (nb,) of the bodies to add, the communicator of the
         sum). On N > 1 ranks with the bodies partitioned (the contact step's `body_partition()`), this rank's
@@ -496,24 +504,24 @@ class Simulation:
         """(kinetic, elastic, gravity potential) = (1/2 u.Mu, 1/2 q.Kq, -F_g.q) summed over bodies, each an exact
         sum of per-body terms (module docstring, "Sums over bodies"; collective on N > 1 ranks with the bodies
         partitioned); kinetic = 0 in a static step (the model has no inertia; u = dq/h is a pseudo-velocity)."""
-        cols, mine, comm = self._own_bodies()
+        cols, mine, comm = self.own_bodies()
         kin, ela, pot = [], [], []
         for gr, c in zip(self.groups, cols):
             U, Q = _cols(gr.U, c), _cols(gr.Q, c)
             if not self.static:
-                kin.append(0.5 * _column_sums(U * (gr.type.M @ U)))
-            ela.append(0.5 * _column_sums(Q * (gr.type.K @ Q)))
+                kin.append(0.5 * column_sums(U * (gr.type.M @ U)))
+            ela.append(0.5 * column_sums(Q * (gr.type.K @ Q)))
             if gr.framed:  # -Σ m_a g·(x_a - x_a,ref), global: -g·(R Σ m (X + q) + m p - R0 Σ m X - m p0)
                 mp = gr.type.mass_properties
                 n, dd = mp.r0.shape
                 X = gr.type.mesh.points
-                sY = np.stack([_column_sums(mp.m[:, None] * (X[:, i, None] + Q[i::dd])) for i in range(dd)], axis=1)
+                sY = np.stack([column_sums(mp.m[:, None] * (X[:, i, None] + Q[i::dd])) for i in range(dd)], axis=1)
                 sX = mp.mass * mp.Xbar
                 R, R0, pos, pos0 = (A if c is None else A[c] for A in (gr.R, gr.R0, gr.pos, gr.pos0))
                 dx = _dot_last(R, sY[:, None, :]) + mp.mass * pos - _dot_last(R0, sX) - mp.mass * pos0
                 pot.append(-_dot_last(dx, self.g))
             else:
-                pot.append(-_column_sums(_cols(gr.Fg, c) * Q))
+                pot.append(-column_sums(_cols(gr.Fg, c) * Q))
         for i in self.rigid:
             if mine[i]:
                 b = self.bodies[i]
@@ -544,15 +552,20 @@ class Simulation:
         return out
 
     def max_velocity(self) -> float:
+        """The largest speed [m/s] of a node of a deformable body and of a rigid body's centre (rigid bodies with a
+        free translation dof): over the own bodies (`own_bodies`), and on N > 1 ranks with the bodies partitioned the
+        largest of the ranks' (one Allreduce MAX; a maximum is exact, so one process's value)."""
+        cols, mine, comm = self.own_bodies()
         v, d = 0.0, self.dim
-        for gr in self.groups:
-            if gr.U.size:
-                v = max(v, float(np.max(np.linalg.norm(gr.U.reshape(-1, d, gr.U.shape[1]), axis=1))))
+        for gr, c in zip(self.groups, cols):
+            U = _cols(gr.U, c)
+            if U.size:
+                v = max(v, float(np.max(np.linalg.norm(U.reshape(-1, d, U.shape[1]), axis=1))))
         for i in self.rigid:
             b = self.bodies[i]
-            if not b.driven[:d].all():
+            if mine[i] and not b.driven[:d].all():
                 v = max(v, float(np.linalg.norm(b.u[:d])))
-        return v
+        return _largest(v, comm)
 
     def info(self, cinfo=None) -> StepInfo:
         kin, ela, pot = self.energies()

@@ -15,7 +15,7 @@ from . import __version__
 from .case import Case
 from .errors import InputError
 from .bodies import Driver
-from .dynamics import Simulation
+from .dynamics import Simulation, column_sums
 from .expand import expand
 from .model import Model, build_model
 from .output.history import HistoryWriter
@@ -470,11 +470,12 @@ class _Guards:
         self.max_ratio = 0.0  # largest (E - E_0 - W) / scale seen: > 0 means energy created (unconverged solves)
 
     def check(self, sim: Simulation, info, e0: tuple) -> str | None:
-        for i, b in enumerate(sim.bodies):
-            for name in ("q", "u"):
-                a = getattr(b, name)
-                if not np.all(np.isfinite(a)):
-                    return f"{'displacement' if name == 'q' else 'velocity'} of body {self.names[i]!r} is NaN/Inf"
+        _, mine, _ = sim.own_bodies()  # N ranks: this rank's bodies; the first NaN body of every rank's, agreed
+        bad = next(((i, name) for i in np.flatnonzero(mine) for name in ("q", "u")
+                    if not np.all(np.isfinite(getattr(sim.bodies[i], name)))), None)
+        a = self._agree(None if bad is None else (0.0, int(bad[0]), bad[1]))
+        if a is not None:
+            return f"{'displacement' if a[2] == 'q' else 'velocity'} of body {self.names[a[1]]!r} is NaN/Inf"
         c = sim.last_contact  # the record of the step (contact/result.py; N ranks: each rank its own contacts' rows)
         if c is not None and c.cs is not None and len(c.cs.gap) and c.P is not None:
             ids = np.arange(len(c.cs.gap)) if c.rows is None else c.rows  # the contacts of the record's rows
@@ -612,8 +613,11 @@ class _RotationWatch:
 
     Check, every step, on the blocks without a frame (all of them in a linear-kinematics run; in a co-rotational run
     the clamped ones, `_Group.framed` false): |θ| of each block, θ = BlockType.rotation_weights() q (body.rotation()
-    of a block without frame), one product A Q (einsum) per block type: 0.07-0.25 ms per step
-    for 10³ bricks, 0.5 ms for 10⁴ (docs/benchmarks.md "Small-rotation watch")."""
+    of a block without frame), each block's θ summed from its own column of q (dynamics.column_sums): 0.09 ms per
+    step for 10³ bricks, 0.66 ms for 10⁴ (2026-11-26; docs/benchmarks.md "Small-rotation watch" for the einsum it
+    replaced, 0.03 and 0.26 ms the same hour, whose sums depend on the blocks beside each one). N ranks: each rank
+    checks its own blocks (Simulation.own_bodies) and one all-gather agrees on the largest (the first among equals,
+    as one process) and the blocks beyond the bound."""
 
     def __init__(self, sim: Simulation, names, state: dict | None = None, bound: float = SMALL_ROTATION):
         self.names, self.bound = names, bound
@@ -626,19 +630,31 @@ class _RotationWatch:
         if not self.active:
             return None
         st = self.state
-        beyond = set(st["blocks_beyond"])
-        for gr in sim.groups:
-            if getattr(gr, "framed", False):
+        cols, _, comm = sim.own_bodies()  # N ranks: this rank's bodies, the ranks' findings agreed below
+        top, beyond = None, []  # (-|θ|, group, position in it) of the largest, first among equals; names beyond
+        for g, (gr, c) in enumerate(zip(sim.groups, cols)):
+            members = gr.members if c is None else gr.members[c]
+            if getattr(gr, "framed", False) or not members.size:
                 continue
-            # type frame (|θ| is frame-free); einsum, not BLAS: the threaded BLAS took 0.3-1.7 ms for 10³ bricks
-            # on this shared machine (spin-up and contention), einsum 0.06 ms
-            th = np.einsum("kd,dn->kn", gr.type.rotation_weights(), gr.Q)
-            mag = np.abs(th[0]) if th.shape[0] == 1 else np.sqrt((th * th).sum(axis=0))
+            # type frame (|θ| is frame-free); each body's θ from its own column (dynamics.column_sums: the same
+            # double whatever the bodies beside it, as the sums over bodies; einsum's order depends on them)
+            Q = gr.Q if c is None else gr.Q.take(c, axis=1)
+            th = [column_sums(w[:, None] * Q) for w in gr.type.rotation_weights()]
+            mag = np.abs(th[0]) if len(th) == 1 else np.sqrt(th[0] * th[0] + th[1] * th[1] + th[2] * th[2])
             j = int(np.argmax(mag))
-            if mag[j] > st["max_rad"]:
-                st.update(max_rad=float(mag[j]), max_block=self.names[gr.members[j]], max_time=float(sim.time))
-            beyond.update(self.names[i] for i in gr.members[mag > self.bound])
-        st["blocks_beyond"] = sorted(beyond)
+            pos = j if c is None else int(c[j])
+            if top is None or -mag[j] < top[0]:
+                top = (-float(mag[j]), g, pos)
+            beyond += [self.names[i] for i in members[mag > self.bound]]
+        if comm is not None:  # one all-gather: every rank's largest and blocks beyond
+            every = comm.allgather((top, beyond))
+            found = [t for t, _ in every if t is not None]
+            top = min(found) if found else None
+            beyond = [name for _, names in every for name in names]
+        if top is not None and -top[0] > st["max_rad"]:
+            st.update(max_rad=-top[0], max_block=self.names[sim.groups[top[1]].members[top[2]]],
+                      max_time=float(sim.time))
+        st["blocks_beyond"] = sorted(set(st["blocks_beyond"]).union(beyond))
         if st["first"] is not None or st["max_rad"] <= self.bound:
             return None
         st["first"] = dict(block=st["max_block"], time=float(sim.time), step=int(sim.step_count), rad=st["max_rad"])

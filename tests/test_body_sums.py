@@ -59,10 +59,10 @@ def sums(sim):
 
 
 @pytest.mark.parametrize("shape", [(30, 1), (375, 4), (54, 63), (54, 64), (7, 300), (1, 5), (0, 3)])
-def test_column_sums_add_each_column_in_row_order(shape):
-    """dynamics._column_sums: each column's sum is the rows added one by one in order (a Python loop of float
+def testcolumn_sums_add_each_column_in_row_order(shape):
+    """dynamics.column_sums: each column's sum is the rows added one by one in order (a Python loop of float
     additions here), for few and many columns (its two ways) and a column alone."""
-    from fem_blocks.dynamics import _column_sums
+    from fem_blocks.dynamics import column_sums
     X = np.random.default_rng(3).standard_normal(shape) * 10.0 ** np.random.default_rng(4).integers(-8, 8, shape)
     want = []
     for j in range(shape[1]):
@@ -70,7 +70,7 @@ def test_column_sums_add_each_column_in_row_order(shape):
         for i in range(shape[0]):
             s = s + float(X[i, j])
         want.append(s)
-    assert _column_sums(X).tolist() == want
+    assert column_sums(X).tolist() == want
 
 
 ORDERS = [list(range(8)), [7, 5, 3, 1, 6, 4, 2, 0], [2, 6, 0, 4, 1, 7, 3, 5]]
