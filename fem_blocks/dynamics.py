@@ -490,10 +490,11 @@ class Simulation:
 
     # -------------------------------------------------------------- diagnostics
     def own_bodies(self):
-        """The bodies whose terms this process adds in the sums over bodies (module docstring): (per group the
-        columns of its members to add (None: all), the mask (nb,) of the bodies to add, the communicator of the
-        sum). On N > 1 ranks with the bodies partitioned (the contact step's `body_partition()`), this rank's
-        bodies and the ranks' communicator; else every body and None."""
+        """The bodies this process reads in the sums over bodies (module docstring), the maxima of `step` and
+        `max_velocity` and the runner's per-step checks of the bodies: (per group the columns of its members
+        (None: all), the mask (nb,) of those bodies, the communicator that combines every rank's part). On N > 1
+        ranks with the bodies partitioned (the contact step's `body_partition()`), this rank's bodies and the
+        ranks' communicator; else every body and None."""
         part = getattr(self.contact, "body_partition", lambda: None)()
         if part is None:
             return [None] * len(self.groups), np.ones(len(self.bodies), dtype=bool), None
