@@ -83,7 +83,7 @@ def column_sums(X: np.ndarray) -> np.ndarray:
     n, k = X.shape
     if n == 0:
         return np.zeros(k)
-    if k < 64:
+    if k < 128:
         return np.add.accumulate(X, axis=0)[-1]
     out = X[0].copy()
     for row in X[1:]:
