@@ -59,7 +59,7 @@ def sums(sim):
 
 
 @pytest.mark.parametrize("shape", [(30, 1), (375, 4), (54, 127), (54, 128), (7, 300), (1, 5), (0, 3)])
-def testcolumn_sums_add_each_column_in_row_order(shape):
+def test_column_sums_add_each_column_in_row_order(shape):
     """dynamics.column_sums: each column's sum is the rows added one by one in order (a Python loop of float
     additions here), for few and many columns (its two ways) and a column alone."""
     from fem_blocks.dynamics import column_sums
