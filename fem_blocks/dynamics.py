@@ -91,9 +91,9 @@ def column_sums(X: np.ndarray) -> np.ndarray:
     return out
 
 
-def _cols(A: np.ndarray, c) -> np.ndarray:
-    """The columns c (the members of a group to add; None: all) of a group's (ndof, k) array, C-ordered (NumPy's
-    A[:, c] is Fortran-ordered: the products and sparse products after it would run strided)."""
+def columns(A: np.ndarray, c) -> np.ndarray:
+    """The columns c of a group's (ndof, k) array (its members' positions from `Simulation.own_bodies`; None: all),
+    C-ordered (NumPy's A[:, c] is Fortran-ordered: the products and sparse products after it would run strided)."""
     return A if c is None else A.take(c, axis=1)
 
 
@@ -387,12 +387,12 @@ class Simulation:
         for gr, Ucorr, c in zip(self.groups, gcorr, cols):
             Unew = gr.Ufree if Ucorr is None else gr.Ufree + Ucorr
             dQ = h * ((1 - th) * gr.U + th * Unew)
-            dQc = _cols(dQ, c)
+            dQc = columns(dQ, c)
             dmax = max(dmax, float(np.max(np.abs(dQc), initial=0.0)))
             if not self.static:
-                dU = _cols(Unew, c) - _cols(gr.U, c)
+                dU = columns(Unew, c) - columns(gr.U, c)
                 winert.append(column_sums(dQc * (gr.type.M @ dU)) / h)
-            work.append(column_sums(_cols(gr.Ftheta, c) * dQc) - column_sums(_cols(gr.Fg, c) * dQc))
+            work.append(column_sums(columns(gr.Ftheta, c) * dQc) - column_sums(columns(gr.Fg, c) * dQc))
             if gr.framed:
                 self._frame_update(gr, Unew)
             else:
@@ -508,7 +508,7 @@ class Simulation:
         cols, mine, comm = self.own_bodies()
         kin, ela, pot = [], [], []
         for gr, c in zip(self.groups, cols):
-            U, Q = _cols(gr.U, c), _cols(gr.Q, c)
+            U, Q = columns(gr.U, c), columns(gr.Q, c)
             if not self.static:
                 kin.append(0.5 * column_sums(U * (gr.type.M @ U)))
             ela.append(0.5 * column_sums(Q * (gr.type.K @ Q)))
@@ -522,7 +522,7 @@ class Simulation:
                 dx = _dot_last(R, sY[:, None, :]) + mp.mass * pos - _dot_last(R0, sX) - mp.mass * pos0
                 pot.append(-_dot_last(dx, self.g))
             else:
-                pot.append(-column_sums(_cols(gr.Fg, c) * Q))
+                pot.append(-column_sums(columns(gr.Fg, c) * Q))
         for i in self.rigid:
             if mine[i]:
                 b = self.bodies[i]
@@ -559,7 +559,7 @@ class Simulation:
         cols, mine, comm = self.own_bodies()
         v, d = 0.0, self.dim
         for gr, c in zip(self.groups, cols):
-            U = _cols(gr.U, c)
+            U = columns(gr.U, c)
             if U.size:
                 v = max(v, float(np.max(np.linalg.norm(U.reshape(-1, d, U.shape[1]), axis=1))))
         for i in self.rigid:

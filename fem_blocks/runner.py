@@ -15,7 +15,7 @@ from . import __version__
 from .case import Case
 from .errors import InputError
 from .bodies import Driver
-from .dynamics import Simulation, column_sums
+from .dynamics import Simulation, column_sums, columns
 from .expand import expand
 from .model import Model, build_model
 from .output.history import HistoryWriter
@@ -516,8 +516,7 @@ class _Guards:
         for gr, c in zip(sim.groups, cols):
             members = gr.members if c is None else gr.members[c]
             for name, A in (("u", gr.U), ("q", gr.Q)):  # q after u: a body with both is named by q
-                X = A if c is None else A.take(c, axis=1)
-                for i in members[~np.isfinite(X).all(axis=0)]:
+                for i in members[~np.isfinite(columns(A, c)).all(axis=0)]:
                     found[int(i)] = name
         for i in sim.rigid:
             b = sim.bodies[i]
@@ -655,7 +654,7 @@ class _RotationWatch:
                 continue
             # type frame (|θ| is frame-free); each body's θ from its own column (dynamics.column_sums: the same
             # double whatever the bodies beside it, as the sums over bodies; einsum's order depends on them)
-            Q = gr.Q if c is None else gr.Q.take(c, axis=1)
+            Q = columns(gr.Q, c)
             th = [column_sums(w[:, None] * Q) for w in gr.type.rotation_weights()]
             mag = np.abs(th[0]) if len(th) == 1 else np.sqrt(th[0] * th[0] + th[1] * th[1] + th[2] * th[2])
             j = int(np.argmax(mag))
