@@ -28,3 +28,18 @@ def run_helper(n: int, script: str, *args, timeout: float = 120):
         pytest.fail(f"a rank was left waiting: the launch did not end in {timeout:g} s\n{e.stdout}\n{e.stderr}")
     assert p.returncode == 0, (p.stdout + p.stderr)[-3000:]
     return p
+
+
+def run_alone(script: str, *args, timeout: float = 300):
+    """`python tests/SCRIPT ARGS...` on one process, with the suite's environment and from the project root (the
+    serial reference of a helper run under mpirun by `run_helper`); fails the test on a nonzero status."""
+    p = subprocess.run([sys.executable, os.path.join(ROOT, "tests", script), *map(str, args)], capture_output=True,
+                       text=True, cwd=ROOT, env=ENV, timeout=timeout)
+    assert p.returncode == 0, (p.stdout + p.stderr)[-3000:]
+    return p
+
+
+def rank_results(out, size: int) -> list:
+    """The JSON files OUT.<rank>.json that a helper's ranks 0..size-1 wrote, read, in rank order."""
+    import json
+    return [json.loads(open(f"{out}.{r}.json").read()) for r in range(size)]

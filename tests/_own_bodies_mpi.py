@@ -10,18 +10,12 @@ watch.
 
 Usage: [mpirun -n N] python tests/_own_bodies_mpi.py CASE.toml OUT
 """
-import hashlib
 import json
 import sys
 
 import numpy as np
 
-
-def digest(*arrays) -> str:
-    h = hashlib.sha1()
-    for a in arrays:
-        h.update(np.ascontiguousarray(a).tobytes())
-    return h.hexdigest()
+from _case_steps import digest, stepping
 
 
 def rank_bodies(sim, step, rank) -> np.ndarray:
@@ -40,20 +34,10 @@ def rank_bodies(sim, step, rank) -> np.ndarray:
 
 def main(path, out):
     from mpi4py import MPI
-    from fem_blocks.case import load_case
-    from fem_blocks.dynamics import Simulation
-    from fem_blocks.expand import expand
-    from fem_blocks.model import build_model
     from fem_blocks.runner import _Guards, _RotationWatch
     comm = MPI.COMM_WORLD
-    case = expand(load_case(path))
-    model = build_model(case)
+    case, model, sim, step = stepping(path, comm)
     names = list(model.names)
-    st = case.stages[0]
-    sim = Simulation(model.bodies, h=st.h, theta=st.theta, gravity=model.gravity, velocity_reset=st.velocity_reset,
-                     contact=model.contact)
-    step = model.contact
-    step.use_comm(comm)
     guards = _Guards(case, model, names, comm if comm.Get_size() > 1 else None)
     watch = _RotationWatch(sim, names, bound=1e-9)  # a bound every block passes: the blocks beyond are listed
     e0 = sim.energies()

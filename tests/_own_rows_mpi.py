@@ -4,18 +4,12 @@ again; writes OUT.<rank>.json with, per rank, the rows the contact step holds an
 
 Usage: [mpirun -n N] python tests/_own_rows_mpi.py CASE.toml OUT
 """
-import hashlib
 import json
 import sys
 
 import numpy as np
 
-
-def digest(*arrays) -> str:
-    h = hashlib.sha1()
-    for a in arrays:
-        h.update(np.ascontiguousarray(a).tobytes())
-    return h.hexdigest()
+from _case_steps import digest, stepping
 
 
 def record(sim, step) -> dict:
@@ -32,18 +26,8 @@ def record(sim, step) -> dict:
 
 def main(path, out):
     from mpi4py import MPI
-    from fem_blocks.case import load_case
-    from fem_blocks.dynamics import Simulation
-    from fem_blocks.expand import expand
-    from fem_blocks.model import build_model
     comm = MPI.COMM_WORLD
-    case = expand(load_case(path))
-    model = build_model(case)
-    st = case.stages[0]
-    sim = Simulation(model.bodies, h=st.h, theta=st.theta, gravity=model.gravity, velocity_reset=st.velocity_reset,
-                     contact=model.contact)
-    step = model.contact
-    step.use_comm(comm)
+    _, _, sim, step = stepping(path, comm)
     res = dict(rank=comm.Get_rank(), size=comm.Get_size(), steps=[])
     for k in range(3):
         if k == 2:  # the runner's snapshot of the last good state (runner._snapshot)

@@ -15,16 +15,10 @@ One-line bugs these catch (checked): the largest velocity taken over every body;
 watch reading every body. (The step's largest displacement increment taken over every body is not caught: it only
 sets the threshold below which a driven dof counts as standing still, docs/testing.md row 60.)
 """
-import json
-import os
-import subprocess
-import sys
-
 import pytest
 
 import dist_cases
-from _mpi import ENV, run_helper
-from _paths import ROOT
+from _mpi import rank_results, run_alone, run_helper
 
 HELPER = "_own_bodies_mpi.py"
 BEAM = """[wall.beam]
@@ -43,26 +37,20 @@ CASE = dist_cases.wall("own_bodies", courses=6, per=6, joint=dist_cases.MIXED).r
                                                                                       BEAM + "[[interfaces]]\n", 1)
 
 
-def _read(out, size):
-    return [json.loads(open(f"{out}.{r}.json").read()) for r in range(size)]
-
-
 @pytest.fixture(scope="module")
 def serial(tmp_path_factory):
     d = tmp_path_factory.mktemp("own_bodies")
     path = d / "own_bodies.toml"
     path.write_text(CASE)
-    p = subprocess.run([sys.executable, os.path.join(ROOT, "tests", HELPER), str(path), str(d / "serial")],
-                       capture_output=True, text=True, cwd=ROOT, env=ENV, timeout=300)
-    assert p.returncode == 0, (p.stdout + p.stderr)[-3000:]
-    return path, _read(d / "serial", 1)[0]
+    run_alone(HELPER, path, d / "serial")
+    return path, rank_results(d / "serial", 1)[0]
 
 
 @pytest.mark.parametrize("n", [2, 3])
 def test_the_step_and_checks_read_only_the_ranks_bodies(serial, n, tmp_path):
     path, one = serial
     run_helper(n, HELPER, path, tmp_path / "out", timeout=300)
-    ranks = _read(tmp_path / "out", n)
+    ranks = rank_results(tmp_path / "out", n)
     assert all(min(r["poisoned"]) > 0 for r in ranks)  # every rank had bodies it does not step
     for r in ranks:
         for mine, ref in zip(r["steps"], one["steps"]):

@@ -17,16 +17,10 @@ from the second step); the own rows gathered in rank order but not put back in c
 contact's impulse carried from the old position in the whole set instead of the old own rows; the impulses of the
 contacts L owned elsewhere not scattered (the bodies' velocities differ).
 """
-import json
-import os
-import subprocess
-import sys
-
 import pytest
 
 import dist_cases
-from _mpi import ENV, run_helper
-from _paths import ROOT
+from _mpi import rank_results, run_alone, run_helper
 
 HELPER = "_own_rows_mpi.py"
 CASES = {
@@ -36,26 +30,20 @@ CASES = {
 }
 
 
-def _read(out, size):
-    return [json.loads(open(f"{out}.{r}.json").read()) for r in range(size)]
-
-
 @pytest.fixture(scope="module", params=sorted(CASES))
 def serial(request, tmp_path_factory):
     d = tmp_path_factory.mktemp("own")
     path = d / f"{request.param}.toml"
     path.write_text(CASES[request.param])
-    p = subprocess.run([sys.executable, os.path.join(ROOT, "tests", HELPER), str(path), str(d / "serial")],
-                       capture_output=True, text=True, cwd=ROOT, env=ENV, timeout=300)
-    assert p.returncode == 0, (p.stdout + p.stderr)[-3000:]
-    return path, _read(d / "serial", 1)[0]
+    run_alone(HELPER, path, d / "serial")
+    return path, rank_results(d / "serial", 1)[0]
 
 
 @pytest.mark.parametrize("n", [2, 3])
 def test_each_rank_holds_and_steps_its_own_contacts_rows(serial, n, tmp_path):
     path, one = serial
     run_helper(n, HELPER, path, tmp_path / "out", timeout=300)
-    ranks = _read(tmp_path / "out", n)
+    ranks = rank_results(tmp_path / "out", n)
     nc = one["n_contacts"]
     assert nc > 20 and all(r["n_contacts"] == nc for r in ranks)
     owns = [r["own"] for r in ranks]
