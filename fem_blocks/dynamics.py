@@ -60,6 +60,16 @@ s_b the body's term from its own arrays only (elementwise products, then its col
 of the terms, bitwise). So S is the same double whatever the grouping of the bodies (block types, members' order)
 and, on N > 1 ranks with the bodies partitioned (the contact step's `body_partition`), whatever the partition: each
 rank adds the terms of its own bodies and one Allreduce of the exact accumulators gives every rank S.
+
+Bodies stepped per rank (N > 1 ranks in colour order, frozen geometry: the contact step's `stepped_bodies`). A
+rank steps only the bodies it reads: B_p = its own bodies, the bodies of its own contacts (their local velocities),
+the rigid bodies, and the bodies the outputs read at every step (`share_bodies`: gauges, rotation columns, joints,
+stop conditions). Each such body's step is the serial one, bitwise: its free velocity from its own state (a column
+of the batched solve: PETSc's LU solves each column alone, linalg.Factor; block types factored otherwise are stepped
+whole), its correction W H P from the impulses on it, all-reduced (contact/step.py `_impulse`). The other bodies'
+q, u (and free velocities) are set to NaN on this rank when the set is taken (`_narrow`): any reader of a body this
+rank does not step gets NaN, never a stale value; `collect_bodies` gives rank 0 every body's state from its owner
+(the figures at the end of a run).
 """
 from __future__ import annotations
 
@@ -222,6 +232,9 @@ class Simulation:
             raise InputError(f"corotational kinematics with contact.geometry = {geometry!r}: expected 'updated' (a "
                              "frozen contact geometry is the small-rotation reference configuration)")
         self.corotational = bool(corotational)
+        self.shared = np.zeros(0, dtype=np.int64)  # bodies stepped on every rank (share_bodies)
+        self._stepped_key, self._stepped = None, None  # stepped_columns' cache
+        self._narrowed = None  # the key of the stepped set whose other bodies are NaN (_narrow)
         self.h, self.theta, self.static = None, None, False
         self.h_nominal = None  # set_step: the nominal step of which h is a sub-step (h itself by default)
         self.set_step(h, theta, static)
@@ -268,6 +281,7 @@ class Simulation:
             op = b.type.step_operator(self.h, self.theta, b.clamped, static)
             groups.setdefault(id(op), []).append(i)
             ops[id(op)] = (op, b.type)
+        self._stepped_key = self._narrowed = None  # (new group arrays: the stepped set is taken again)
         self.groups = [_Group(ops[k][0], ops[k][1], members, self.bodies,
                               framed=self.corotational and not ops[k][0].clamped.any())
                        for k, members in groups.items()]
@@ -311,25 +325,34 @@ class Simulation:
         (co-rotational) add the inertial term of their turning frames, -h M (ω_i × (u_i - v̄_i)) (docs/method.md
         §7)."""
         h, th = self.h, self.theta
-        for gr in self.groups:
+        self._narrow()
+        for gr, s in zip(self.groups, self.stepped_columns()):
             if self.velocity_reset:
-                gr.U[:] = 0.0
+                if s is None:
+                    gr.U[:] = 0.0
+                else:
+                    gr.U[:, s] = 0.0
             bt = gr.type
             if gr.framed:
                 self._frame_start(gr)
             gr.Ftheta = (1 - th) * self._group_load(gr, t0) + th * self._group_load(gr, t1)
-            KQ = bt.K @ gr.Q
+            Q, U, F = columns(gr.Q, s), columns(gr.U, s), columns(gr.Ftheta, s)  # (the stepped bodies')
+            KQ = bt.K @ Q
             if gr.framed:
-                rhs = bt.M @ gr.Ueff - h * KQ + h * gr.Ftheta
+                rhs = bt.M @ gr.Ueff - h * KQ + h * F
             else:
-                rhs = (-h * KQ + h * gr.Ftheta) if self.static else (bt.M @ gr.U - h * KQ + h * gr.Ftheta)
+                rhs = (-h * KQ + h * F) if self.static else (bt.M @ U - h * KQ + h * F)
             if th != 1.0:
-                rhs -= h * h * th * (1 - th) * (bt.K @ gr.U)
+                rhs -= h * h * th * (1 - th) * (bt.K @ U)
             if bt.C.nnz and th != 1.0 and not self.static:
-                rhs -= h * (1 - th) * (bt.C @ gr.U)
+                rhs -= h * (1 - th) * (bt.C @ U)
             rhs[gr.clamped, :] = 0.0
-            gr.Ufree = gr.op.solve(rhs)
-            gr.Ufree[gr.clamped, :] = 0.0
+            uf = gr.op.solve(rhs)
+            uf[gr.clamped, :] = 0.0
+            if s is None:
+                gr.Ufree = uf
+            else:  # (the other columns: NaN since _narrow)
+                gr.Ufree[:, s] = uf
         for i in self.rigid:
             b = self.bodies[i]
             if self.velocity_reset:
@@ -382,22 +405,30 @@ class Simulation:
             res = self.contact.solve(self, t0, t1)  # ContactResult: corrections W H (h r), impulses, ...
         gcorr = res.group_corr if res is not None else [None] * len(self.groups)
         cols, mine, comm = self.own_bodies()
+        self._narrow()  # (the first step: the contact step took its set of bodies during this step)
         work, wdrv, winert = [], [], []  # the own bodies' terms (module docstring, "Sums over bodies")
         dmax = 0.0
-        for gr, Ucorr, c in zip(self.groups, gcorr, cols):
-            Unew = gr.Ufree if Ucorr is None else gr.Ufree + Ucorr
-            dQ = h * ((1 - th) * gr.U + th * Unew)
+        for gr, Ucorr, c, s in zip(self.groups, gcorr, cols, self.stepped_columns()):
+            # the stepped bodies' columns (s: all, or the rank's B_p; the correction holds the same columns)
+            U0, Uf = columns(gr.U, s), columns(gr.Ufree, s)
+            Unew = Uf if Ucorr is None else Uf + Ucorr
+            dQ = h * ((1 - th) * U0 + th * Unew)
+            c = c if s is None or c is None else np.searchsorted(s, c)  # the own bodies among them (own ⊂ B_p)
             dQc = columns(dQ, c)
             dmax = max(dmax, float(np.max(np.abs(dQc), initial=0.0)))
             if not self.static:
-                dU = columns(Unew, c) - columns(gr.U, c)
+                dU = columns(Unew, c) - columns(U0, c)
                 winert.append(column_sums(dQc * (gr.type.M @ dU)) / h)
-            work.append(column_sums(columns(gr.Ftheta, c) * dQc) - column_sums(columns(gr.Fg, c) * dQc))
+            F, Fg = (columns(A, s) for A in (gr.Ftheta, gr.Fg))
+            work.append(column_sums(columns(F, c) * dQc) - column_sums(columns(Fg, c) * dQc))
             if gr.framed:
                 self._frame_update(gr, Unew)
-            else:
+            elif s is None:
                 gr.Q += dQ
                 gr.U[:] = Unew
+            else:
+                gr.Q[:, s] += dQ
+                gr.U[:, s] = Unew
         drv_moves = []
         for k, i in enumerate(self.rigid):
             b = self.bodies[i]
@@ -481,12 +512,74 @@ class Simulation:
                     raise InputError(f"checkpoint: {key}: missing or of another shape than body {i} of this model "
                                      f"(expected {np.shape(getattr(b, name))})")
                 getattr(b, name)[...] = d[key]
+        self._narrowed = None  # (the restored state may hold every body: _narrow sets the others to NaN again)
         self.time = float(d["sim.time"])
         self.step_count = int(d["sim.step"])
         self.external_work = float(d["sim.external_work"])
         self.driver_work = float(d["sim.driver_work"])
         if self.contact is not None and "contact.steps" in d:
             self.last_contact = self.contact.restore_state(self, d)
+
+    # -------------------------------------------------------------- the bodies a rank steps
+    def share_bodies(self, ids) -> None:
+        """Step the bodies `ids` (indices) on every rank, whatever the partition: the bodies the outputs read at every
+        step on every rank (module docstring, "Bodies stepped per rank")."""
+        self.shared = np.unique(np.asarray(list(ids), dtype=np.int64))
+        self._stepped_key = None
+
+    def stepped_columns(self) -> list:
+        """Per group the columns of the bodies this process steps (None: every member): on N > 1 ranks with the
+        contact step's `stepped_bodies()` (frozen geometry, colour order) those of its mask, the shared bodies
+        (`share_bodies`) added; None for a group whose factor does not solve each column alone
+        (`linalg.Factor.columnwise`) or with every member in the set. The contact step's corrections take the same
+        columns (contact/scene.py)."""
+        part = getattr(self.contact, "stepped_bodies", lambda: None)()
+        if part is None:
+            return [None] * len(self.groups)
+        key = self._stepped_key  # (the contact step's mask itself, held: a new mask is a new set)
+        if key is None or key[0] is not part or key[1] != self.shared.tobytes():
+            key = (part, self.shared.tobytes())
+            mask = part.copy()
+            mask[self.shared] = True
+            out = []
+            for gr in self.groups:
+                s = np.flatnonzero(mask[gr.members])
+                out.append(None if gr.framed or not gr.op.factor.columnwise or s.size == len(gr.members) else s)
+            self._stepped_key, self._stepped = key, out
+        return self._stepped
+
+    def _narrow(self) -> None:
+        """Set q, u and the free velocities of the bodies this process does not step to NaN, once per stepped set
+        (again after a restore or a new set of groups; module docstring)."""
+        cols = self.stepped_columns()
+        key = self._stepped_key
+        if key is None or key is self._narrowed:
+            return
+        for gr, s in zip(self.groups, cols):
+            if s is None:
+                continue
+            off = np.setdiff1d(np.arange(len(gr.members)), s, assume_unique=True)
+            if getattr(gr, "Ufree", None) is None or gr.Ufree.shape != gr.U.shape:
+                gr.Ufree = np.zeros_like(gr.U)
+            for A in (gr.Q, gr.U, gr.Ufree):
+                A[:, off] = np.nan
+        self._narrowed = key
+
+    def collect_bodies(self) -> None:
+        """On N > 1 ranks with the bodies stepped per rank: rank 0 receives q and u of every body from the rank that
+        owns it (one gather; collective), so that it holds the whole state (the figures at the end of a run); else
+        nothing to do."""
+        part = getattr(self.contact, "stepped_bodies", lambda: None)()
+        cols, mine, comm = self.own_bodies()
+        if part is None or comm is None:
+            return
+        sent = [(g, c, columns(gr.Q, c), columns(gr.U, c))  # (the own columns of the groups stepped per rank)
+                for g, (gr, c, s) in enumerate(zip(self.groups, cols, self.stepped_columns())) if s is not None]
+        got = comm.gather(sent, root=0)
+        for rank_part in got or []:
+            for g, c, Q, U in rank_part:
+                self.groups[g].Q[:, c] = Q
+                self.groups[g].U[:, c] = U
 
     # -------------------------------------------------------------- diagnostics
     def own_bodies(self):

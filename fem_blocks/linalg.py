@@ -239,6 +239,13 @@ class Factor:
             raise
         self._F = pc.getFactorMatrix()
 
+    @property
+    def columnwise(self) -> bool:
+        """`solve` of an (n, k) right side gives each column the same double whatever the other columns: PETSc's LU
+        (checked, tests/test_linalg.py); CHOLMOD's and MUMPS' multi-column solves round a column otherwise with
+        other columns beside it."""
+        return self.method == "petsc-lu"
+
     def failed(self) -> bool:
         """The last solve did not succeed (PETSc's converged reason < 0)."""
         return self._ksp.getConvergedReason() < 0

@@ -158,18 +158,46 @@ def gauge_points(case: Case, model: Model) -> list[tuple]:
     return out
 
 
+def read_bodies(case: Case, model: Model, rotations=(), gauges=()) -> list[int]:
+    """The bodies the run reads at every step on every rank (dynamics.Simulation.share_bodies: stepped on every rank
+    when the bodies are stepped per rank): those of the history's rotation columns and gauges, of the stages' stop
+    conditions and of the force-displacement curve. (The joints' points come from the contacts' owners:
+    joints_record.)"""
+    ids = set(rotations) | {g[1] for g in gauges}
+    for st in case.stages:
+        names = [ref[0] for ref in (st.stop_displacement, st.stop_after_peak) if ref is not None]
+        names += [nm for nm in (st.stop_rotation or (None, None))[:2] if nm is not None]
+        ids.update(model.index(nm) for nm in names)
+    cv = case.output.get("curve")
+    if cv:
+        ids.add(model.index(cv["body"]))
+    return sorted(ids)
+
+
 def _gauge_names(model: Model, gauges) -> list[str]:
     D = 2 if len(model.dofs) == 3 else 3
     return [f"{g[0]}.u{d}" for g in gauges for d in model.dofs[:D]]
 
 
+def joints_record(model: Model, sim):
+    """(the last step's record of every contact, `locate`) for the joints' resultants (output/joints.py
+    record_joints): 2D `locate(cs)` gives the contacts' current candidate points (ContactStep.contact_points), on
+    N > 1 ranks computed by each contact's owner (whose bodies it steps, dynamics.py "Bodies stepped per rank") and
+    gathered with the record; 3D None (the contact set's points). COLLECTIVE on N > 1 ranks."""
+    rec = None if sim is None else sim.last_contact
+    if rec is None or len(model.dofs) != 3:
+        return (None if rec is None else rec.whole()), None
+    if rec.rows is None:
+        return rec, model.contact.contact_points
+    points = rec.gather(model.contact.contact_points(rec.cs.subset(rec.rows)))
+    return rec.whole(), (lambda cs: points)
+
+
 def _joint_values(model: Model, sim, joints) -> dict:
     """history.csv values of the `[output] joints` pairs at the last step (output/joints.py)."""
     from .output.joints import history_values, record_joints
-    rec = None if sim is None or sim.last_contact is None else sim.last_contact.whole()  # (N ranks: collective)
-    two_d = len(model.dofs) == 3
-    res = record_joints(rec, model.contact.contact_points if two_d else None,
-                        model.contact.joint_lengths if two_d else None)
+    rec, locate = joints_record(model, sim)  # (N ranks: collective)
+    res = record_joints(rec, locate, model.contact.joint_lengths if len(model.dofs) == 3 else None)
     return history_values(res, joints, model.names)
 
 
@@ -950,6 +978,7 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
     joint_ids = joint_pairs(case, model)  # [output] joints
     gauge_ids = gauge_points(case, model)  # [output] gauges
     cols = history_columns(model, rot_ids, joint_ids, gauge_ids)
+    sim.share_bodies(read_bodies(case, model, rot_ids, gauge_ids))  # (N ranks: stepped on every rank)
     hpath = os.path.join(out_dir, "history.csv")
 
     def open_history():
@@ -980,9 +1009,9 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
         if pc is None:
             return
         if comm is not None and case.output.get("joints_paraview"):
-            rec = None if sim.last_contact is None else sim.last_contact.whole()
+            rec, locate = joints_record(model, sim)  # (collective: the record and points of every contact)
             if jw is not None:
-                jw.write(sim.time, rec)
+                jw.write(sim.time, rec, locate)
         pc.write(sim.time, sim.last_contact)
 
     if ck is None:
@@ -1010,6 +1039,7 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
         # (N ranks: rank 0 writes the summary and figures, from the record of every contact gathered by every rank;
         # every rank returns the summary, or raises)
         last = None if sim.last_contact is None else sim.last_contact.whole()
+        sim.collect_bodies()  # (N ranks with the bodies stepped per rank: rank 0 receives every body's state)
         return on_root(comm, _finish, status, code, last)
 
     def _finish(status: str, code: int | None, last) -> dict:

@@ -14,14 +14,16 @@ from _case_steps import digest, stepping
 
 def record(sim, step) -> dict:
     """The step's record of every contact (ContactResult.whole(), in contact order), its totals and statistics, the
-    rows the record itself holds, and the bodies' velocities, as digests."""
+    rows the record itself holds, and the velocities of the bodies this rank steps (those not NaN: dynamics.py
+    "Bodies stepped per rank"), as digests."""
     own = sim.last_contact
     c = own.whole()
     return dict(P=digest(c.P), r=digest(c.r), v=digest(c.v), state=digest(c.state), gt_end=digest(c.gt_end),
                 status=digest(c.status), friction=digest(c.friction), law=digest(c.law),
                 friction_total=float(c.friction_total), dissipated=float(c.dissipated),
                 stats=[own.stats.get(k) for k in ("contacts", "active", "slip", "sweeps")],
-                u=digest(*[b.u for b in sim.bodies]), warm=digest(step.P), record_rows=int(len(own.P)))
+                u={str(i): digest(b.u) for i, b in enumerate(sim.bodies) if not np.isnan(b.u).all()},
+                warm=digest(step.P), record_rows=int(len(own.P)))
 
 
 def main(path, out):

@@ -101,6 +101,15 @@ velocity_reset = true
 """
 
 
+READERS = """[output]
+joints = [["brick0", "brick4"], ["brick20", "brick21"]]
+joints_paraview = true
+rotations = ["brick3", "brick18"]
+gauges = [{name = "low", block = "brick0", point = [0.1, 0.03]},
+          {name = "high", block = "brick21", point = [0.85, 0.27]}]
+"""
+
+
 def wall(name, courses=3, per=2, joint=DRY, tol=1e-5, max_sweeps=400, policy="warn", paraview="false", ck=0,
          duration=0.004):
     return WALL.format(name=name, courses=courses, per=per, joint=joint, tol=tol, max_sweeps=max_sweeps,
@@ -118,8 +127,11 @@ CASES = {
     "newton": wall("newton").replace('order = "colours"', 'solver = "newton"\ncriterion = "residual"')
                             .replace("tol = 1e-05", "tol = 1e-08"),  # the Newton's linear solves shared by the ranks
     "guard": wall("guard").replace("[contact]", "[checks]\nmax_penetration = 1e-9\n[contact]", 1),  # a run check stops
-    "joints": wall("joints", joint=MIXED, paraview="true").replace(  # the joints' outputs from the gathered record
-        "[output]\n", '[output]\njoints = [["brick0", "brick2"], ["brick1", "brick3"]]\njoints_paraview = true\n', 1),
+    # the joints' outputs from the gathered record, the outputs that read one body at every step (gauges, rotations)
+    # on a wall large enough for each rank to leave bodies unstepped (dynamics.py "Bodies stepped per rank"); its
+    # last checkpoint holds the partition
+    "joints": wall("joints", courses=5, per=4, joint=MIXED, tol=1e-4, max_sweeps=2000, paraview="true",
+                   ck=2).replace("[output]\n", READERS, 1),
 }
 
 

@@ -233,6 +233,15 @@ def _frames(pvd):
     return [(float(e.get("timestep")), e.get("file")) for e in ET.parse(pvd).getroot().iter("DataSet")]
 
 
+def _partition(out, n):
+    """The rank of each body in the checkpoint pieces of the run in `out` (None without a checkpoint)."""
+    path = out / "checkpoint.rank0.npz"
+    if not path.exists():
+        return None
+    with np.load(path) as z:
+        return np.array(z["contact.body_owner"]) if "contact.body_owner" in z else None
+
+
 def _check_pieces(d, name, n):
     """The ParaView series of the run on n ranks against the serial run's; returns the number of frames."""
     import xml.etree.ElementTree as ET
@@ -242,8 +251,11 @@ def _check_pieces(d, name, n):
     fs, fp = _frames(ser / "blocks.pvd"), _frames(par / "blocks.pvd")
     assert [t for t, _ in fp] == [t for t, _ in fs] and len(fs) >= 2
     nb = len(_by_body(ser / fs[0][1])[0])
-    expect = [range(p * nb // n, (p + 1) * nb // n) for p in range(n)]
-    for (_, vtu), (_, pvtu) in zip(fs, fp):
+    blocks = [list(range(p * nb // n, (p + 1) * nb // n)) for p in range(n)]  # the first frame's pieces
+    owner = _partition(d / f"{name}.{n}", n)  # the pieces after it: the partition's, when a checkpoint holds it
+    split = [list(np.flatnonzero(owner == p)) for p in range(n)] if owner is not None else None
+    later = None
+    for f, ((_, vtu), (_, pvtu)) in enumerate(zip(fs, fp)):
         assert pvtu.endswith(".pvtu") and (par / pvtu).exists()
         root = ET.parse(par / pvtu).getroot()  # the PUnstructuredGrid structure and the serial file's arrays
         assert root.tag == "VTKFile" and root.get("type") == "PUnstructuredGrid"
@@ -256,16 +268,23 @@ def _check_pieces(d, name, n):
                 decl, have = [x[1:] for x in decl], [x[1:] for x in have]
             assert decl == have, (ptag, decl, have)
         sources = [p.get("Source") for p in g.findall("Piece")]
-        assert sources == [pvtu[:-5] + f"_p{p}.vtu" for p in range(n) if len(expect[p])]  # rank order, no empty
+        ranks = [int(s.rsplit("_p", 1)[1][:-4]) for s in sources]
+        assert sources == [pvtu[:-5] + f"_p{p}.vtu" for p in ranks] and ranks == sorted(set(ranks))  # rank order
         whole, n_pts, n_cells = _by_body(ser / vtu)
-        got, n_pts2, n_cells2 = {}, 0, 0
-        for s in sources:
+        got, n_pts2, n_cells2, pieces = {}, 0, 0, {}
+        for s, p in zip(sources, ranks):
             assert (par / s).exists()
             part, a, b = _by_body(par / s)
-            assert sorted(part) == list(expect[int(s.rsplit("_p", 1)[1][:-4])])
+            assert part and not set(part) & set(got)  # a listed piece holds bodies, each body in one piece
+            pieces[p] = sorted(part)
             got.update(part)
             n_pts2, n_cells2 = n_pts2 + a, n_cells2 + b
         assert (n_pts2, n_cells2) == (n_pts, n_cells) and sorted(got) == sorted(whole)
+        if f == 0 or split is not None:
+            assert pieces == {p: b for p, b in enumerate(blocks if f == 0 else split) if b}, (pvtu, pieces)
+        else:  # (no checkpoint: one partition, so the same pieces in every frame after the first)
+            later = later or pieces
+            assert pieces == later, (pvtu, pieces, later)
         for b in whole:
             assert whole[b].keys() == got[b].keys()
             for k in whole[b]:
@@ -281,12 +300,14 @@ def _check_pieces(d, name, n):
     return len(fp)
 
 
-@pytest.mark.parametrize("n,name", [(2, "dry"), (3, "dry"), (2, "wall3d"), (3, "one_brick")])
+@pytest.mark.parametrize("n,name", [(2, "dry"), (3, "dry"), (2, "wall3d"), (3, "one_brick"), (2, "joints")])
 def test_paraview_pieces_per_rank_are_the_serial_grid(runs, n, name):
     """On N ranks blocks.pvd lists one .pvtu per frame (the serial run's times); each .pvtu declares the serial
     .vtu's arrays (names, VTK types, components), lists in rank order the pieces blocks_<frame>_p<rank>.vtu of the
-    ranks with bodies (one_brick on 3 ranks: rank 0 has none), which exist; piece p holds the bodies
-    [p nb / N, (p + 1) nb / N) and, body by body, the serial file's cells, points, point and cell data BITWISE;
+    ranks with bodies (one_brick on 3 ranks: a rank has none), which exist; piece p holds, in the first frame, the
+    bodies [p nb / N, (p + 1) nb / N), and in the later frames rank p's bodies of the partition (the checkpoint's
+    contact.body_owner in the resume test; else the same pieces in each frame), each body in one piece, and, body by
+    body, the serial file's cells, points, point and cell data BITWISE;
     VTK's parallel reader (ParaView's) reads the .pvtu with the serial number of cells.
     One-line bugs this catches (checked): every rank writing the piece of all bodies (piece_bodies returning
     range(nb): the pieces' bodies overlap); array_info without write_vtu's padding of 2-vectors (the .pvtu declares
@@ -345,8 +366,9 @@ def test_contact_pieces_per_rank_are_the_serial_contacts(runs, n, name):
 
 def test_joint_outputs_on_2_ranks_are_the_serial_files(runs):
     """`[output] joints` and `joints_paraview` on 2 ranks: the joints' resultants come from the record of every
-    contact, gathered by every rank (ContactResult.whole()), and rank 0 writes joints.pvd. Expectation: the serial
-    run's joints.pvd and every frame's .vtu, byte for byte (the history's joint columns: the bitwise history test)."""
+    contact, gathered by every rank (ContactResult.whole()), at the contacts' current points computed by their owners
+    (runner.joints_record), and rank 0 writes joints.pvd. Expectation: the serial run's joints.pvd and every frame's
+    .vtu, byte for byte (the history's joint columns: the bitwise history test)."""
     d, serial, codes, logs = runs
     assert codes[2]["joints"] == [serial["joints"]] * 2, logs[2][-3000:]
     ser, par = d / "joints.1" / "paraview", d / "joints.2" / "paraview"
@@ -354,7 +376,35 @@ def test_joint_outputs_on_2_ranks_are_the_serial_files(runs):
     assert len(frames) >= 2 and _frames(par / "joints.pvd") == frames
     for _, f in frames:
         assert (par / f).read_bytes() == (ser / f).read_bytes(), f
-    assert "brick0|brick2.N" in (d / "joints.2" / "history.csv").read_text().splitlines()[0]
+    assert "brick0|brick4.N" in (d / "joints.2" / "history.csv").read_text().splitlines()[0]
+
+
+def test_bodies_stepped_per_rank_give_the_serial_outputs(runs):
+    """The "joints" wall on 2 ranks (frozen geometry): each rank steps only its bodies, those of its own contacts and
+    the bodies the outputs read at every step (dynamics.py "Bodies stepped per rank"). Found here from the partition
+    and the contact set of the last checkpoint: each rank leaves bodies unstepped, among them bodies of a gauge, of a
+    rotation column and of a listed joint. Expectation: the serial run's history (gauges, rotations, joints: the
+    bitwise history test), joints.pvd (test above), blocks.pvd pieces (test above) and figures at the end (rank 0
+    receives every body's state: Simulation.collect_bodies), byte for byte. One-line bugs this catches (checked): the
+    gauges' and rotations' bodies not shared (their columns NaN on rank 0); the joints' points computed by rank 0 for
+    every contact (NaN); rank 0 not collecting the bodies before the figures."""
+    d, serial, codes, logs = runs
+    assert codes[2]["joints"] == [serial["joints"]] * 2, logs[2][-3000:]
+    with np.load(d / "joints.2" / "checkpoint.rank0.npz") as z:
+        owner, cand, ant = (np.array(z[k]) for k in ("contact.body_owner", "contact.cs.cand_body",
+                                                      "contact.cs.ant_body"))
+    summary = json.loads((d / "joints.2" / "summary.json").read_text())
+    read = {0, 21, 3, 18, 4}  # brick0 and brick21 (gauges), brick3 and brick18 (rotations); brick0, brick4 (a joint)
+    unstepped = set()
+    for p in range(2):
+        B = owner == p
+        mine = owner[cand] == p
+        B[cand[mine]] = B[ant[mine]] = True
+        assert not B.all()
+        unstepped |= set(np.flatnonzero(~B))
+    assert unstepped & read and summary["n_bodies"] == len(owner)
+    for f in ("crack_pattern.png", "rotations.png"):
+        assert (d / "joints.2" / f).read_bytes() == (d / "joints.1" / f).read_bytes(), f
 
 
 def test_sigterm_to_one_rank_stops_every_rank_at_the_same_step(runs):

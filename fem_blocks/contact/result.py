@@ -44,7 +44,8 @@ class ContactResult:
     status: np.ndarray = None   # (nc,) 0 open, 1 stick, 2 slip
     law: np.ndarray = None      # (nc,) law codes
     state: np.ndarray = None    # (nc, NSTATE | NSTATE + 1) committed law state
-    group_corr: list = field(default_factory=list)  # per Simulation group: (ndof, k) correction, or None
+    # per Simulation group: the (ndof, k) correction of its stepped columns (Simulation.stepped_columns), or None
+    group_corr: list = field(default_factory=list)
     rigid_corr: np.ndarray = None     # (n_rigid, rigid ndof) velocity correction W p, in sim.rigid order
     rigid_impulse: np.ndarray = None  # (n_rigid, rigid ndof) contact impulse p on each rigid body
     friction: np.ndarray = None       # (nc,) frictional dissipation of this step per contact [J] (contact/friction.py)

@@ -190,16 +190,18 @@ class ContactScene:
             out[s:s + self.rigid_ndof] = {"ufree": b.ufree, "u": b.u, "q": b.q}[which]
         return out
 
-    def corrections(self, imp: np.ndarray):
+    def corrections(self, imp: np.ndarray, cols=None):
         """Velocity corrections W H (h r) from flat W-numbered impulses `imp`: one batched solve per group.
+        `cols`: per group the columns of the bodies to correct (Simulation.stepped_columns; None: every member).
 
-        Returns (group_corr, rigid_corr, rigid_impulse): per group of `sim.groups` its correction (ndof, k) (clamped
-        dofs 0), or None when no impulse reaches it; per rigid body (sim.rigid order) W p and the impulse p. Writes
-        nothing into the simulation (the caller applies them)."""
+        Returns (group_corr, rigid_corr, rigid_impulse): per group of `sim.groups` its correction (ndof, k) of those
+        columns (clamped dofs 0), or None when no impulse reaches them; per rigid body (sim.rigid order) W p and the
+        impulse p. Writes nothing into the simulation (the caller applies them)."""
         group_corr = []
-        for gr, uidx, xidx, R, C in self.groups:
-            rhs = np.zeros_like(gr.U)
-            rhs[gr.type.boundary_dofs, :] = imp[uidx].T
+        for (gr, uidx, xidx, R, C), c in zip(self.groups, cols or [None] * len(self.groups)):
+            rows = uidx if c is None else uidx[c]
+            rhs = np.zeros((gr.U.shape[0], len(rows)))
+            rhs[gr.type.boundary_dofs, :] = imp[rows].T
             rhs[gr.clamped, :] = 0.0
             corr = None
             if np.any(rhs):

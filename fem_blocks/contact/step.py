@@ -178,6 +178,15 @@ class ContactStep:
             return None
         return self.comm, self.body_owner == self.comm.Get_rank()
 
+    def stepped_bodies(self):
+        """N > 1 ranks in colour order with frozen geometry, once the contact set is split: the mask (nb,) of the
+        bodies this rank steps, B = its own bodies, the bodies of its own contacts (`_rank_contacts`) and the rigid
+        bodies (the same array object while the contact set stays); else None (every body stepped: updated
+        geometry detects on every body's position). dynamics.py, "Bodies stepped per rank"."""
+        if self._local is None or self.opts.geometry != "frozen":
+            return None
+        return self._local.stepped
+
     def _split(self) -> bool:
         """N > 1 ranks in colour order: each rank holds the G blocks of its contacts and their neighbours only, and
         the Delassus rows of its own contacts (docs/scaling.md "Phase B1")."""
@@ -196,8 +205,11 @@ class ContactStep:
         near[cs.cand_body[own]] = True
         near[cs.ant_body[own]] = True
         L = np.flatnonzero(near[cs.cand_body] | near[cs.ant_body])
+        stepped = near.copy()
+        stepped[self.scene.rigid] = True
         return _RankContacts(L, own, np.searchsorted(L, own), np.repeat(mine, self.scene.W_size),
-                             np.argsort(owner, kind="stable"), np.bincount(owner, minlength=self.comm.Get_size()))
+                             np.argsort(owner, kind="stable"), np.bincount(owner, minlength=self.comm.Get_size()),
+                             stepped)
 
     def _build_G(self, centers, new_set: bool):
         """The G blocks of the contact set (N > 1 ranks in colour order: of this rank's contacts L only). new_set: the
@@ -696,7 +708,7 @@ class ContactStep:
         nc = len(cs.gap)
         self.steps += 1
         if nc == 0:
-            gc, rc, ri = s.corrections(np.zeros(s.n_udof))
+            gc, rc, ri = s.corrections(np.zeros(s.n_udof), sim.stepped_columns())
             return ContactResult(d, dict(contacts=0, active=0, sweeps=0, change=0.0, residual=0.0, converged=True,
                                          solver="none", message="no contact"), cs=cs, P=self.P.copy(),
                                  law=self.law.copy(), state=self.state.copy(), group_corr=gc, rigid_corr=rc,
@@ -777,7 +789,7 @@ class ContactStep:
             from mpi4py import MPI
             self.comm.Allreduce(MPI.IN_PLACE, counts, op=MPI.SUM)
         imp = self._impulse(P)
-        gc, rc, ri = s.corrections(imp)
+        gc, rc, ri = s.corrections(imp, sim.stepped_columns())  # (the bodies the simulation steps)
         tm["correction"] += perf_counter() - c3
         if not res.converged:
             self.n_unconverged += 1
@@ -801,6 +813,7 @@ class _RankContacts:
     """A rank's part of the contact set (N > 1 ranks in colour order, ContactStep._rank_contacts): L its contacts
     (global numbers, increasing: its own and those sharing a body with them or acting on its bodies), own its own
     contacts (global), own_pos their positions in L, dofs the mask of its bodies' dofs in the flat W numbering;
+    stepped the mask of the bodies it steps (its bodies, those of its own contacts, the rigid bodies);
     order every contact grouped by owner rank (rank 0's own contacts, then rank 1's, ..., each increasing) and counts
     the number each rank owns: the layout of the gather of the own rows (ContactStep._whole)."""
     L: np.ndarray
@@ -809,6 +822,7 @@ class _RankContacts:
     dofs: np.ndarray
     order: np.ndarray
     counts: np.ndarray
+    stepped: np.ndarray  # the bodies this rank steps (ContactStep.stepped_bodies): B and the rigid bodies
     scatter: tuple = None  # the PETSc scatter of the impulses of L's contacts owned elsewhere (_L_impulses)
 
     def destroy(self):

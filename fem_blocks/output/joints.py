@@ -206,8 +206,10 @@ class JointsWriter:
         self.dim, self.locate, self.lengths = dim, locate, lengths
         self.series = SeriesWriter(directory, "joints", append, keep_until_time)
 
-    def arrays(self, result):
-        j = record_joints(result, self.locate, self.lengths)
+    def arrays(self, result, locate=None):
+        """(points, point data) of the joints of `result`; `locate`: instead of the writer's (runner.joints_record:
+        the points gathered from the contacts' owners on N > 1 ranks)."""
+        j = record_joints(result, locate or self.locate, self.lengths)
         if j is None:
             return np.zeros((0, self.dim)), {}
         opened = ~(j.N > 0)
@@ -219,6 +221,6 @@ class JointsWriter:
                     n_contacts=j.n_contacts.astype(np.int64), normal=j.normal, tangent=j.tangent)
         return x, data
 
-    def write(self, time: float, result) -> str:
-        x, data = self.arrays(result)
+    def write(self, time: float, result, locate=None) -> str:
+        x, data = self.arrays(result, locate)
         return self.series.write_frame(time, x, [("vertex", np.arange(len(x)))], point_data=data)

@@ -9,12 +9,14 @@ von Mises stress (deformable cells; 0 on rigid polygons), body id, body kind (0 
 1 rigid). Fields are computed per block type with batched array operations (no per-node loop).
 `BodiesWriter3D`: the same for 3D bodies (Voigt stress (sxx, syy, szz, syz, sxz, sxy), 3D von Mises).
 
-On N MPI ranks (comm given; every rank holds the whole, identical state and calls write at the same steps): rank
-p writes the piece of the bodies [p nb / N, (p + 1) nb / N) (integer division, nb bodies; a rank with no body
-writes no piece) as `blocks_<frame>_p<p>.vtu`, the grid the serial writer makes of those bodies alone (the same
-arrays, per body the same points, cells and values, bitwise); rank 0 writes `blocks_<frame>.pvtu` over the pieces
-and `blocks.pvd` over the .pvtu files (pvd.SeriesWriter). The contact writer (contacts.py) stays whole: rank 0
-writes contacts.pvd alone.
+On N MPI ranks (comm given; every rank calls write at the same steps): rank p writes the piece of its bodies as
+`blocks_<frame>_p<p>.vtu`, the grid the serial writer makes of those bodies alone (the same arrays, per body the same
+points, cells and values, bitwise; a rank with no body writes no piece); rank 0 writes `blocks_<frame>.pvtu` over the
+pieces and `blocks.pvd` over the .pvtu files (pvd.SeriesWriter). A rank's bodies (`piece_of`): once the simulation's
+bodies are partitioned (the contact step's partition, dynamics.Simulation.own_bodies) those it owns, the only ones
+whose state it holds when the bodies are stepped per rank (dynamics.py, "Bodies stepped per rank"); before (the
+first frame) the block [p nb / N, (p + 1) nb / N) (integer division, nb bodies), every rank holding every body then.
+The contact writer (contacts.py) writes each rank's own contacts the same way.
 """
 from __future__ import annotations
 
@@ -36,6 +38,27 @@ def piece_owner(n_bodies: int, size: int) -> np.ndarray:
     """The rank whose piece holds each body (piece_bodies on each of `size` ranks): the last p with p nb / N <= i."""
     starts = np.arange(size, dtype=np.int64) * n_bodies // size
     return np.searchsorted(starts, np.arange(n_bodies, dtype=np.int64), side="right").astype(np.int64) - 1
+
+
+def piece_of(source, n_bodies: int, comm) -> np.ndarray:
+    """The bodies (increasing indices) whose piece this rank writes (module docstring): its own bodies when `source`
+    (a Simulation) has them partitioned (`own_bodies()` with a communicator), else `piece_bodies`."""
+    own = getattr(source, "own_bodies", None)
+    if comm is not None and own is not None:
+        _, mask, part = own()
+        if part is not None:
+            return np.flatnonzero(mask)
+    return np.asarray(piece_bodies(n_bodies, comm), dtype=np.int64)
+
+
+def _follow(writer, source, n_bodies: int) -> None:
+    """Rebuild `writer`'s static grid when the bodies of its piece changed (`piece_of`; at the first frame after the
+    partition)."""
+    mine = piece_of(source, n_bodies, writer.comm)
+    if not np.array_equal(mine, writer.mine):
+        writer.mine = mine
+        writer._build_static()
+
 
 # Voigt order of the stresses: 2D (xx, yy, xy), 3D (xx, yy, zz, yz, xz, xy)
 _VOIGT = {2: ((0, 0), (1, 1), (0, 1)), 3: ((0, 0), (1, 1), (2, 2), (1, 2), (0, 2), (0, 1))}
@@ -92,12 +115,13 @@ class BodiesWriter(SeriesWriter):
                  basename: str = "blocks", keep_until_time: float | None = None, comm=None):
         self.sim, self.stress = sim, stress
         super().__init__(directory, basename, append, keep_until_time, comm)
-        self.mine = piece_bodies(len(sim.bodies), self.comm)
+        self.mine = piece_of(sim, len(sim.bodies), self.comm)
         self._build_static()
 
     # ---------------------------------------------------------------- static topology
     def _build_static(self):
         sim = self.sim
+        self._nu = self._pe = None  # (the cells' Poisson ratios and plane-strain flags, taken at the first write)
         pts, blocks_tri, blocks_quad, polys = [], [], [], []
         body_of_cell = {"triangle": [], "quad": [], "polygon": []}
         self.layout = []  # (group, its members in this piece, point offset per member (k,), n_nodes)
@@ -181,19 +205,20 @@ class BodiesWriter(SeriesWriter):
         return point_data, cell_data
 
     def _cell_nu(self):
-        if not hasattr(self, "_nu"):
+        if self._nu is None:
             self._nu = np.array([getattr(getattr(self.sim.bodies[b], "type", None), "material", None).nu
                                  if self.sim.bodies[b].kind == 0 else 0.0 for b in self.cell_body])
         return self._nu
 
     def _cell_plane_strain(self):
-        if not hasattr(self, "_pe"):
+        if self._pe is None:
             self._pe = np.array([self.sim.bodies[b].kind == 0 and self.sim.bodies[b].type.material.plane == "strain"
                                  for b in self.cell_body])
         return self._pe
 
     # ---------------------------------------------------------------- write
     def write(self, time: float) -> str:
+        _follow(self, self.sim, len(self.sim.bodies))
         if not self.cells:  # (N ranks: no body in this rank's piece)
             return self.write_frame(time, None, None)
         point_data, cell_data = self.fields()
@@ -218,7 +243,7 @@ class BodiesWriter3D(SeriesWriter):
                  basename: str = "blocks", keep_until_time: float | None = None, comm=None):
         self.source, self.stress = bodies, stress
         super().__init__(directory, basename, append, keep_until_time, comm)
-        self.mine = piece_bodies(len(self.bodies), self.comm)
+        self.mine = piece_of(self.source, len(self.bodies), self.comm)
         self._build_static()
 
     @property
@@ -294,6 +319,7 @@ class BodiesWriter3D(SeriesWriter):
         return point_data, cell_data
 
     def write(self, time: float) -> str:
+        _follow(self, self.source, len(self.bodies))
         if not self.cells:  # (N ranks: no body in this rank's piece)
             return self.write_frame(time, None, None)
         point_data, cell_data = self.fields()
