@@ -53,7 +53,7 @@ class Mutation:
 MUTATIONS = [
     # the ten bugs of issue 19's table that survived (or were caught only incidentally)
     Mutation("theta_term", "θ term h²θ(1−θ)K u → h²θ²K u (free velocity)", "fem_blocks/dynamics.py",
-             "rhs -= h * h * th * (1 - th) * (bt.K @ gr.U)", "rhs -= h * h * th * th * (bt.K @ gr.U)",
+             "rhs -= h * h * th * (1 - th) * (bt.K @ U)", "rhs -= h * h * th * th * (bt.K @ U)",
              ("tests/test_theta_scheme.py",)),
     Mutation("rigid_force_weights", "rigid-body force weights (1−θ)F(t0) + θF(t1) swapped", "fem_blocks/dynamics.py",
              "b.Ftheta = (1 - th) * b.applied_force(t0, self.g) + th * b.applied_force(t1, self.g)",
@@ -144,7 +144,7 @@ MUTATIONS = [
              ("tests/test_corotational.py",)),
     Mutation("corot_checkpoint_frame", "checkpoint exports the placement R0 instead of the frame R",
              "fem_blocks/dynamics.py",
-             'd[f"sim.body{i}.R"] = np.array(b.R)', 'd[f"sim.body{i}.R"] = np.array(b.R0)',
+             'd[key + "R"] = np.array(b.R)', 'd[key + "R"] = np.array(b.R0)',
              ("tests/test_corotational.py",)),
     # rotating blocks: output, small-rotation warning, acceptance tests (issue 22)
     Mutation("rotation_weights_sign", "best-fit small rotation Σ m r × q → Σ m q × r (2D rotation weights)",
@@ -188,7 +188,8 @@ MUTATIONS = [
              ("tests/test_placement.py",)),
     Mutation("colour_exchange_wrong", "distributed sweep: after each colour, the impulses of colour 0 are exchanged",
              "fem_blocks/distributed/colour.py",
-             "                self._exchange(c)", "                self._exchange(0)",
+             "                                          cases)\n                self._exchange(c)\n",
+             "                                          cases)\n                self._exchange(0)\n",
              ("tests/test_dist_run.py",)),
     Mutation("groups_uncoupled", "colour groups: coupled groups may share a colour (the group graph without W)",
              "fem_blocks/distributed/colour.py",
@@ -238,7 +239,7 @@ MUTATIONS = [
              "fem_blocks/distributed/colour.py", "                self._exchange(c)\n        qo = ",
              "                pass\n        qo = ", ("tests/test_dist_own_rows.py",)),
     Mutation("own_rows_gathered_in_rank_order", "N ranks, own rows: the step's record left in rank order, not put "
-             "back in contact order", "fem_blocks/contact/step.py", "    out[order] = buf\n",
+             "back in contact order", "fem_blocks/distributed/sweep.py", "    out[order] = buf\n",
              "    out[:] = buf\n", ("tests/test_dist_own_rows.py",)),
     Mutation("own_rows_redetect_whole_index", "N ranks, own rows: a re-detected contact's impulse carried from its "
              "old number in the whole set, not from the old own rows", "fem_blocks/contact/step.py",
@@ -286,6 +287,30 @@ MUTATIONS = [
              "fem_blocks/linalg.py", "        if k == 0:\n            return np.zeros((n, 0))\n",
              "        if k == 0:\n            return np.zeros((n, 0))\n        if k == 1:\n"
              "            return self.solve(b[:, 0])[:, None]\n", ("tests/test_linalg.py", "tests/test_body_sums.py")),
+    # bodies stepped per rank (issue 24, phase B2)
+    Mutation("stepped_every_body", "N ranks, frozen geometry: every rank steps every body", "fem_blocks/dynamics.py",
+             "                out.append(None if gr.framed or not gr.op.factor.columnwise or s.size == len(gr.members) "
+             "else s)\n", "                out.append(None)\n", ("tests/test_dist_own_bodies.py",)),
+    Mutation("stepped_others_kept", "N ranks: the bodies a rank does not step keep their last values, not NaN",
+             "fem_blocks/dynamics.py", "                A[:, off] = np.nan\n", "                pass\n",
+             ("tests/test_dist_own_bodies.py",)),
+    Mutation("stepped_shared_ignored", "N ranks: the shared bodies not added to a rank's stepped bodies",
+             "fem_blocks/dynamics.py", "            mask[self.shared] = True\n", "            pass\n",
+             ("tests/test_dist_own_bodies.py", "tests/test_dist_run.py")),
+    Mutation("stepped_reset_every_column", "N ranks: the velocity reset zeroes every body's velocity, not the stepped "
+             "ones'", "fem_blocks/dynamics.py", "                    gr.U[:, s] = 0.0\n",
+             "                    gr.U[:] = 0.0\n", ("tests/test_dist_own_bodies.py",)),
+    Mutation("read_bodies_not_shared", "N ranks: the bodies of the gauges and rotation columns not stepped on every "
+             "rank", "fem_blocks/runner.py", "    sim.share_bodies(read_bodies(case, model, rot_ids, gauge_ids))",
+             "    sim.share_bodies([])", ("tests/test_dist_run.py",)),
+    Mutation("joints_points_every_contact", "N ranks: every rank computes the joints' points of every contact",
+             "fem_blocks/runner.py", "    if rec.rows is None:\n        return rec, model.contact.contact_points\n",
+             "    if True:\n        return rec.whole(), model.contact.contact_points\n", ("tests/test_dist_run.py",)),
+    Mutation("figures_not_collected", "N ranks: rank 0 draws the figures without collecting the bodies' state",
+             "fem_blocks/runner.py", "        sim.collect_bodies()", "        pass", ("tests/test_dist_run.py",)),
+    Mutation("pieces_contiguous", "N ranks: blocks.pvd's pieces stay blocks of contiguous bodies, not the partition",
+             "fem_blocks/output/paraview.py", "    if comm is not None and own is not None:\n",
+             "    if False:\n", ("tests/test_dist_run.py",)),
 ]
 
 IGNORE = shutil.ignore_patterns(".git", "__pycache__", ".venv", "*.pyc", ".pytest_cache", "out", "*.egg-info")
