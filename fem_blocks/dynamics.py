@@ -295,12 +295,16 @@ class Simulation:
             self.contact.on_step_change(self)
 
     # -------------------------------------------------------------- loads
-    def _group_load(self, gr: _Group, t: float) -> np.ndarray:
-        F = gr.Fg.copy()
+    def _group_load(self, gr: _Group, t: float, s=None) -> np.ndarray:
+        """The applied load F(t) (gravity, tractions) of the group's bodies of columns s (None: every member)."""
+        F = gr.Fg.copy() if s is None else gr.Fg.take(s, axis=1)
         for j in gr.traction_bodies:
+            k = j if s is None else int(np.searchsorted(s, j))  # (its column in F)
+            if s is not None and (k == len(s) or s[k] != j):
+                continue
             body = self.bodies[gr.members[j]]
             for tr in body.tractions:
-                F[:, j] += tr.history(t) * body.type.traction_load(tr.tag, body.R.T @ np.asarray(tr.value, float))
+                F[:, k] += tr.history(t) * body.type.traction_load(tr.tag, body.R.T @ np.asarray(tr.value, float))
         return F
 
     # -------------------------------------------------------------- co-rotational frames (docs/method.md §7)
@@ -335,8 +339,8 @@ class Simulation:
             bt = gr.type
             if gr.framed:
                 self._frame_start(gr)
-            gr.Ftheta = (1 - th) * self._group_load(gr, t0) + th * self._group_load(gr, t1)
-            Q, U, F = columns(gr.Q, s), columns(gr.U, s), columns(gr.Ftheta, s)  # (the stepped bodies')
+            F = (1 - th) * self._group_load(gr, t0, s) + th * self._group_load(gr, t1, s)  # (the stepped bodies')
+            Q, U = columns(gr.Q, s), columns(gr.U, s)
             KQ = bt.K @ Q
             if gr.framed:
                 rhs = bt.M @ gr.Ueff - h * KQ + h * F
@@ -350,9 +354,9 @@ class Simulation:
             uf = gr.op.solve(rhs)
             uf[gr.clamped, :] = 0.0
             if s is None:
-                gr.Ufree = uf
+                gr.Ufree, gr.Ftheta = uf, F
             else:  # (the other columns: NaN since _narrow)
-                gr.Ufree[:, s] = uf
+                gr.Ufree[:, s], gr.Ftheta[:, s] = uf, F
         for i in self.rigid:
             b = self.bodies[i]
             if self.velocity_reset:
@@ -549,8 +553,8 @@ class Simulation:
         return self._stepped
 
     def _narrow(self) -> None:
-        """Set q, u and the free velocities of the bodies this process does not step to NaN, once per stepped set
-        (again after a restore or a new set of groups; module docstring)."""
+        """Set q, u, the free velocities and loads of the bodies this process does not step to NaN, once per stepped
+        set (again after a restore or a new set of groups; module docstring)."""
         cols = self.stepped_columns()
         key = self._stepped_key
         if key is None or key is self._narrowed:
@@ -559,9 +563,10 @@ class Simulation:
             if s is None:
                 continue
             off = np.setdiff1d(np.arange(len(gr.members)), s, assume_unique=True)
-            if getattr(gr, "Ufree", None) is None or gr.Ufree.shape != gr.U.shape:
-                gr.Ufree = np.zeros_like(gr.U)
-            for A in (gr.Q, gr.U, gr.Ufree):
+            for name in ("Ufree", "Ftheta"):  # (set by free_velocities: of every member before the first narrowing)
+                if getattr(gr, name, None) is None or getattr(gr, name).shape != gr.U.shape:
+                    setattr(gr, name, np.zeros_like(gr.U))
+            for A in (gr.Q, gr.U, gr.Ufree, gr.Ftheta):
                 A[:, off] = np.nan
         self._narrowed = key
 

@@ -311,6 +311,10 @@ MUTATIONS = [
     Mutation("pieces_contiguous", "N ranks: blocks.pvd's pieces stay blocks of contiguous bodies, not the partition",
              "fem_blocks/output/paraview.py", "    if comm is not None and own is not None:\n",
              "    if False:\n", ("tests/test_dist_run.py",)),
+    Mutation("stepped_traction_column", "N ranks: a traction added to the column of its body among all members, not "
+             "among the stepped ones", "fem_blocks/dynamics.py",
+             "            k = j if s is None else int(np.searchsorted(s, j))  # (its column in F)\n",
+             "            k = j  # (its column in F)\n", ("tests/test_body_sums.py",)),
 ]
 
 IGNORE = shutil.ignore_patterns(".git", "__pycache__", ".venv", "*.pyc", ".pytest_cache", "out", "*.egg-info")
