@@ -63,11 +63,12 @@ rank adds the terms of its own bodies and one Allreduce of the exact accumulator
 
 Bodies stepped per rank (N > 1 ranks in colour order, frozen geometry: the contact step's `stepped_bodies`). A
 rank steps only the bodies it reads: B_p = its own bodies, the bodies of its own contacts (their local velocities),
-the rigid bodies, and the bodies the outputs read at every step (`share_bodies`: gauges, rotation columns, joints,
-stop conditions). Each such body's step is the serial one, bitwise: its free velocity from its own state (a column
-of the batched solve: PETSc's LU solves each column alone, linalg.Factor; block types factored otherwise are stepped
-whole), its correction W H P from the impulses on it, all-reduced (contact/step.py `_impulse`). The other bodies'
-q, u (and free velocities) are set to NaN on this rank when the set is taken (`_narrow`): any reader of a body this
+the rigid bodies, and the bodies the outputs read at every step (`share_bodies`: those of the gauges, rotation
+columns, stop conditions and curve). Each such body's step is the serial one, bitwise: its free velocity from its own
+state (a column of the batched solve: PETSc's LU solves each column alone, linalg.Factor; block types factored
+otherwise are stepped whole), its correction W H P from the impulses on it, all-reduced (contact/step.py
+`_impulse`). The other bodies' q, u (and free velocities and loads) are set to NaN on this rank when the set is
+taken (`_narrow`): any reader of a body this
 rank does not step gets NaN, never a stale value; `collect_bodies` gives rank 0 every body's state from its owner
 (the figures at the end of a run).
 """

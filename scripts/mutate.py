@@ -315,6 +315,14 @@ MUTATIONS = [
              "among the stepped ones", "fem_blocks/dynamics.py",
              "            k = j if s is None else int(np.searchsorted(s, j))  # (its column in F)\n",
              "            k = j  # (its column in F)\n", ("tests/test_body_sums.py",)),
+    Mutation("totals_numpy", "the contacts' totals (dissipated, frictional work) summed by NumPy, not exactly",
+             "fem_blocks/contact/step.py",
+             "        return exact_sums(terms, self.comm if self._local is not None else None)\n",
+             "        return [float(np.sum(x)) for x in terms]\n", ("tests/test_dist_own_rows.py",)),
+    Mutation("totals_not_reduced", "N ranks: each rank's totals of its own contacts only (no all-reduce)",
+             "fem_blocks/contact/step.py",
+             "        return exact_sums(terms, self.comm if self._local is not None else None)\n",
+             "        return exact_sums(terms, None)\n", ("tests/test_dist_own_rows.py",)),
 ]
 
 IGNORE = shutil.ignore_patterns(".git", "__pycache__", ".venv", "*.pyc", ".pytest_cache", "out", "*.egg-info")

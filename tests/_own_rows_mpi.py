@@ -5,6 +5,7 @@ again; writes OUT.<rank>.json with, per rank, the rows the contact step holds an
 Usage: [mpirun -n N] python tests/_own_rows_mpi.py CASE.toml OUT
 """
 import json
+import math
 import sys
 
 import numpy as np
@@ -15,7 +16,9 @@ from _case_steps import digest, stepping
 def record(sim, step) -> dict:
     """The step's record of every contact (ContactResult.whole(), in contact order), its totals and statistics, the
     rows the record itself holds, and the velocities of the bodies this rank steps (those not NaN: dynamics.py
-    "Bodies stepped per rank"), as digests."""
+    "Bodies stepped per rank"), as digests; and math.fsum of the record's S_DISS and frictional work per contact
+    (the totals' expectation)."""
+    from fem_blocks.laws import S_DISS
     own = sim.last_contact
     c = own.whole()
     return dict(P=digest(c.P), r=digest(c.r), v=digest(c.v), state=digest(c.state), gt_end=digest(c.gt_end),
@@ -23,7 +26,8 @@ def record(sim, step) -> dict:
                 friction_total=float(c.friction_total), dissipated=float(c.dissipated),
                 stats=[own.stats.get(k) for k in ("contacts", "active", "slip", "sweeps")],
                 u={str(i): digest(b.u) for i, b in enumerate(sim.bodies) if not np.isnan(b.u).all()},
-                warm=digest(step.P), record_rows=int(len(own.P)))
+                warm=digest(step.P), record_rows=int(len(own.P)),
+                fsum=[math.fsum(c.state[:, S_DISS]), math.fsum(c.friction)])
 
 
 def main(path, out):

@@ -62,5 +62,9 @@ def test_each_rank_holds_and_steps_its_own_contacts_rows(serial, n, tmp_path):
         assert r["restored"] == {key: one["steps"][1][key] for key in ("P", "state")}
         assert r["again"] == r["steps"][2]
     assert one["again"] == one["steps"][2]
+    total = 0.0  # the totals: exact sums of the contacts' terms, rounded once (math.fsum), on one process too
+    for st in one["steps"]:
+        total += st["fsum"][1]
+        assert st["dissipated"] == st["fsum"][0] and st["friction_total"] == total
     assert len(set(s["P"] for s in one["steps"])) == 3  # the steps differ (not a trivial state)
     assert all(s["record_rows"] == nc for s in one["steps"])

@@ -249,11 +249,6 @@ class ContactStep:
                                f"{own.size} of this rank")
         return np.ascontiguousarray(a[own])
 
-    def _whole(self, x: np.ndarray) -> np.ndarray:
-        """Per-contact rows of the step's arrays (ROWS' layout) as the rows of every contact, in contact order, on
-        every rank: N > 1 ranks in colour order, one Allgatherv of the own contacts' rows; else x itself."""
-        return x if self._local is None else self._gather()(x)
-
     def _gather(self):
         """N > 1 ranks in colour order: the gather of the own rows of the current contact set (distributed/sweep.py
         `gather_rows` bound to its layout: a record keeps the gather of its own contact set)."""
@@ -270,11 +265,13 @@ class ContactStep:
 
     def _totals(self, friction=None) -> list:
         """[Σ S_DISS of the committed law states (+ Σ friction, the step's frictional work per contact, when given)]
-        over every contact, each summed in contact order [J] (N > 1 ranks: the own rows of every rank gathered side
-        by side, one Allgatherv, so the sums are one process's, bitwise)."""
+        over every contact [J], each an exact sum rounded once (distributed/exact.py: the same double whatever the
+        order and the split of the terms). N > 1 ranks in colour order: each rank adds its own rows, one Allreduce
+        of the accumulators (2 × 560 bytes) gives every rank one process's sums, bitwise."""
+        from ..distributed.exact import exact_sums
         from ..laws import S_DISS
-        every = self._whole(np.column_stack([self.state[:, S_DISS]] + ([friction] if friction is not None else [])))
-        return [float(np.ascontiguousarray(every[:, k]).sum()) for k in range(every.shape[1])]
+        terms = [self.state[:, S_DISS]] + ([friction] if friction is not None else [])
+        return exact_sums(terms, self.comm if self._local is not None else None)
 
     def law_codes(self, cs) -> np.ndarray:
         """The law code of every contact of the current contact set `cs` (its interfaces' laws)."""
