@@ -80,7 +80,7 @@ import numpy as np
 
 from . import corotational
 from .bodies import DeformableBody, DeformableBody3D, RigidBody, RigidBody3D, check_step
-from .distributed.exact import exact_sums
+from .distributed.exact import exact_sums, largest
 from .errors import InputError
 
 _BODY_KEY = "sim.body"  # a body's checkpoint entries: "sim.body<i>.<name>" (Simulation.export_state)
@@ -111,14 +111,6 @@ def columns(A: np.ndarray, c) -> np.ndarray:
 def _joined(terms: list) -> np.ndarray:
     """The per-body terms of a sum, as one array (empty: no term)."""
     return np.concatenate([np.ravel(t) for t in terms]) if terms else np.zeros(0)
-
-
-def _largest(x: float, comm) -> float:
-    """The largest of every rank's x (comm None: x)."""
-    if comm is None:
-        return x
-    from mpi4py import MPI
-    return comm.allreduce(x, op=MPI.MAX)
 
 
 def _dot_last(A: np.ndarray, x: np.ndarray) -> np.ndarray:
@@ -454,7 +446,7 @@ class Simulation:
             self._move_rigid(b, dq, t1)
             b.u[:] = unew
         work, wdrv, winert = exact_sums([_joined(x) for x in (work, wdrv, winert)], comm)
-        self._attribute_inertia(winert, drv_moves, _largest(dmax, comm))
+        self._attribute_inertia(winert, drv_moves, largest(dmax, comm))
         self.time, self.step_count = t1, self.step_count + 1
         self.external_work += work
         self.driver_work += wdrv
@@ -665,7 +657,7 @@ class Simulation:
             b = self.bodies[i]
             if mine[i] and not b.driven[:d].all():
                 v = max(v, float(np.linalg.norm(b.u[:d])))
-        return _largest(v, comm)
+        return largest(v, comm)
 
     def info(self, cinfo=None) -> StepInfo:
         kin, ela, pot = self.energies()

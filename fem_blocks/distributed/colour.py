@@ -62,7 +62,7 @@ from ..linalg import BlockCSR, matvec_bcsr
 from ..solver import nlgs
 from ..solver.parallel import colour_contacts, pair_colouring
 from ..solver.problem import SolverResult
-from .exact import exact_sums
+from .exact import exact_sums, largest
 
 MAX_OUTER = 100      # interface laws: most staggered passes (solver/nlgs.solve_cohesive's max_outer)
 X_TOL = 1e-12        # interface laws: the internal variables have stopped changing
@@ -283,12 +283,6 @@ class ColourSolver:
         from .sweep import gather_rows
         return gather_rows(self.comm, self._ids, self._counts, np.asarray(x_own).reshape(-1, width))
 
-    def _max(self, x: float) -> float:
-        if self.comm is None:
-            return x
-        from mpi4py import MPI
-        return self.comm.allreduce(x, op=MPI.MAX)
-
     def _sum_int(self, x: np.ndarray) -> np.ndarray:
         if self.comm is None:
             return x
@@ -355,8 +349,8 @@ class ColourSolver:
                                                  int(check_every), qnorm, cases, u, coh)
                 sweeps += s
                 self._u(qo, u)
-                dx = self._max(nlgs._update_internal(coh["law"], coh["par"], coh["st"], coh["ueff"], u, coh["h"],
-                                                     coh["theta"], coh["trial"]))
+                dx = largest(nlgs._update_internal(coh["law"], coh["par"], coh["st"], coh["ueff"], u, coh["h"],
+                                                   coh["theta"], coh["trial"]), self.comm)
                 if dx <= X_TOL or sweeps >= max_sweeps:
                     converged = converged and dx <= X_TOL
                     break

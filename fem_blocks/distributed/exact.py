@@ -29,6 +29,10 @@ partial sum overflows although the total would not). Otherwise the result is mat
 
 Message of a reduction: NBINS int64 = 560 bytes per summed quantity (`exact_sums` reduces several in one
 Allreduce of len(xs) NBINS int64).
+
+A maximum is exact under any order and split by itself: `largest` is the ranks' largest of one double (one
+Allreduce MAX), beside the sums for the same readers (the sweeps' stopping tests, the largest velocity and
+displacement increment of a step).
 """
 from __future__ import annotations
 
@@ -183,6 +187,16 @@ def exact_sums(xs, comm=None) -> list[float]:
         accumulate(np.asarray(x, dtype=np.float64).ravel(), accs[i])
     allreduce(accs, comm)
     return [value(a) for a in accs]
+
+
+def largest(x: float, comm=None) -> float:
+    """The largest of every rank's x (one Allreduce MAX; collective). comm: mpi4py or petsc4py communicator; None or
+    size 1: x."""
+    comm = _mpi_comm(comm)
+    if comm is None:
+        return x
+    from mpi4py import MPI
+    return comm.allreduce(x, op=MPI.MAX)
 
 
 def exact_sum(x, comm=None) -> float:
