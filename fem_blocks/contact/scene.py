@@ -178,12 +178,17 @@ class ContactScene:
         W_flat = np.ascontiguousarray(np.concatenate(parts)) if parts else np.zeros(0)
         return W_flat, W_offset, self.W_size.copy()
 
-    def gather(self, which: str) -> np.ndarray:
-        """Flat W-numbered vector of 'ufree', 'u' (start-of-step velocity) or 'q' (displacement)."""
+    def gather(self, which: str, cols=None) -> np.ndarray:
+        """Flat W-numbered vector of 'ufree', 'u' (start-of-step velocity) or 'q' (displacement). `cols`: per group the
+        columns of the bodies to take (Simulation.stepped_columns; None: every member); the other bodies' entries
+        are 0."""
         out = np.zeros(self.n_udof)
-        for gr, uidx, xidx, R, C in self.groups:
+        for (gr, uidx, xidx, R, C), c in zip(self.groups, cols or [None] * len(self.groups)):
             A = {"ufree": gr.Ufree, "u": gr.U, "q": gr.Q}[which]
-            out[uidx.ravel()] = A[gr.type.boundary_dofs, :].T.ravel()
+            if c is None:
+                out[uidx.ravel()] = A[gr.type.boundary_dofs, :].T.ravel()
+            else:
+                out[uidx[c].ravel()] = A[np.ix_(gr.type.boundary_dofs, c)].T.ravel()
         for i in self.rigid:
             b = self.sim.bodies[i]
             s = self.U_offset[i]

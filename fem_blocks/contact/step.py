@@ -711,7 +711,8 @@ class ContactStep:
                                  law=self.law.copy(), state=self.state.copy(), group_corr=gc, rigid_corr=rc,
                                  rigid_impulse=ri, friction=np.zeros(0), friction_total=self.friction_total,
                                  **self._record_rows())
-        ufree = s.gather("ufree")
+        stepped = sim.stepped_columns()  # (the bodies the simulation steps: the others' entries are not read)
+        ufree = s.gather("ufree", stepped)
         K = self._kin
         colours = self._colour_solver()
         # the step's contacts: every contact, or on N > 1 ranks in colour order this rank's own contacts (the rows of
@@ -721,9 +722,9 @@ class ContactStep:
         mine = (lambda x: x) if loc is None else (lambda x: np.ascontiguousarray(x[loc.own_pos]))
         # v_free = G u_free, v_i = G u_i and (frozen geometry) the normal jump (G q)_N
         vfree = mine(K.local_velocity(self.G, ufree, s.U_offset))
-        vi = mine(K.local_velocity(self.G, s.gather("u"), s.U_offset))
+        vi = mine(K.local_velocity(self.G, s.gather("u", stepped), s.U_offset))
         if self.opts.geometry == "frozen":
-            gt = self.gap_ref + mine(K.local_velocity(self.G, s.gather("q"), s.U_offset))[:, 0]
+            gt = self.gap_ref + mine(K.local_velocity(self.G, s.gather("q", stepped), s.U_offset))[:, 0]
         else:
             gt = own(cs.gap) - own(cs.g0) - self.g_built  # as-built contacts of the initial set: g - g0 - g_built
         area = own(cs.area)
