@@ -323,6 +323,17 @@ MUTATIONS = [
              "fem_blocks/contact/step.py",
              "        return exact_sums(terms, self.comm if self._local is not None else None)\n",
              "        return exact_sums(terms, None)\n", ("tests/test_dist_own_rows.py",)),
+    Mutation("takeover_stale_blocks", "updated geometry: a colour solver taken over keeps the previous W's blocks",
+             "fem_blocks/distributed/colour.py", "        np.take(W.blocks, src, axis=0, out=bl)\n", "",
+             ("tests/test_colour.py",)),
+    Mutation("takeover_contact_order", "a colour solver taken over takes the new blocks in contact order, not in "
+             "sweep order", "fem_blocks/distributed/colour.py", "np.take(W.blocks, src, axis=0, out=bl)",
+             "bl[...] = W.blocks", ("tests/test_colour.py",)),
+    Mutation("takeover_sig_no_bodies", "the take-over signature without the contacts' body pairs",
+             "fem_blocks/distributed/colour.py",
+             "            self._sig = _signature(W, n, np.asarray(cand, dtype=np.int64), np.asarray(ant, dtype=np.int64),\n"
+             "                                   np.int64(nb))\n",
+             "            self._sig = _signature(W, n)\n", ("tests/test_colour.py",)),
 ]
 
 IGNORE = shutil.ignore_patterns(".git", "__pycache__", ".venv", "*.pyc", ".pytest_cache", "out", "*.egg-info")

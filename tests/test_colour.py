@@ -14,8 +14,9 @@ from fem_blocks.linalg import BlockCSR
 from fem_blocks.solver import nlgs
 
 
-def problem(nb=9, nc=40, seed=1):
-    """(W BlockCSR with the assembly's pattern, q, mu, cand, ant): body 0 is held (it couples nothing)."""
+def problem(nb=9, nc=40, seed=1, held=True):
+    """(W BlockCSR with the assembly's pattern, q, mu, cand, ant): body 0 is held (it couples nothing), or with
+    held=False moves like the others (no block of zeros)."""
     rng = np.random.default_rng(seed)
     cand = rng.integers(1, nb, nc)
     ant = np.where(rng.random(nc) < 0.3, 0, rng.integers(1, nb, nc))
@@ -27,7 +28,8 @@ def problem(nb=9, nc=40, seed=1):
             H[3 * cand[a]:3 * cand[a] + 3, 2 * a + k] = g
             H[3 * ant[a]:3 * ant[a] + 3, 2 * a + k] = -rng.normal(size=3)
     minv = rng.uniform(0.5, 2.0, 3 * nb)
-    minv[:3] = 0.0  # body 0 held in every dof
+    if held:
+        minv[:3] = 0.0  # body 0 held in every dof
     Wd = H.T @ (minv[:, None] * H) + 0.05 * np.eye(2 * nc)
     indptr, idx, blocks, diag = [0], [], [], []
     for a in range(nc):
@@ -233,3 +235,128 @@ def test_a_step_after_close_assembles_w_again(tmp_path):
         sim.step()
         got.append(sim.last_contact.P.tobytes())
     assert got[0] == got[1]
+
+
+def test_permute_rows_moves_the_rows_in_place_as_a_gather_would():
+    """linalg.permute_rows (the rows put in sweep order in place, block by block along the permutation's cycles) against
+    the same rows gathered into new arrays: 2×2 and 3×3 blocks, rows of 0 to 5 blocks, a permutation with fixed
+    points and long cycles, the identity, no rows. Catches a cycle closed one block early or late, a block moved but
+    its column not relabelled, the row pointers of the old order kept."""
+    from fem_blocks.linalg import permute_rows
+    rng = np.random.default_rng(7)
+    for d, n, ident in ((2, 200, False), (3, 150, False), (2, 30, True), (2, 0, False)):
+        lens = rng.integers(0, 6, n)
+        indptr = np.concatenate([[0], np.cumsum(lens)]).astype(np.int64)
+        m = int(indptr[-1])
+        indices = rng.integers(0, max(n, 1), m).astype(np.int64)
+        blocks = rng.normal(size=(m, d, d))
+        perm = np.arange(n, dtype=np.int64) if ident else np.argsort(rng.integers(0, 6, n), kind="stable")
+        relabel = rng.permutation(max(n, 1)).astype(np.int64)
+        new_lens = lens[perm]
+        src = np.concatenate([np.arange(indptr[a], indptr[a + 1]) for a in perm]).astype(np.int64) if n else \
+            np.zeros(0, dtype=np.int64)
+        ix, bl = indices.copy(), blocks.copy()
+        ptr = permute_rows(indptr, ix, bl, perm.astype(np.int64), relabel)
+        assert np.array_equal(ptr, np.concatenate([[0], np.cumsum(new_lens)]))
+        assert np.array_equal(ix, relabel[indices[src]]) and np.array_equal(bl, blocks[src]), (d, n, ident)
+
+
+def _same_pattern(W, seed):
+    """W's pattern with other blocks (the next step's operator of the same contacts)."""
+    rng = np.random.default_rng(seed)
+    return BlockCSR(W.indptr.copy(), W.indices.copy(), W.blocks * rng.uniform(0.5, 1.5, W.blocks.shape),
+                    W.diag_pos.copy())
+
+
+def test_a_solver_of_the_same_structure_takes_over_the_previous_one():
+    """ColourSolver(..., previous=): the operator of the next step with the same contacts, body pairs and block
+    pattern (other values) takes over the previous solver's colours, sweep order and rows (its blocks array, refilled)
+    and solves as a solver built from scratch, bit for bit (r, u, sweeps, change); on one process and through
+    from_rows (one rank, MPI.COMM_SELF). It does not take over another structure: the bodies renumbered (other
+    groups), a block of zeros (colours from the values), or a previous solver that did not keep its layout.
+    Catches: the new blocks not taken (the previous values swept), taken in contact order instead of sweep order, the
+    signature without the body pairs."""
+    from mpi4py import MPI
+    from fem_blocks.distributed.colour import body_pair_groups
+    W, q, mu, cand, ant = problem(seed=5, held=False)
+    W2 = _same_pattern(W, 1)
+    fresh = ColourSolver(_same_pattern(W, 1), bodies=(cand, ant, 9))
+    ref = fresh.solve(q, mu, tol=1e-10, max_sweeps=200)
+    ids, n = np.arange(W.n), W.n
+    group = body_pair_groups(cand, ant, 9)[0]
+    for how in ("serial", "rows"):
+        if how == "serial":
+            make = lambda A, **kw: ColourSolver(A, bodies=(cand, ant, 9), take_rows=True, **kw)  # noqa: E731
+        else:
+            make = lambda A, **kw: ColourSolver.from_rows(A, ids, ids, n, group, np.zeros(n, int),  # noqa: E731
+                                                          MPI.COMM_SELF, take_rows=True, **kw)
+        first = make(BlockCSR(*[np.array(a, copy=True) for a in (W.indptr, W.indices, W.blocks, W.diag_pos)]),
+                     reusable=True)
+        first.solve(q, mu, tol=1e-10, max_sweeps=200)
+        held = first.rows[2]
+        A2 = BlockCSR(*[np.array(a, copy=True) for a in (W2.indptr, W2.indices, W2.blocks, W2.diag_pos)])
+        second = make(A2, previous=first)
+        assert first.rows is None and second.rows[2] is held and A2.blocks is held, how  # taken over, refilled
+        got = second.solve(q, mu, tol=1e-10, max_sweeps=200)
+        assert got.sweeps == ref.sweeps and got.change == ref.change, how
+        assert got.r.tobytes() == ref.r.tobytes() and got.u.tobytes() == ref.u.tobytes(), how
+        third = make(_same_pattern(W, 2), previous=second)  # (and again: the taken-over solver keeps its layout)
+        assert second.rows is None and third.rows[2] is held
+        third.destroy()
+    # not the same structure: a fresh build, the previous solver left whole
+    prev = ColourSolver(_same_pattern(W, 3), bodies=(cand, ant, 9), take_rows=True, reusable=True)
+    other = ColourSolver(_same_pattern(W, 1), bodies=((cand + 1) % 9, (ant + 1) % 9, 9), take_rows=True,
+                         previous=prev)
+    assert prev.rows is not None and other.rows[2] is not prev.rows[2]
+    Wz, *_ = problem(seed=5)  # body 0 held: blocks of zeros
+    zp = ColourSolver(_same_pattern(Wz, 3), bodies=(cand, ant, 9), take_rows=True, reusable=True)
+    zn = ColourSolver(_same_pattern(Wz, 1), bodies=(cand, ant, 9), take_rows=True, previous=zp)
+    assert zp.rows is not None and zn.rows[2] is not zp.rows[2]
+    plain = ColourSolver(_same_pattern(W, 3), bodies=(cand, ant, 9), take_rows=True)  # (not reusable)
+    again = ColourSolver(_same_pattern(W, 1), bodies=(cand, ant, 9), take_rows=True, previous=plain)
+    assert plain.rows is not None
+    b = again.solve(q, mu, tol=1e-10, max_sweeps=200)
+    assert b.r.tobytes() == ref.r.tobytes()
+
+
+def test_updated_geometry_takes_over_the_colour_solver_between_redetections(tmp_path, monkeypatch):
+    """Updated geometry assembles W at every step; between re-detections (redetect_every = 3) the contacts are the
+    same and the contact step's colour solver takes over the previous one (contact/step.py `_colour_solver`). The
+    run is the run whose solver is built from scratch at every step (take-over refused), bit for bit: impulses and
+    bodies' displacements after each of 5 steps. Catches a take-over that keeps the previous step's blocks, or one
+    across a re-detection with another contact set."""
+    import dist_cases
+    from fem_blocks.case import load_case
+    from fem_blocks.distributed import colour
+    from fem_blocks.dynamics import Simulation
+    from fem_blocks.expand import expand
+    from fem_blocks.model import build_model
+    path = tmp_path / "w.toml"
+    path.write_text(dist_cases.wall("w", courses=2, per=3).replace(
+        "[contact]\n", '[contact]\ngeometry = "updated"\nredetect_every = 3\n'))
+    real = colour.ColourSolver._take_over
+    runs, taken = [], []
+
+    def counted(self, previous, W, take_rows):
+        ok = real(self, previous, W, take_rows)
+        taken.append(ok)
+        return ok
+    for refuse in (False, True):
+        monkeypatch.setattr(colour.ColourSolver, "_take_over",
+                            (lambda self, p, W, t: False) if refuse else counted)
+        model = build_model(expand(load_case(str(path))))
+        sim = Simulation(model.bodies, h=1e-3, theta=1.0, gravity=model.gravity, velocity_reset=True,
+                         contact=model.contact)
+        out = []
+        for _ in range(5):
+            sim.step()
+            cs = model.contact.cs
+            out.append((sim.last_contact.P.tobytes(), b"".join(b.q.tobytes() for b in model.bodies),
+                        (cs.key.tobytes(), cs.cand_body.tobytes(), cs.ant_body.tobytes())))
+        runs.append(out)
+    sets = [s for _, _, s in runs[0]]
+    # taken over at steps 2, 3 and 5 (the contacts of the step before), at 4 (re-detected) iff the set is the same
+    assert taken[:3] == [False, True, True] and taken[4] is True
+    assert taken[3] == (sets[3] == sets[2])
+    assert runs[0] == runs[1]
+    assert len(set(p for p, _, _ in runs[0])) == 5

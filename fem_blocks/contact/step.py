@@ -365,23 +365,29 @@ class ContactStep:
         """order = "colours": the colour solver of the current Delassus operator (rebuilt with it); on N > 1
         ranks each contact is owned by the rank of its candidate body. W's arrays are given to the solver
         (take_rows: put in its sweep order in place, no second copy); in colour order nothing else reads them, and
-        `Wdel` then only identifies the operator the solver was built for."""
+        `Wdel` then only identifies the operator the solver was built for. Updated geometry assembles W at every
+        step, mostly for the same contacts: the new solver takes over the previous one's colours, sweep order and
+        scatters when the structure is the same (ColourSolver's `previous`: the same solver, bit for bit)."""
         if self.opts.order != "colours":
             return None
         if self._colours is not None and self._colours.W is self.Wdel:
             return self._colours
         from ..distributed.colour import ColourSolver, body_pair_groups
-        if self._colours is not None:
-            self._colours.destroy()
+        prev, updated = self._colours, self.opts.geometry == "updated"
+        if prev is not None and not updated:
+            prev.destroy()
+        reuse = dict(take_rows=True, previous=prev if updated else None, reusable=updated)
         if self._local is not None:
             cs = self.cs
             self._colours = ColourSolver.from_rows(self.Wdel, self._local.own, self._local.L, len(cs.gap),
                                                    body_pair_groups(cs.cand_body, cs.ant_body, self.scene.nb)[0],
-                                                   self._owner(), self.comm, take_rows=True)
-            return self._colours
-        owner = self._owner() if self.comm is not None else None
-        self._colours = ColourSolver(self.Wdel, owner, self.comm,
-                                     bodies=(self.cs.cand_body, self.cs.ant_body, self.scene.nb), take_rows=True)
+                                                   self._owner(), self.comm, **reuse)
+        else:
+            owner = self._owner() if self.comm is not None else None
+            self._colours = ColourSolver(self.Wdel, owner, self.comm,
+                                         bodies=(self.cs.cand_body, self.cs.ant_body, self.scene.nb), **reuse)
+        if prev is not None and updated:
+            prev.destroy()  # (nothing left to release if the new solver took it over)
         return self._colours
 
     def mark_W_dirty(self):

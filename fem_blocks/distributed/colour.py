@@ -152,6 +152,21 @@ def _in_sweep_order(lr, colour_own, shared: bool, fresh_indices: bool = False):
             colour_own[perm])
 
 
+def _signature(W: BlockCSR, *arrays) -> bytes | None:
+    """What fixes a colour solver's structure besides its blocks' values (ColourSolver's `previous`): W's block
+    pattern (indptr, indices) and the arrays given (contacts, groups, owners), as a digest; None if W has an
+    off-diagonal block of zeros (its colours would depend on the values: `coupling_rows`)."""
+    import hashlib
+    if coupling_rows(W) is not W:
+        return None
+    h = hashlib.blake2b(digest_size=32)
+    for a in (W.indptr, W.indices) + arrays:
+        a = np.ascontiguousarray(a)
+        h.update(f"{a.dtype.str}{a.shape};".encode())
+        h.update(a.tobytes() if a.ndim == 0 else memoryview(a).cast("B"))
+    return h.digest()
+
+
 class ColourSolver:
     """The colour-order NLGS for one Delassus operator W (set up once per W; collective when `comm` has N > 1
     ranks). contact_owner: (nc,) rank of each contact (N > 1); comm: an mpi4py communicator or None (serial);
@@ -161,13 +176,31 @@ class ColourSolver:
     The solver sweeps its rows in sweep order (`_in_sweep_order`: a colour's rows one after the other in memory).
     take_rows=True gives it W's arrays: they are put in that order in place and W, kept as `self.W` only to
     recognise the operator, is no longer a valid operator (the contact step, which assembles W for the solver
-    alone); otherwise the solver works on its own copy (W unchanged)."""
+    alone); otherwise the solver works on its own copy (W unchanged).
 
-    def __init__(self, W: BlockCSR, contact_owner=None, comm=None, bodies=None, take_rows: bool = False):
+    previous: the solver of the operator before (updated geometry: W is assembled again at every step, mostly for
+    the same contacts). When the new operator has the structure of the previous one — the same contacts, body-pair
+    groups and owners, the same block pattern row by row, and no block of zeros (`_signature`) — the colours, the
+    sweep order and the PETSc scatters are those the new operator would get (they depend on that structure only),
+    so they are taken over (`_take_over`) and only the new blocks are put in sweep order: the same solver, bit for
+    bit, as one built from scratch, without the colouring and the rows' permutation (most of the set-up). On N > 1
+    ranks the ranks take over only if every rank can (one all-reduce). `previous` is then spent (its PETSc objects
+    are this solver's); otherwise it is left as it is, for its owner to destroy. reusable: keep what a next
+    solver needs to take this one over (set when `previous` is given)."""
+
+    def __init__(self, W: BlockCSR, contact_owner=None, comm=None, bodies=None, take_rows: bool = False,
+                 previous: "ColourSolver | None" = None, reusable: bool = False):
         self.W = W
         self.d = W.dim
         n = self.n = W.n
         self.comm = comm if comm is not None and comm.Get_size() > 1 else None
+        self._sig = None
+        if (previous is not None or reusable) and bodies is not None and self.comm is None:
+            cand, ant, nb = bodies
+            self._sig = _signature(W, n, np.asarray(cand, dtype=np.int64), np.asarray(ant, dtype=np.int64),
+                                   np.int64(nb))
+            if self._take_over(previous, W, take_rows):
+                return
         if bodies is not None:
             cand, ant, nb = bodies
             if len(cand) != n or len(ant) != n:
@@ -185,6 +218,7 @@ class ColourSolver:
             self.ghost = np.zeros(0, dtype=np.int64)
             lr = LocalRows(self.owned, self.ghost, Wc.indptr, Wc.indices, Wc.blocks, Wc.diag_pos, np.zeros(0),
                            np.zeros(0))
+            self._ip0 = np.array(lr.indptr, dtype=np.int64) if self._sig is not None else None
             lr, c_sweep = _in_sweep_order(lr, colour, shared=Wc is W and not take_rows)
             self._sweep = lr.owned
             self._back = np.searchsorted(self.owned, self._sweep)  # sweep position -> position in `owned`
@@ -203,7 +237,8 @@ class ColourSolver:
 
     @classmethod
     def from_rows(cls, rows: BlockCSR, owned, columns, n: int, group, owner, comm,
-                  take_rows: bool = False) -> "ColourSolver":
+                  take_rows: bool = False, previous: "ColourSolver | None" = None,
+                  reusable: bool = False) -> "ColourSolver":
         """The colour solver of a run whose ranks hold only the rows of their own contacts (collective on `comm`,
         N > 1 ranks). rows: the rows of W of this rank's contacts `owned` (global numbers, increasing; row i is
         contact owned[i]), their column k meaning contact columns[k] (global numbers, increasing), as
@@ -212,7 +247,7 @@ class ColourSolver:
         every contact (one per group). The colours are those of `colour_groups` on the whole W: the greedy colouring
         of the group graph, each rank colouring its own groups from the nonzero blocks of its rows
         (distributed/greedy.py, no rank holds the whole graph), so the iterates are those of one process in colour
-        order, bitwise. take_rows: as for the constructor."""
+        order, bitwise. take_rows, previous, reusable: as for the constructor."""
         from .greedy import greedy_colours
         from .sweep import localise
         self = cls.__new__(cls)
@@ -222,6 +257,12 @@ class ColourSolver:
         columns = np.asarray(columns, dtype=np.int64)
         group = np.asarray(group, dtype=np.int64)
         owner = np.asarray(owner, dtype=np.int64)
+        self._sig = None
+        if previous is not None or reusable:
+            self._sig = _signature(rows, np.int64(n), np.int64(comm.Get_size()), owned, columns, group[columns],
+                                   owner[columns])
+            if self._take_over(previous, rows, take_rows):
+                return self
         one = np.zeros(int(group.max()) + 1 if group.size else 0, dtype=np.int64)
         one[group] = np.arange(group.size)  # a contact of each group: its owner is the group's
         r_loc, c_loc = _nonzero_blocks(rows)
@@ -249,6 +290,7 @@ class ColourSolver:
         from .sweep import DistSweep
         self.dist = None
         self.owned, self.ghost = lr.owned, lr.ghost
+        self._ip0 = np.array(lr.indptr, dtype=np.int64) if self._sig is not None else None
         lr, c_sweep = _in_sweep_order(lr, colour_local[:lr.owned.size], shared=shared, fresh_indices=True)
         self._sweep = lr.owned
         self._back = np.searchsorted(self.owned, self._sweep)  # sweep position -> position in `owned`
@@ -260,6 +302,31 @@ class ColourSolver:
         counts = np.array(self.comm.allgather(self.owned.size), dtype=np.int64)
         self._counts = counts
         self._ids = np.concatenate(self.comm.allgather(self.owned))  # gathered owned contacts, in rank order
+
+    def _take_over(self, previous, W: BlockCSR, take_rows: bool) -> bool:
+        """Become `previous` with the blocks of W (module docstring of the class, `previous`) if both have the same
+        signature (`_sig`; on N > 1 ranks if every rank's has: one all-reduce); False, and nothing done, if not.
+        W's rows are in `previous`'s layout before its sweep order (the structure is the same): the new blocks are
+        taken row by row into the sweep order (one gather into the solver's own blocks array, which held the
+        previous operator's); with take_rows W's arrays become the solver's, as when its rows are moved in place."""
+        same = previous is not None and self._sig is not None and previous._sig == self._sig
+        if self.comm is not None:
+            from mpi4py import MPI
+            same = bool(self.comm.allreduce(int(same), op=MPI.MIN))
+        if not same:
+            return False
+        sig = self._sig
+        self.__dict__.update({k: v for k, v in previous.__dict__.items() if k != "W"})
+        self._sig = sig
+        ip, ix, bl, dp = self.rows
+        perm, ip0 = self._back, self._ip0  # sweep row i <- row perm[i] of the rows as assembled
+        lens = ip[1:] - ip[:-1]
+        src = np.repeat(ip0[:-1][perm] - ip[:-1], lens) + np.arange(ip[-1], dtype=np.int64)
+        np.take(W.blocks, src, axis=0, out=bl)
+        previous.dist = previous.rows = None  # (spent: its scatters and arrays are this solver's)
+        if take_rows:
+            W.indptr, W.indices, W.blocks, W.diag_pos = ip, ix, bl, dp
+        return True
 
     @property
     def n_owned(self) -> int:
