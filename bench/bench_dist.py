@@ -19,8 +19,13 @@ With --checkpoint DIR, the state after the steps is also written as a checkpoint
 sizes of the pieces). (Until the contact step held its own contacts' rows only, it was also written as one file by
 rank 0, the layout before the pieces: rank 0 no longer holds the whole state.)
 
+With --geometry updated (and --redetect-every K) the steps re-detect the contacts every K steps and assemble W, G
+and the colour solver at every step; a line after the row gives the contact step's own timers per step (detection:
+geometry, detection and W; delassus: W alone; local: the local quantities and the colour solver's set-up; nlgs;
+correction), the slowest rank's.
+
 Usage: mpirun -n N .venv/bin/python bench/bench_dist.py [n_bricks ...] [--steps S] [--warm W] [--max-sweeps K]
-                                                        [--checkpoint DIR]
+                                                        [--checkpoint DIR] [--geometry G] [--redetect-every K]
 """
 import argparse
 import hashlib
@@ -42,6 +47,8 @@ from bench_partition import wall_case  # noqa: E402 (bench/ is on sys.path when 
 
 SETTINGS = """[contact]
 order = "colours"
+geometry = "{geometry}"
+redetect_every = {redetect}
 tol = 1e-4
 max_sweeps = {max_sweeps}
 [[stages]]
@@ -83,10 +90,10 @@ def checkpoint_times(sim, model, comm, directory, repeat=3):
     return min(t_many), max(sizes), min(sizes)
 
 
-def run(n_bricks, comm, steps, warm, show=True, max_sweeps=1000, ck_dir=None):
+def run(n_bricks, comm, steps, warm, show=True, max_sweeps=1000, ck_dir=None, geometry="frozen", redetect=1):
     with tempfile.TemporaryDirectory() as d:
         # the wall of bench_partition.py, with this benchmark's solver and steps
-        path = wall_case(n_bricks, d, SETTINGS.format(max_sweeps=max_sweeps))
+        path = wall_case(n_bricks, d, SETTINGS.format(max_sweeps=max_sweeps, geometry=geometry, redetect=redetect))
         comm.Barrier()
         c = time.perf_counter()
         model = build_model(expand(load_case(path)))
@@ -99,6 +106,7 @@ def run(n_bricks, comm, steps, warm, show=True, max_sweeps=1000, ck_dir=None):
     comm.Barrier()
     t_setup = time.perf_counter() - c
     t_nlgs0 = cs.timers["nlgs"]
+    timers0 = dict(cs.timers)
     sweeps, reac = [], []
     floor = next(i for i, b in enumerate(model.bodies) if b.kind == 1)
     c = time.perf_counter()
@@ -126,6 +134,11 @@ def run(n_bricks, comm, steps, warm, show=True, max_sweeps=1000, ck_dir=None):
               f"{rows[:, 8].max():.0f} | {h} |", flush=True)
         print(f"\nRSS after the steps per rank: {rows[:, 9].min():.0f}–{rows[:, 9].max():.0f} MB (the peak above may "
               "be the set-up's)", flush=True)
+    parts = {k: 1e3 * (v - timers0.get(k, 0.0)) / steps for k, v in cs.timers.items()}
+    every = comm.gather(parts) if comm.size > 1 else [parts]
+    if comm.rank == 0 and show:  # the contact step's own timers (ContactStep.timers), per step, slowest rank
+        print("contact step per step [ms], slowest rank: " + ", ".join(
+            f"{k} {max(p[k] for p in every):.0f}" for k in parts) + "\n", flush=True)
     if ck_dir is not None:
         tn, mbmax, mbmin = checkpoint_times(sim, model, comm, ck_dir)
         if comm.rank == 0:
@@ -143,6 +156,9 @@ if __name__ == "__main__":
     ap.add_argument("--max-sweeps", type=int, default=1000, help="[contact] max_sweeps of the wall's steps")
     ap.add_argument("--checkpoint", metavar="DIR", help="also time the checkpoint after the steps, written in DIR "
                     "as one piece per rank")
+    ap.add_argument("--geometry", choices=("frozen", "updated"), default="frozen",
+                    help="[contact] geometry (updated: W, G and the colour solver every step)")
+    ap.add_argument("--redetect-every", type=int, default=1, help="[contact] redetect_every (updated geometry)")
     a = ap.parse_args()
     comm = MPI.COMM_WORLD
     if comm.rank == 0:
@@ -152,4 +168,5 @@ if __name__ == "__main__":
               "(reactions, sweeps) |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|", flush=True)
     run(20, comm, 2, 1, show=False)  # warm-up: numba caches outside the timed runs
     for n in a.sizes:
-        run(n, comm, a.steps, a.warm, max_sweeps=a.max_sweeps, ck_dir=a.checkpoint)
+        run(n, comm, a.steps, a.warm, max_sweeps=a.max_sweeps, ck_dir=a.checkpoint, geometry=a.geometry,
+            redetect=a.redetect_every)

@@ -67,3 +67,26 @@ def test_match_3d_same_point_on_two_antagonists():
         (0, 3, (2.0, 1.0, 2.0)), (0, 3, (2.0, 0.0, 2.0)), (0, 3, (2.0, 1.0, 1.0)), (0, 3, (2.0, 0.0, 1.0)),
         (0, 2, (1.0, 1.0, 1.0)), (0, 2, (1.0, 0.0, 1.0)), (0, 2, (2.0, 1.0, 1.0)), (0, 2, (2.0, 0.0, 1.0))])
     check(cs[0], cs[1], old_ids, new_ids, 6)
+
+
+def test_match_is_the_lowest_old_contact_with_the_same_key_and_antagonist():
+    """match against its definition, by brute force: random keys of both signs (the detection's node and overlap keys
+    are negative) far apart in magnitude, repeated (key, antagonist) pairs in the old set (the lowest index wins),
+    antagonists up to the largest body. Catches a pair code that confuses two pairs (a key times too few bodies), a
+    match that is not the lowest old contact, or the old contacts' order lost."""
+    class Set:
+        def __init__(self, key, ant):
+            self.key, self.ant_body = key, ant
+
+        def __len__(self):
+            return len(self.key)
+    rng = np.random.default_rng(3)
+    values = np.array([-(2 ** 50), -12345678901, -7, -1, 0, 3, 9, 2 ** 40])
+    for trial in range(20):
+        nb = int(rng.integers(1, 6))
+        old, new = (Set(rng.choice(values, m), rng.integers(0, nb, m)) for m in rng.integers(0, 30, 2))
+        want = []
+        for k, a in zip(new.key, new.ant_body):
+            hits = [i for i in range(len(old)) if old.key[i] == k and old.ant_body[i] == a]
+            want.append(hits[0] if hits else -1)
+        assert match(old, new).tolist() == want, trial

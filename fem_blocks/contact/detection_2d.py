@@ -246,7 +246,10 @@ def _body_slots(mask, node, ant_body, cand_body) -> np.ndarray:
     idx = np.flatnonzero(mask)
     if len(idx) == 0:
         return slot
-    pairs, inv = np.unique(np.column_stack([node[idx], ant_body[idx]]), axis=0, return_inverse=True)
+    # the (node, antagonist body) pairs as one int64 in their lexicographic order (one sort of integers)
+    nbody = int(ant_body[idx].max()) + 1
+    codes, inv = np.unique(node[idx].astype(np.int64) * nbody + ant_body[idx], return_inverse=True)
+    pairs = np.column_stack([codes // nbody, codes % nbody])
     first = np.searchsorted(pairs[:, 0], pairs[:, 0])   # rows sorted by node: the first row of each node
     rank = np.arange(len(pairs)) - first
     if rank.max() >= SLOTS:
@@ -316,7 +319,9 @@ def detect(bx, bnode_body, bnode_local, bedges, bedge_body, kind, body_group, ta
     if np.any(nodes_pl):
         uk, inv = np.unique(key, return_inverse=True)
         # sum of L/2 over distinct candidate edges per node key
-        pair_code = np.unique(np.column_stack([inv, ce]), axis=0)
+        ne = len(bedges)  # (the distinct (node key, candidate edge) pairs, in lexicographic order)
+        pc = np.unique(inv.ravel().astype(np.int64) * ne + ce)
+        pair_code = np.column_stack([pc // ne, pc % ne])
         tsum = np.zeros(len(uk))
         np.add.at(tsum, pair_code[:, 0], 0.5 * L[pair_code[:, 1]])
         trib_sel = np.where(nodes_pl[sel], tsum[np.searchsorted(uk, key[sel])], trib[sel])

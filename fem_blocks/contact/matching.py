@@ -18,9 +18,11 @@ def match(old, new) -> np.ndarray:
     and `new` are ContactSets of either dimension (anything with int arrays `key` and `ant_body`)."""
     if len(old) == 0 or len(new) == 0:
         return -np.ones(len(new), dtype=np.int64)
-    rows = np.concatenate([np.column_stack([old.key, old.ant_body]), np.column_stack([new.key, new.ant_body])])
-    _, cid = np.unique(rows, axis=0, return_inverse=True)
-    cid = cid.ravel()
+    # (key, ant_body) as one int64 increasing with the pair in lexicographic order: the key's rank among the keys
+    # times the number of bodies, plus the body (one sort of integers, not of rows)
+    _, kid = np.unique(np.concatenate([old.key, new.key]), return_inverse=True)
+    ant = np.concatenate([old.ant_body, new.ant_body]).astype(np.int64)
+    cid = kid.ravel().astype(np.int64) * (int(ant.max()) + 1) + ant
     co, cn = cid[:len(old)], cid[len(old):]
     o = np.argsort(co, kind="stable")
     pos = np.minimum(np.searchsorted(co[o], cn), len(co) - 1)

@@ -320,9 +320,16 @@ class ColourSolver:
         self._sig = sig
         ip, ix, bl, dp = self.rows
         perm, ip0 = self._back, self._ip0  # sweep row i <- row perm[i] of the rows as assembled
+        # src[k]: the block of W that goes to sweep position k, one int64 per block (no other temporary): ones,
+        # the jump to the source row at each row start, summed
         lens = ip[1:] - ip[:-1]
-        src = np.repeat(ip0[:-1][perm] - ip[:-1], lens) + np.arange(ip[-1], dtype=np.int64)
-        np.take(W.blocks, src, axis=0, out=bl)
+        full = lens > 0
+        a, n_ = ip0[:-1][perm][full], lens[full]
+        src = np.ones(int(ip[-1]), dtype=np.int64)
+        if src.size:
+            src[ip[:-1][full]] = a - np.concatenate([[0], a[:-1] + n_[:-1] - 1])
+            np.cumsum(src, out=src)
+        np.take(W.blocks, src, axis=0, out=bl, mode="clip")  # ("clip": not buffered; src is in range)
         previous.dist = previous.rows = None  # (spent: its scatters and arrays are this solver's)
         if take_rows:
             W.indptr, W.indices, W.blocks, W.diag_pos = ip, ix, bl, dp
