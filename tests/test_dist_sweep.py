@@ -129,6 +129,29 @@ def expected_exchange(W, owner, size):
     return out
 
 
+def test_localise_numbers_owned_then_ghosts_in_increasing_order():
+    """sweep.localise (a rank's own rows, global column numbers -> local ones) against its definition: local number
+    of an owned contact = its position in `owned`; the ghosts = the columns met that are not owned, increasing, numbered
+    after them. Global numbers with gaps, owned contacts that no row reads, the largest number an owned one, no rows.
+    Catches a ghost list with repeats or owned contacts, ghosts numbered before the owned, a table cut at the largest
+    column."""
+    rng = np.random.default_rng(11)
+    for trial in range(30):
+        universe = np.sort(rng.choice(10 ** 6, 60, replace=False))
+        owned = np.sort(rng.choice(universe, int(rng.integers(0, 15)), replace=False))
+        nrow = owned.size
+        lens = rng.integers(0, 6, nrow)
+        indptr = np.concatenate([[0], np.cumsum(lens)]).astype(np.int64)
+        cols = np.concatenate([np.sort(rng.choice(universe, n, replace=False)) for n in lens]).astype(np.int64) \
+            if nrow else np.zeros(0, dtype=np.int64)
+        lr = ds.localise(owned, indptr, cols, np.zeros((cols.size, 2, 2)), np.zeros(nrow, dtype=np.int64))
+        ghost = np.array(sorted(set(cols.tolist()) - set(owned.tolist())), dtype=np.int64)
+        assert np.array_equal(lr.ghost, ghost), trial
+        number = {int(c): k for k, c in enumerate(owned)}
+        number.update({int(c): owned.size + k for k, c in enumerate(ghost)})
+        assert lr.indices.tolist() == [number[int(c)] for c in cols], trial
+
+
 @pytest.mark.parametrize("dim", [2, 3])
 def test_colour_solver_is_the_serial_colour_order_with_the_exact_residual(dim):
     """One process: ColourSolver (contacts coloured one by one, residual criterion every 10 sweeps) gives

@@ -77,11 +77,18 @@ def localise(owned, indptr, cols, blocks, diag_pos) -> LocalRows:
     owned first, then the ghosts (the other columns, increasing), their order within a row kept. q and mu empty."""
     owned = np.asarray(owned, dtype=np.int64)
     cols = np.asarray(cols, dtype=np.int64)
-    ghost = np.setdiff1d(cols, owned)
-    ids = np.concatenate([owned, ghost])
-    perm = np.argsort(ids, kind="stable")
-    local = perm[np.searchsorted(ids, cols, sorter=perm)]
-    return LocalRows(owned, ghost, np.asarray(indptr, dtype=np.int64), local.astype(np.int64), blocks,
+    # a table over the global numbers (linear in the blocks and the contacts, no sort of the blocks' columns):
+    # the columns met, less the owned ones, are the ghosts (increasing); local number = owned's position, then
+    # the ghost's after them
+    top = int(max(cols.max(initial=-1), owned.max(initial=-1))) + 1
+    seen = np.zeros(top, dtype=bool)
+    seen[cols] = True
+    seen[owned] = False
+    ghost = np.flatnonzero(seen).astype(np.int64)
+    lut = np.empty(top, dtype=np.int64)
+    lut[owned] = np.arange(owned.size, dtype=np.int64)
+    lut[ghost] = owned.size + np.arange(ghost.size, dtype=np.int64)
+    return LocalRows(owned, ghost, np.asarray(indptr, dtype=np.int64), lut[cols], blocks,
                      np.asarray(diag_pos, dtype=np.int64), np.zeros(0), np.zeros(0))
 
 
