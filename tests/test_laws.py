@@ -214,7 +214,11 @@ def test_mixed_path_dissipates_between_modes():
 
 def deformable_joint_peak(h, positions):
     """Deformable block glued (Fremond) on a fixed base, pulled by a rigid plate glued on top by a stiff
-    elastic interface: peak force of the joint."""
+    elastic interface: peak force of the joint. The plate goes up by 4 u_c over 1 s; the joint's peak comes at
+    u_c (t ~ 0.27 s), so the ramp is run to 2 u_c (t = 0.5 s), where the force is back below half the peak (an
+    assertion: the peak is behind; the Frémond branch w²/(c_N u³) gives 1/8 of it there, measured 0.13-0.16).
+    The steps past t = 0.5 s cannot change the peak (each step costs the same 20000 sweeps, about half the
+    test's time)."""
     mat = Material(E=1e10, nu=0.2, rho=2000.0, thickness=T)
     bt = BlockType(mesh_rectangle(L, 0.1, 0.05), mat)
     blk = DeformableBody(bt, (0.0, 0.0))
@@ -229,9 +233,10 @@ def deformable_joint_peak(h, positions):
                      ["b", "g", "p"], ContactOptions(tol=1e-10, max_sweeps=20000))
     sim = Simulation([blk, base, plate], h=h, theta=1.0, contact=cs, gravity=(0, 0), velocity_reset=True)
     peak = 0.0
-    for _ in range(int(round(1.0 / h))):
+    for _ in range(int(round(0.5 / h))):
         sim.step()
         peak = max(peak, plate.reaction[1])
+    assert plate.reaction[1] < 0.5 * peak  # past the peak: on the softening branch at 2 u_c
     return peak
 
 
