@@ -12,20 +12,11 @@ from _paths import ROOT  # noqa: E402
 from fem_blocks.cli import DEFAULT_DEMO, list_demos, main  # noqa: E402
 
 
-def _cli(capsys, *args):
-    """`fem-blocks ARGS` in this process (cli.main: the command's code, its exit status, stdout and stderr); the
-    command's own process entry is run by test_demo_options_passed_or_rejected (and tests/test_case.py). A launch
-    costs about 2.5 s of imports."""
-    capsys.readouterr()
-    code = main(list(args))
-    return subprocess.CompletedProcess(["fem-blocks", *args], code, *capsys.readouterr())
-
-
-def test_demo_command_quick(tmp_path, capsys):
+def test_demo_command_quick(tmp_path, cli):
     """`fem-blocks demo NAME --quick` end to end on the thesis' shear wall (≈ 15 s: the micro-model default takes
     ≈ 3-4 min, measured in docs/benchmarks.md, too long for the suite)."""
     out = tmp_path / "demo"
-    p = _cli(capsys, "demo", "shear_wall_fc_p030", "--quick", "--quiet", "--out", str(out))
+    p = cli("demo", "shear_wall_fc_p030", "--quick", "--quiet", "--out", out)  # in this process: conftest.cli
     assert p.returncode == 0, p.stderr
     assert "ParaView files:" in p.stdout and "peak horizontal force" in p.stdout
     s = json.loads((out / "summary.json").read_text())
@@ -47,9 +38,9 @@ def test_default_demo_is_the_micro_model_wall(capsys):
 
 
 # ----------------------------------------------------------------------------- 3D demos (Python, --quick)
-def _demo(tmp_path, capsys, name, *extra):
+def _demo(tmp_path, cli, name, *extra):
     out = tmp_path / name
-    p = _cli(capsys, "demo", name, "--quick", "--out", str(out), *extra)
+    p = cli("demo", name, "--quick", "--out", out, *extra)
     assert p.returncode == 0, p.stderr
     assert "ParaView files:" in p.stdout
     return out, json.loads((out / "summary.json").read_text())
@@ -74,12 +65,12 @@ def _tipping_lag(b, h, omega, psi):
     return omega * brentq(lambda t: omega * (math.sinh(p * t) / p - t) - psi, 1e-12, 50.0, xtol=1e-15)
 
 
-def test_tilting_table_quick(tmp_path, capsys):
+def test_tilting_table_quick(tmp_path, cli):
     """2D case-file demo (demos/tilting_table.toml, --quick ≈ 20 s): the table turns about its hinge (pivot driver),
     the stage stops when the block has turned by 2e-4 rad relative to the table; the table's angle then, read from
     summary.json, has tan within [0, +1 %] of b/h = 1/3, and within 0.2 % once the closed-form lag of the stop
     (1.07e-3 rad at 0.005 rad/s) is taken off (measured +0.35 % and -0.007 %); the block then falls to 0.35 rad."""
-    out, s = _demo(tmp_path, capsys, "tilting_table")
+    out, s = _demo(tmp_path, cli, "tilting_table")
     assert s["exit_status"] == 0
     tilt, fall = s["stages"]
     assert tilt["stopped"].startswith("rotation") and fall["stopped"].startswith("rotation")
@@ -93,14 +84,14 @@ def test_tilting_table_quick(tmp_path, capsys):
 
 
 @pytest.mark.parametrize("joints", ["dry", "brittle"])
-def test_dome_quick(tmp_path, capsys, joints):
+def test_dome_quick(tmp_path, cli, joints):
     """4-course dome on 4 piers, 1 hexahedron per block (quick): dry joints let exactly the blocks over the pier
     gaps fall (10 bed blocks, 3 + 2 + 2 + 3, and the 6 course-1 blocks bridging them), the piers then carry
     the rest: pier reaction / weight = 1 - loose weight fraction to 1e-3; brittle adhesion (r_c = 0.4 MPa,
     thesis §7.2.2.a) holds every block and the piers carry the whole weight. Updated contact geometry (co-rotational
     blocks, the wedge joints' as-built offsets): every hexahedron edge within 1e-4 of its length (observed 9.0e-6 dry,
     1.2e-5 brittle: elastic, the same in frozen geometry)."""
-    out, s = _demo(tmp_path, capsys, "dome", "--joints", joints)
+    out, s = _demo(tmp_path, cli, "dome", "--joints", joints)
     assert s["joints"] == joints and s["blocks"] == 88
     assert s["geometry"] == "updated" and s["max_edge_change"] <= 1e-4
     if joints == "dry":

@@ -106,15 +106,12 @@ def _run(case, out, *extra, wait=True):
     return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT)
 
 
-def _resume(capsys, case, out, *extra):
-    """`fem-blocks run CASE --out OUT --quiet --resume ...` in this process (cli.main: the command's own code, its
-    exit status and its stderr), after a run killed in another process: nothing of that run is in this process,
-    so the resumed run has only the checkpoint and the files (a launch costs about 2.5 s of imports). The
-    uninterrupted runs (the reference, the determinism run) and the killed runs stay separate processes."""
-    from fem_blocks.cli import main
-    capsys.readouterr()
-    code = main(["run", str(case), "--out", str(out), "--quiet", "--resume", *extra])
-    return subprocess.CompletedProcess(["fem-blocks"], code, *capsys.readouterr())
+def _resume(cli, case, out, *extra):
+    """`fem-blocks run CASE --out OUT --quiet --resume ...` in this process (conftest.cli: cli.main), after a run
+    killed in another process: nothing of that run is in this process, so the resumed run has only the checkpoint
+    and the files. The uninterrupted runs (the reference, the determinism run) and the killed runs stay separate
+    processes."""
+    return cli("run", case, "--out", out, "--quiet", "--resume", *extra)
 
 
 def _wait_for_checkpoint_step(proc, out, step, timeout=300):
@@ -198,7 +195,7 @@ def test_two_runs_are_bitwise_identical(reference, tmp_path):
     _assert_identical(_final(out), ref)
 
 
-def test_sigkill_at_a_random_step_then_resume_is_bitwise_identical(reference, tmp_path, capsys):
+def test_sigkill_at_a_random_step_then_resume_is_bitwise_identical(reference, tmp_path, cli):
     case, _, ref = reference
     n_steps = 30 + 200
     target = random.Random(12345).randrange(10, n_steps - 20)
@@ -209,12 +206,12 @@ def test_sigkill_at_a_random_step_then_resume_is_bitwise_identical(reference, tm
     proc.send_signal(signal.SIGKILL)
     proc.wait()
     # the kill left a history with rows past the checkpoint (or a torn last line): resume must cut them
-    p = _resume(capsys, case, out)
+    p = _resume(cli, case, out)
     assert p.returncode == UNCONVERGED, p.stderr
     _assert_identical(_final(out), ref)
 
 
-def test_truncated_checkpoint_falls_back_to_the_previous_one(reference, tmp_path, capsys):
+def test_truncated_checkpoint_falls_back_to_the_previous_one(reference, tmp_path, cli):
     case, _, ref = reference
     out = tmp_path / "trunc"
     proc = _run(case, out, wait=False)
@@ -227,13 +224,13 @@ def test_truncated_checkpoint_falls_back_to_the_previous_one(reference, tmp_path
     ck.write_bytes(data[: len(data) // 2])  # as if cut mid-write by a full disk
     prev_step = int(read_checkpoint(out / "checkpoint.prev.npz")["sim.step"])
     assert prev_step < newest
-    p = _resume(capsys, case, out)
+    p = _resume(cli, case, out)
     assert p.returncode == UNCONVERGED, p.stderr
     assert "checkpoint.npz" in p.stderr and "previous checkpoint" in p.stderr  # the fallback is reported
     _assert_identical(_final(out), ref)
 
 
-def test_sigint_writes_a_checkpoint_and_says_how_to_resume(reference, tmp_path, capsys):
+def test_sigint_writes_a_checkpoint_and_says_how_to_resume(reference, tmp_path, cli):
     case, _, ref = reference
     out = tmp_path / "int"
     proc = _run(case, out, wait=False)
@@ -245,12 +242,12 @@ def test_sigint_writes_a_checkpoint_and_says_how_to_resume(reference, tmp_path, 
     assert "--resume" in err and "Traceback" not in err
     ck = read_checkpoint(out / "checkpoint.npz")
     assert int(ck["sim.step"]) > s  # the step in progress was finished and checkpointed
-    p = _resume(capsys, case, out)
+    p = _resume(cli, case, out)
     assert p.returncode == UNCONVERGED, p.stderr
     _assert_identical(_final(out), ref)  # (the interruption added one frame at the checkpoint time; the last agree)
 
 
-def test_resume_refuses_a_changed_case_unless_forced(reference, tmp_path, capsys):
+def test_resume_refuses_a_changed_case_unless_forced(reference, tmp_path, cli):
     case, ref_out, _ = reference
     out = tmp_path / "changed"
     proc = _run(case, out, wait=False)
@@ -259,11 +256,11 @@ def test_resume_refuses_a_changed_case_unless_forced(reference, tmp_path, capsys
     proc.wait()
     changed = tmp_path / "case.toml"
     changed.write_text(CASE.replace("tol = 1e-6", "tol = 1e-7"))
-    p = _resume(capsys, changed, out)
+    p = _resume(cli, changed, out)
     assert p.returncode == 2 and "changed since this checkpoint" in p.stderr and "--force" in p.stderr
-    p = _resume(capsys, changed, out, "--force")
+    p = _resume(cli, changed, out, "--force")
     assert p.returncode == UNCONVERGED, p.stderr
-    p = _resume(capsys, case, tmp_path / "empty")
+    p = _resume(cli, case, tmp_path / "empty")
     assert p.returncode == 2 and "cannot resume" in p.stderr
 
 
