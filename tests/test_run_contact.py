@@ -55,12 +55,11 @@ min_steps = 5
 """
 
 
-def test_prism_case_runs_to_equilibrium_with_contact_outputs(tmp_path):
+def test_prism_case_runs_to_equilibrium_with_contact_outputs(tmp_path, cli):
     case = tmp_path / "prism.toml"
     case.write_text(CASE)
     out = tmp_path / "out"
-    p = subprocess.run([sys.executable, "-m", "fem_blocks.cli", "run", str(case), "--out", str(out), "--quiet"],
-                       capture_output=True, text=True, cwd=ROOT, timeout=600)
+    p = cli("run", case, "--out", out, "--quiet")  # in this process (conftest.cli)
     assert p.returncode == 0, p.stderr
     s = json.loads((out / "summary.json").read_text())
     st = s["stages"][0]
@@ -132,7 +131,7 @@ def test_interface_law_keys_validated_with_units(tmp_path):
     assert c.interfaces[0].params["w"] == pytest.approx(20.0)    # 0.02 N/mm = 20 J/m^2
 
 
-def test_cohesive_case_writes_law_state_to_paraview_and_checkpoint(tmp_path):
+def test_cohesive_case_writes_law_state_to_paraview_and_checkpoint(tmp_path, cli):
     from fem_blocks.output.checkpoint import read_checkpoint
     text = CASE.replace('name = "bed"\nbetween = ["bricks", "bricks"]\nmu = 0.6',
                         'name = "bed"\nbetween = ["bricks", "bricks"]\nlaw = "fremond"\nmu = 0.6\nc_N = 1e10\n'
@@ -140,8 +139,7 @@ def test_cohesive_case_writes_law_state_to_paraview_and_checkpoint(tmp_path):
     case = tmp_path / "c.toml"
     case.write_text(text)
     out = tmp_path / "out"
-    p = subprocess.run([sys.executable, "-m", "fem_blocks.cli", "run", str(case), "--out", str(out), "--quiet"],
-                       capture_output=True, text=True, cwd=ROOT, timeout=600)
+    p = cli("run", case, "--out", out, "--quiet")
     assert p.returncode == 0, p.stderr
     ck = read_checkpoint(out / "checkpoint.npz")
     h = read_history(out / "history.csv")
@@ -155,7 +153,7 @@ def test_cohesive_case_writes_law_state_to_paraview_and_checkpoint(tmp_path):
     assert np.allclose(np.asarray(m.point_data["damage"]).ravel(), 0.0)
 
 
-def test_arch_case_stands_under_gravity(tmp_path):
+def test_arch_case_stands_under_gravity(tmp_path, cli):
     """[arch] builder: 15 voussoirs of one block type (rotated instances) on rigid piers; t/R = 0.26 stands."""
     from fem_blocks.case import load_case
     from fem_blocks.expand import expand
@@ -165,8 +163,7 @@ def test_arch_case_stands_under_gravity(tmp_path):
     assert len(c.blocks) == 15 and len(c.block_types) == 1 and [r.name for r in c.rigid_bodies] == ["pier0", "pier1"]
     assert len({b.angle for b in c.blocks}) == 15
     out = tmp_path / "arch"
-    p = subprocess.run([sys.executable, "-m", "fem_blocks.cli", "run", os.path.join(ROOT, "demos", "arch.toml"),
-                        "--out", str(out), "--quiet"], capture_output=True, text=True, cwd=ROOT, timeout=600)
+    p = cli("run", os.path.join(ROOT, "demos", "arch.toml"), "--out", out, "--quiet")
     assert p.returncode == 0, p.stderr
     h = read_history(out / "history.csv")
     assert h["max_velocity"][-1] < 1e-4  # at rest: the arch stands
@@ -174,7 +171,7 @@ def test_arch_case_stands_under_gravity(tmp_path):
     assert h["pier0.Ry"][-1] + h["pier1.Ry"][-1] == pytest.approx(weight, rel=0.01)  # polygonal arcs: ~0.1 %
 
 
-def test_stage_forces_and_drivers(tmp_path):
+def test_stage_forces_and_drivers(tmp_path, cli):
     """A later stage applies a force on a previously driven dof of the beam (freed), and freeing a dof of a
     massless body is a clear error."""
     text = CASE.replace("[wall.foundation]\ndepth = 0.05", "[wall.foundation]\ndepth = 0.05\n[wall.beam]\ndepth = 0.05\n"
@@ -201,15 +198,14 @@ y = -500.0
     case = tmp_path / "c.toml"
     case.write_text(text)
     out = tmp_path / "out"
-    p = subprocess.run([sys.executable, "-m", "fem_blocks.cli", "run", str(case), "--out", str(out), "--quiet"],
-                       capture_output=True, text=True, cwd=ROOT, timeout=600)
+    p = cli("run", case, "--out", out, "--quiet")
     assert p.returncode == 0, p.stderr
     h = read_history(out / "history.csv")
     weight = 2000.0 * 3 * 0.2 * 0.05 * 0.1 * 9.81 + 7800.0 * 0.05 * 0.2 * 0.1 * 9.81
     assert h["beam.Ry"][-1] == 0.0  # y is free in stage 2: no driver reaction
     assert h["foundation.Ry"][-1] == pytest.approx(weight + 500.0, rel=1e-4)
     bad = text.replace("[stages.forces.beam]", "[stages.forces.foundation]")
-    case.write_text(bad)
+    case.write_text(bad)  # its own process: one line on stderr, nothing else (no warning, no traceback)
     p = subprocess.run([sys.executable, "-m", "fem_blocks.cli", "run", str(case), "--out", str(out), "--quiet"],
                        capture_output=True, text=True, cwd=ROOT, timeout=600)
     assert p.returncode == 2 and len(p.stderr.strip().splitlines()) == 1
