@@ -13,21 +13,18 @@ now ends at 0.36 s (largest rotation 0.29 rad at full resolution), before the mi
 import csv
 import glob
 import json
-import subprocess
-import sys
 
 import numpy as np
 import pytest
 
 pytestmark = pytest.mark.dolfinx
-from _paths import DEMOS, ROOT  # noqa: E402
+from _paths import DEMOS  # noqa: E402
 
 
-def test_arch_collapse_quick_voussoirs_turn_and_keep_their_size(tmp_path):
+def test_arch_collapse_quick_voussoirs_turn_and_keep_their_size(tmp_path, cli):
     import meshio
     out = tmp_path / "arch_collapse"
-    p = subprocess.run([sys.executable, "-m", "fem_blocks.cli", "run", f"{DEMOS}/arch_collapse.toml", "--quick",
-                        "--quiet", "--out", str(out)], capture_output=True, text=True, cwd=ROOT, timeout=300)
+    p = cli("run", f"{DEMOS}/arch_collapse.toml", "--quick", "--quiet", "--out", out)  # in this process: conftest.cli
     assert p.returncode == 0, p.stderr
     s = json.loads((out / "summary.json").read_text())
     assert s["status"] == "completed" and s["warnings"] == [] and s["convergence"]["unconverged_steps"] == 0

@@ -180,11 +180,11 @@ output_every = 2
 """
 
 
-def test_run_writes_paraview_history_summary(tmp_path):
+def test_run_writes_paraview_history_summary(tmp_path, cli):
     case = tmp_path / "small.toml"
     case.write_text(SMALL_CASE)
     out = tmp_path / "out"
-    p = run_cli("run", str(case), "--out", str(out), "--quiet")
+    p = cli("run", case, "--out", out, "--quiet")  # in this process (conftest.cli)
     assert p.returncode == 0, p.stderr
     assert "blocks.pvd" in p.stdout
     pvd = (out / "paraview" / "blocks.pvd").read_text()

@@ -277,12 +277,14 @@ def test_every_newton_pass_runs_at_the_extrapolated_damage():
 
 # ----------------------------------------------------------------------------- checkpoint / resume
 @pytest.mark.dolfinx
-def test_resume_from_a_checkpoint_is_bitwise_with_implex(tmp_path):
+def test_resume_from_a_checkpoint_is_bitwise_with_implex(tmp_path, cli):
     """The damage rate of the extrapolation lives in the law state (column S_HIST), so a checkpoint carries it:
     the small wall of tests/test_resume.py with IMPL-EX Frémond joints (weaker), run through; then its output directory
     with the previous checkpoint (checkpoint_every = 7) put back as the newest, resumed: the same history, bitwise.
     The final checkpoint holds non-zero rates (the column is part of the checkpointed state); the rates of the
-    previous checkpoint happen to be 0 in this run, so a rate kept outside the state would not be caught here."""
+    previous checkpoint happen to be 0 in this run, so a rate kept outside the state would not be caught here.
+    The reference runs in its own process, the resume in this one (conftest.cli): nothing of the reference is in
+    the resumed run's process."""
     import shutil
     import subprocess
     import sys
@@ -298,19 +300,16 @@ def test_resume_from_a_checkpoint_is_bitwise_with_implex(tmp_path):
     case.write_text(CASE.replace('law = "fremond"', 'law = "fremond"\ndamage_integration = "implex"')
                     .replace("w = 18.0", "w = 0.001"))
 
-    def run(out, *extra):
-        return subprocess.run([sys.executable, "-m", "fem_blocks.cli", "run", str(case), "--out", str(out),
-                               "--quiet", *extra], capture_output=True, text=True, cwd=ROOT, timeout=600)
-
     ref = tmp_path / "ref"
-    p = run(ref)
+    p = subprocess.run([sys.executable, "-m", "fem_blocks.cli", "run", str(case), "--out", str(ref), "--quiet"],
+                       capture_output=True, text=True, cwd=ROOT, timeout=600)
     assert p.returncode in (0, 3), p.stderr
     st = read_checkpoint(ref / "checkpoint.npz")["contact.state"]
     assert np.any(st[:, S_HIST] < 0.0)  # IMPL-EX rates of β in the checkpoint (Frémond: β decreasing)
     again = tmp_path / "again"
     shutil.copytree(ref, again)
     os.replace(again / "checkpoint.prev.npz", again / "checkpoint.npz")
-    p2 = run(again, "--resume")
+    p2 = cli("run", case, "--out", again, "--quiet", "--resume")
     assert p2.returncode == p.returncode, p2.stderr
     assert (again / "history.csv").read_text() == (ref / "history.csv").read_text()
     a, b = read_checkpoint(again / "checkpoint.npz"), read_checkpoint(ref / "checkpoint.npz")

@@ -13,14 +13,12 @@ The read-out formulas on hand-made arrays, the dead load F2 e2 by hand, one CLI 
 """
 import json
 import os
-import subprocess
-import sys
 
 import numpy as np
 import pytest
 
 pytestmark = pytest.mark.dolfinx
-from _paths import DEMOS, ROOT  # noqa: E402
+from _paths import DEMOS  # noqa: E402
 
 from fem_blocks.lab import load_lab, run_lab  # noqa: E402
 from fem_blocks.lab.bond_tension import peak_problems, tension_readout  # noqa: E402
@@ -206,13 +204,12 @@ def test_bond_wrench_brittle_joint_fw_is_ft(tmp_path):
 
 # ------------------------------------------------------------------------------------------ the demos
 @pytest.mark.parametrize("demo", ["couplet_tension", "bond_wrench"])
-def test_demo_cli_quick(tmp_path, demo):
+def test_demo_cli_quick(tmp_path, cli, demo):
     """`fem-blocks run demos/DEMO.toml --quick` end to end (deformable bricks, the wall's joint): exit 0, the report
     and figure; couplet tension reads f_t back within 1 % and G_I within 2 %; the bond wrench's ductile joint gives
     f_w above f_t (the standard's elastic formula on a joint that redistributes)."""
     out = tmp_path / demo
-    p = subprocess.run([sys.executable, "-m", "fem_blocks.cli", "run", os.path.join(DEMOS, f"{demo}.toml"), "--quick",
-                        "--quiet", "--out", str(out)], capture_output=True, text=True, cwd=ROOT, timeout=300)
+    p = cli("run", os.path.join(DEMOS, f"{demo}.toml"), "--quick", "--quiet", "--out", out)  # this process: conftest.cli
     assert p.returncode == 0, p.stdout + p.stderr
     s = json.loads((out / "summary.json").read_text())
     q = s["quantities"]

@@ -5,8 +5,6 @@ Expectations from closed forms or hand computations."""
 import json
 import math
 import os
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -215,14 +213,13 @@ def test_step_with_no_contact_is_free_flight():
     assert blk.q[1] == pytest.approx(-0.5 * 9.81 * 0.1 ** 2, rel=1e-12)
 
 
-def test_cli_exit_status_1_on_policy_fail(tmp_path):
+def test_cli_exit_status_1_on_policy_fail(tmp_path, cli):
     """`on_nonconvergence = "fail"`: the CLI exits 1 after writing the outputs, with the reason on stderr."""
     text = CASE.replace("tol = 1e-10\nmax_sweeps = 100000", 'tol = 1e-12\nmax_sweeps = 2\non_nonconvergence = "fail"')
     p = tmp_path / "c.toml"
     p.write_text(text)
     out = tmp_path / "out"
-    r = subprocess.run([sys.executable, "-m", "fem_blocks.cli", "run", str(p), "--out", str(out), "--quiet"],
-                       capture_output=True, text=True, cwd=ROOT, timeout=600)
+    r = cli("run", p, "--out", out, "--quiet")  # in this process (conftest.cli): an uncaught error would raise
     assert r.returncode == 1, r.stderr
     assert "did not converge" in r.stderr
     assert json.loads((out / "summary.json").read_text())["status"].startswith("stopped:")

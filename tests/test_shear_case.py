@@ -2,8 +2,6 @@
 with the beam's vertical displacement blocked (stage drivers), stop after the peak, figures and summary."""
 import json
 import os
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -24,12 +22,11 @@ def reduced_case(text: str) -> str:
     return text
 
 
-def test_reduced_shear_wall_protocol(tmp_path):
+def test_reduced_shear_wall_protocol(tmp_path, cli):
     case = tmp_path / "sw.toml"
     case.write_text(reduced_case(open(os.path.join(ROOT, "demos", "base", "shear_wall.toml")).read()))
     out = tmp_path / "out"
-    p = subprocess.run([sys.executable, "-m", "fem_blocks.cli", "run", str(case), "--out", str(out), "--quiet"],
-                       capture_output=True, text=True, cwd=ROOT, timeout=900)
+    p = cli("run", case, "--out", out, "--quiet")  # in this process (conftest.cli)
     assert p.returncode == 0, p.stderr
     s = json.loads((out / "summary.json").read_text())
     h = read_history(out / "history.csv")
