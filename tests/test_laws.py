@@ -165,6 +165,14 @@ def test_elastic_brittle_dissipates_rc2_over_2cN():
 MIXED = dict(k_n=1e11, k_s=5e10, f_t=2e5, c=3e5, G_I=10.0, G_II=50.0, tan_phi=0.6)
 
 
+# The mixed-mode runs below drive a ramp to 40 G/strength in 1 s with h = 1/4000 s and stop at mid-ramp (2000 steps,
+# 20 G/strength): the softening is then over (linear: the joint fails at 2 G/strength, step 199; exponential: the
+# energy left is e^-20 of G, the damage 1 - 3e-12), so the peaks, the dissipation and the residual friction are those
+# of the whole ramp (measured: the same bits for linear softening, 1.6e-8 relative for exponential); an assertion
+# checks the damage is complete. The second half of the ramp cost half of these tests' time.
+MID_RAMP = 2000
+
+
 @pytest.mark.parametrize("softening", ["linear", "exponential"])
 @pytest.mark.parametrize("mode", ["I", "II", "II+p"])
 def test_mixed_mode_peaks_and_energies(mode, softening):
@@ -183,10 +191,11 @@ def test_mixed_mode_peaks_and_energies(mode, softening):
         blk, base, cs, sim = joint("mixed", prm, drivers=drivers, forces={"y": -p * A}, rho=2000.0, h=1.0 / n)
         comp = 0
     s = []
-    for _ in range(n):
+    for _ in range(MID_RAMP):
         sim.step()
         s.append(blk.reaction[comp] / A)
     s = np.array(s)
+    assert cs.state[:, S_BETA].min() > 1 - 1e-9  # the softening is over: the whole dissipation is counted
     if mode == "I":
         assert s.max() == pytest.approx(prm["f_t"], rel=0.01)
         assert cs.state[:, S_DISS].sum() / A == pytest.approx(prm["G_I"], rel=0.01)
@@ -205,7 +214,7 @@ def test_mixed_path_dissipates_between_modes():
     n = 4000
     blk, base, cs, sim = joint("mixed", prm, h=1.0 / n, drivers=driven({"x": ramp([0, umax], [0, 1]),
                                                                         "y": ramp([0, umax / 4], [0, 1])}))
-    for _ in range(n):
+    for _ in range(MID_RAMP):  # fully damaged from step 154
         sim.step()
     e = cs.state[:, S_DISS].sum() / A
     assert prm["G_I"] < e < prm["G_II"]
