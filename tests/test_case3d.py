@@ -221,23 +221,23 @@ rz = 4.0
 assert RESUME.count("duration = 0.05") == 1 and RESUME.count('name = "lid"') == 1 and RESUME.count("[output]") == 1 and 'name = "push"' in RESUME
 
 
-def _cli(case, out, *extra, wait=True):
-    cmd = [sys.executable, "-m", "fem_blocks.cli", "run", str(case), "--out", str(out), "--quiet", *extra]
-    if wait:
-        return subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT, timeout=300)
+def _launch(case, out):
+    """`fem-blocks run CASE --out OUT --quiet` in a process of its own (to be killed)."""
+    cmd = [sys.executable, "-m", "fem_blocks.cli", "run", str(case), "--out", str(out), "--quiet"]
     return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT)
 
 
-def test_resume_3d_after_sigkill_is_bitwise_identical(tmp_path):
+def test_resume_3d_after_sigkill_is_bitwise_identical(tmp_path, cli):
     """A 3D run killed (SIGKILL) after its checkpoint at step >= 30 and resumed gives bitwise the same history and
-    final state (rigid orientation included) as an uninterrupted run (the approach of tests/test_resume.py)."""
+    final state (rigid orientation included) as an uninterrupted run (the approach of tests/test_resume.py). The
+    killed run is a process of its own; the reference and the resume run in this one (conftest.cli)."""
     path = tmp_path / "case.toml"
     path.write_text(RESUME)
     ref = tmp_path / "ref"
     s = run_case(load_case(str(path)), str(ref), progress=False)
     assert s["status"].startswith("completed") and s["steps"] == 5 + 120  # (its gravity steps end above 1e-10)
     out = tmp_path / "killed"
-    proc = _cli(path, out, wait=False)
+    proc = _launch(path, out)
     t0, step = time.monotonic(), None
     while time.monotonic() - t0 < 120 and proc.poll() is None:
         try:
@@ -251,7 +251,7 @@ def test_resume_3d_after_sigkill_is_bitwise_identical(tmp_path):
     proc.send_signal(signal.SIGKILL)
     proc.wait()
     assert int(read_checkpoint(out / "checkpoint.npz")["sim.step"]) < 125  # killed mid-run
-    p = _cli(path, out, "--resume")
+    p = cli("run", path, "--out", out, "--quiet", "--resume")
     assert p.returncode == s["exit_status"], p.stderr  # 3: completed with unconverged (gravity) steps
     assert (out / "history.csv").read_text() == (ref / "history.csv").read_text()
     assert json.loads((out / "summary.json").read_text())["convergence"] == s["convergence"]  # across the resume

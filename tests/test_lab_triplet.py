@@ -196,11 +196,12 @@ def test_lab_file_through_load_case_names_the_key(tmp_path):
 
 
 @pytest.mark.dolfinx
-def test_killed_lab_run_resumes_bitwise(stiff_run, tmp_path):
+def test_killed_lab_run_resumes_bitwise(stiff_run, tmp_path, cli):
     """SIGKILL while the second specimen runs, then `--resume`: every specimen's history.csv and the report are
     bitwise those of the uninterrupted run (the fixture's; checkpoints do not change a run): finished specimens
     resume from their final checkpoint, the interrupted one from its last. Bug caught: a finished specimen run
-    again on top of its outputs, a resumed specimen appending to its history twice."""
+    again on top of its outputs, a resumed specimen appending to its history twice. The killed run is a process of
+    its own; the resume runs in this one (conftest.cli: cli.main)."""
     import signal
     import subprocess
     import sys
@@ -209,12 +210,9 @@ def test_killed_lab_run_resumes_bitwise(stiff_run, tmp_path):
     case = tmp_path / "t.toml"
     case.write_text(STIFF + "checkpoint_every = 20\n")
 
-    def run(out, *extra, wait=True):
-        cmd = [sys.executable, "-m", "fem_blocks.cli", "run", str(case), "--out", str(out), "--quiet", *extra]
-        return (subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT, timeout=600) if wait else
-                subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT))
     out = tmp_path / "killed"
-    proc = run(out, wait=False)
+    proc = subprocess.Popen([sys.executable, "-m", "fem_blocks.cli", "run", str(case), "--out", str(out), "--quiet"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT)
     t0 = time.monotonic()
     while not (out / "p1" / "checkpoint.npz").exists() and proc.poll() is None and time.monotonic() - t0 < 300:
         time.sleep(0.01)
@@ -222,7 +220,7 @@ def test_killed_lab_run_resumes_bitwise(stiff_run, tmp_path):
     proc.send_signal(signal.SIGKILL)
     proc.wait()
     assert not (out / "p1" / "summary.json").exists() and not (out / "p2").exists()
-    p = run(out, "--resume")
+    p = cli("run", case, "--out", out, "--quiet", "--resume")
     assert p.returncode == 0, p.stdout + p.stderr
     for sp in ("p0", "p1", "p2"):
         assert (out / sp / "history.csv").read_bytes() == (ref / sp / "history.csv").read_bytes()
