@@ -2,7 +2,8 @@
 takes the runner's snapshot after step 2 (the state a refined or adaptive step goes back to), restores it and steps
 again; writes OUT.<rank>.json with, per rank, the rows the contact step holds and the record's digests.
 
-Usage: [mpirun -n N] python tests/_own_rows_mpi.py CASE.toml OUT
+Usage: [mpirun -n N] python tests/_own_rows_mpi.py CASE.toml OUT [CASE2.toml OUT2 ...]
+(several cases: each one in turn in the same launch, as if launched alone; a launch costs seconds of imports)
 """
 import json
 import math
@@ -61,4 +62,7 @@ def main(path, out):
 
 
 if __name__ == "__main__":
-    main(sys.argv[1], sys.argv[2])
+    args = sys.argv[1:]
+    assert args and len(args) % 2 == 0, "expected pairs CASE.toml OUT"
+    for k in range(0, len(args), 2):
+        main(args[k], args[k + 1])

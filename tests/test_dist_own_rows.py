@@ -33,20 +33,32 @@ CASES = {
 }
 
 
-@pytest.fixture(scope="module", params=sorted(CASES))
-def serial(request, tmp_path_factory):
+@pytest.fixture(scope="module")
+def launches(tmp_path_factory):
+    """Both cases on one process and on 2 and 3 ranks: one launch each, the cases one after the other in it (the
+    helper steps each as if launched alone). Returns (d, {case: serial results})."""
     d = tmp_path_factory.mktemp("own")
-    path = d / f"{request.param}.toml"
-    path.write_text(CASES[request.param])
-    run_alone(HELPER, path, d / "serial")
-    return path, rank_results(d / "serial", 1)[0]
+    for name, text in CASES.items():
+        (d / f"{name}.toml").write_text(text)
+
+    def pairs(tag):
+        return [str(x) for name in sorted(CASES) for x in (d / f"{name}.toml", d / f"{name}.{tag}")]
+    run_alone(HELPER, *pairs("serial"))
+    for n in (2, 3):
+        run_helper(n, HELPER, *pairs(n), timeout=300)
+    return d, {name: rank_results(d / f"{name}.serial", 1)[0] for name in CASES}
+
+
+@pytest.fixture(params=sorted(CASES))
+def serial(request, launches):
+    d, one = launches
+    return d, request.param, one[request.param]
 
 
 @pytest.mark.parametrize("n", [2, 3])
-def test_each_rank_holds_and_steps_its_own_contacts_rows(serial, n, tmp_path):
-    path, one = serial
-    run_helper(n, HELPER, path, tmp_path / "out", timeout=300)
-    ranks = rank_results(tmp_path / "out", n)
+def test_each_rank_holds_and_steps_its_own_contacts_rows(serial, n):
+    d, name, one = serial
+    ranks = rank_results(d / f"{name}.{n}", n)
     nc = one["n_contacts"]
     assert nc > 20 and all(r["n_contacts"] == nc for r in ranks)
     owns = [r["own"] for r in ranks]
