@@ -648,16 +648,16 @@ class Simulation:
         free translation dof): over the own bodies (`own_bodies`), and on N > 1 ranks with the bodies partitioned the
         largest of the ranks' (one Allreduce MAX; a maximum is exact, so one process's value)."""
         cols, mine, comm = self.own_bodies()
-        v, d = 0.0, self.dim
+        vals, d = [0.0], self.dim
         for gr, c in zip(self.groups, cols):
             U = columns(gr.U, c)
             if U.size:
-                v = max(v, float(np.max(np.linalg.norm(U.reshape(-1, d, U.shape[1]), axis=1))))
+                vals.append(float(np.max(np.linalg.norm(U.reshape(-1, d, U.shape[1]), axis=1))))
         for i in self.rigid:
             b = self.bodies[i]
             if mine[i] and not b.driven[:d].all():
-                v = max(v, float(np.linalg.norm(b.u[:d])))
-        return largest(v, comm)
+                vals.append(float(np.linalg.norm(b.u[:d])))
+        return largest(float(np.max(vals)), comm)  # (np.max: a NaN velocity stays NaN; Python's max drops it)
 
     def info(self, cinfo=None) -> StepInfo:
         kin, ela, pot = self.energies()

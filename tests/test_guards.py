@@ -114,3 +114,24 @@ def test_nonconvergence_policy_refine_halves_the_step(tmp_path):
     # each sub-step row carries the state at the end of its sub-step, not the end of the nominal step
     ry = h["foundation.Ry"][1:].reshape(4, 4)
     assert np.all(np.abs(np.diff(ry, axis=1)).max(axis=1) > 1e-3)
+
+
+def test_a_nan_velocity_is_the_largest_velocity(tmp_path):
+    """Simulation.max_velocity (the history's largest velocity) is NaN when a node of a body has a NaN velocity,
+    whatever the other bodies: a NaN must show in the history, not be dropped by a maximum (Python's max(v, nan) is
+    v). Expectation: NaN in the column of one brick of a 2-course wall, the other bricks finite. Catches the maximum
+    taken with Python's max (the NaN lost)."""
+    import math
+    import dist_cases
+    from fem_blocks.expand import expand
+    from fem_blocks.model import build_model
+    path = tmp_path / "w.toml"
+    path.write_text(dist_cases.wall("w", courses=2, per=3))
+    model = build_model(expand(load_case(str(path))))
+    sim = Simulation(model.bodies, h=1e-3, theta=1.0, gravity=model.gravity, velocity_reset=True,
+                     contact=model.contact)
+    sim.step()
+    assert math.isfinite(sim.max_velocity()) and sim.max_velocity() > 0
+    gr = next(g for g in sim.groups if g.U.shape[1] > 1)
+    gr.U[:, -1] = np.nan  # the last member of a group: finite bodies before it
+    assert math.isnan(sim.max_velocity())
