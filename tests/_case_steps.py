@@ -1,5 +1,5 @@
 """What the helpers that step a case file in-process share (tests/_own_rows_mpi.py, tests/_own_bodies_mpi.py, run on
-one process or under mpirun): the model of the case with its contact step shared by the ranks, and digests of arrays
+one process or under mpirun; in-process tests of a case file too): the model of the case with its contact step shared by the ranks, and digests of arrays
 to compare between runs."""
 import hashlib
 

@@ -181,16 +181,11 @@ def test_colour_order_run_sweeps_the_delassus_arrays_without_a_copy(tmp_path):
     operator. Expectation: the whole operator assembled here from the step's own G, through coupling_rows.
     Catches: the couplings flag not passed (the solver copies), the blocks of zeros kept."""
     import dist_cases
+    from _case_steps import stepping
     from fem_blocks import delassus
-    from fem_blocks.case import load_case
-    from fem_blocks.dynamics import Simulation
-    from fem_blocks.expand import expand
-    from fem_blocks.model import build_model
     path = tmp_path / "w.toml"
     path.write_text(dist_cases.wall("w", courses=2, per=3))
-    model = build_model(expand(load_case(str(path))))
-    sim = Simulation(model.bodies, h=1e-3, theta=1.0, gravity=model.gravity, velocity_reset=True,
-                     contact=model.contact)
+    _, model, sim, _ = stepping(str(path), None)
     sim.step()
     step = model.contact
     W = step.Wdel
@@ -218,17 +213,12 @@ def test_a_step_after_close_assembles_w_again(tmp_path):
     step must assemble W again, not hand the reordered arrays to a new solver. Expectation: the same run without
     close(), bitwise. Catches close() leaving W_dirty unset (the next solver reads the rows as if in contact order)."""
     import dist_cases
-    from fem_blocks.case import load_case
-    from fem_blocks.dynamics import Simulation
-    from fem_blocks.expand import expand
-    from fem_blocks.model import build_model
+    from _case_steps import stepping
     path = tmp_path / "w.toml"
     path.write_text(dist_cases.wall("w", courses=2, per=3))
     got = []
     for close in (False, True):
-        model = build_model(expand(load_case(str(path))))
-        sim = Simulation(model.bodies, h=1e-3, theta=1.0, gravity=model.gravity, velocity_reset=True,
-                         contact=model.contact)
+        _, model, sim, _ = stepping(str(path), None)
         sim.step()
         if close:
             model.contact.close()
@@ -326,11 +316,8 @@ def test_updated_geometry_takes_over_the_colour_solver_between_redetections(tmp_
     bodies' displacements after each of 5 steps. Catches a take-over that keeps the previous step's blocks, or one
     across a re-detection with another contact set."""
     import dist_cases
-    from fem_blocks.case import load_case
+    from _case_steps import stepping
     from fem_blocks.distributed import colour
-    from fem_blocks.dynamics import Simulation
-    from fem_blocks.expand import expand
-    from fem_blocks.model import build_model
     path = tmp_path / "w.toml"
     path.write_text(dist_cases.wall("w", courses=2, per=3).replace(
         "[contact]\n", '[contact]\ngeometry = "updated"\nredetect_every = 3\n'))
@@ -344,9 +331,7 @@ def test_updated_geometry_takes_over_the_colour_solver_between_redetections(tmp_
     for refuse in (False, True):
         monkeypatch.setattr(colour.ColourSolver, "_take_over",
                             (lambda self, p, W, t: False) if refuse else counted)
-        model = build_model(expand(load_case(str(path))))
-        sim = Simulation(model.bodies, h=1e-3, theta=1.0, gravity=model.gravity, velocity_reset=True,
-                         contact=model.contact)
+        _, model, sim, _ = stepping(str(path), None)
         out = []
         for _ in range(5):
             sim.step()

@@ -123,13 +123,10 @@ def test_a_nan_velocity_is_the_largest_velocity(tmp_path):
     taken with Python's max (the NaN lost)."""
     import math
     import dist_cases
-    from fem_blocks.expand import expand
-    from fem_blocks.model import build_model
+    from _case_steps import stepping
     path = tmp_path / "w.toml"
     path.write_text(dist_cases.wall("w", courses=2, per=3))
-    model = build_model(expand(load_case(str(path))))
-    sim = Simulation(model.bodies, h=1e-3, theta=1.0, gravity=model.gravity, velocity_reset=True,
-                     contact=model.contact)
+    _, _, sim, _ = stepping(str(path), None)
     sim.step()
     assert math.isfinite(sim.max_velocity()) and sim.max_velocity() > 0
     gr = next(g for g in sim.groups if g.U.shape[1] > 1)

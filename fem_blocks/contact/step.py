@@ -374,8 +374,6 @@ class ContactStep:
             return self._colours
         from ..distributed.colour import ColourSolver, body_pair_groups
         prev, updated = self._colours, self.opts.geometry == "updated"
-        if prev is not None and not updated:
-            prev.destroy()
         reuse = dict(take_rows=True, previous=prev if updated else None, reusable=updated)
         if self._local is not None:
             cs = self.cs
@@ -386,7 +384,7 @@ class ContactStep:
             owner = self._owner() if self.comm is not None else None
             self._colours = ColourSolver(self.Wdel, owner, self.comm,
                                          bodies=(self.cs.cand_body, self.cs.ant_body, self.scene.nb), **reuse)
-        if prev is not None and updated:
+        if prev is not None:
             prev.destroy()  # (nothing left to release if the new solver took it over)
         return self._colours
 
