@@ -22,10 +22,12 @@ rank 0, the layout before the pieces: rank 0 no longer holds the whole state.)
 With --geometry updated (and --redetect-every K) the steps re-detect the contacts every K steps and assemble W, G
 and the colour solver at every step; a line after the row gives the contact step's own timers per step (detection:
 geometry, detection and W; delassus: W alone; local: the local quantities and the colour solver's set-up; nlgs;
-correction), the slowest rank's.
+correction), the slowest rank's, with the times the bodies were partitioned again (`[contact] rebalance`, its
+default unless --rebalance B is given) and the contacts per rank at the end.
 
 Usage: mpirun -n N .venv/bin/python bench/bench_dist.py [n_bricks ...] [--steps S] [--warm W] [--max-sweeps K]
                                                         [--checkpoint DIR] [--geometry G] [--redetect-every K]
+                                                        [--rebalance B]
 """
 import argparse
 import hashlib
@@ -90,10 +92,14 @@ def checkpoint_times(sim, model, comm, directory, repeat=3):
     return min(t_many), max(sizes), min(sizes)
 
 
-def run(n_bricks, comm, steps, warm, show=True, max_sweeps=1000, ck_dir=None, geometry="frozen", redetect=1):
+def run(n_bricks, comm, steps, warm, show=True, max_sweeps=1000, ck_dir=None, geometry="frozen", redetect=1,
+        rebalance=None):
+    settings = SETTINGS.format(max_sweeps=max_sweeps, geometry=geometry, redetect=redetect)
+    if rebalance is not None:
+        settings = settings.replace("[contact]\n", f"[contact]\nrebalance = {rebalance!r}\n", 1)
     with tempfile.TemporaryDirectory() as d:
         # the wall of bench_partition.py, with this benchmark's solver and steps
-        path = wall_case(n_bricks, d, SETTINGS.format(max_sweeps=max_sweeps, geometry=geometry, redetect=redetect))
+        path = wall_case(n_bricks, d, settings)
         comm.Barrier()
         c = time.perf_counter()
         model = build_model(expand(load_case(path)))
@@ -138,7 +144,9 @@ def run(n_bricks, comm, steps, warm, show=True, max_sweeps=1000, ck_dir=None, ge
     every = comm.gather(parts) if comm.size > 1 else [parts]
     if comm.rank == 0 and show:  # the contact step's own timers (ContactStep.timers), per step, slowest rank
         print("contact step per step [ms], slowest rank: " + ", ".join(
-            f"{k} {max(p[k] for p in every):.0f}" for k in parts) + "\n", flush=True)
+            f"{k} {max(p[k] for p in every):.0f}" for k in parts)
+            + f"; partitioned again {cs.rebalanced} times, contacts per rank at the end {rows[:, 0].min():.0f}–"
+            f"{rows[:, 0].max():.0f}\n", flush=True)
     if ck_dir is not None:
         tn, mbmax, mbmin = checkpoint_times(sim, model, comm, ck_dir)
         if comm.rank == 0:
@@ -159,6 +167,8 @@ if __name__ == "__main__":
     ap.add_argument("--geometry", choices=("frozen", "updated"), default="frozen",
                     help="[contact] geometry (updated: W, G and the colour solver every step)")
     ap.add_argument("--redetect-every", type=int, default=1, help="[contact] redetect_every (updated geometry)")
+    ap.add_argument("--rebalance", type=float, default=None, help="[contact] rebalance (updated geometry on N > 1 "
+                    "ranks; default: the case file's default)")
     a = ap.parse_args()
     comm = MPI.COMM_WORLD
     if comm.rank == 0:
@@ -169,4 +179,4 @@ if __name__ == "__main__":
     run(20, comm, 2, 1, show=False)  # warm-up: numba caches outside the timed runs
     for n in a.sizes:
         run(n, comm, a.steps, a.warm, max_sweeps=a.max_sweeps, ck_dir=a.checkpoint, geometry=a.geometry,
-            redetect=a.redetect_every)
+            redetect=a.redetect_every, rebalance=a.rebalance)

@@ -10,15 +10,20 @@ on every rank; each rank
 and its record hold exactly the rows of the contacts whose candidate body it owns (their union is every contact
 once); the runner's snapshot of a step (what a refined or
 adaptive step restores) holds those rows, and restoring it and stepping again gives the same step again, bitwise.
-Cases: a wall with mixed-mode cohesive joints (law state carried and committed per rank) in frozen geometry, and a
+Cases: a wall with mixed-mode cohesive joints (law state carried and committed per rank) in frozen geometry, a
 dry wall in updated geometry re-detected every other step (at step 3, and again after the restore: the impulses
 carried to the new contact set by their owners; at step 2 the contacts are those of step 1, and the colour solver
-of the new W takes over the previous one's colours and PETSc scatters: contact/step.py `_colour_solver`).
+of the new W takes over the previous one's colours and PETSc scatters: contact/step.py `_colour_solver`), and a
+wall with mixed-mode joints in updated geometry re-detected at every step with `rebalance = 1.0`, whose bodies are
+partitioned again at the re-detections (contact/step.py `_rebalance`; the helper's partition turns with the step,
+so every contact's impulses and law state move to another rank at each one).
 
 One-line bugs these catch (checked): the ghosts' warm start left at zero instead of exchanged (the iterates differ
 from the second step); the own rows gathered in rank order but not put back in contact order; a re-detected
 contact's impulse carried from the old position in the whole set instead of the old own rows; the impulses of the
-contacts L owned elsewhere not scattered (the bodies' velocities differ).
+contacts L owned elsewhere not scattered (the bodies' velocities differ); at a new partition, the old own rows
+carried by the old own positions instead of gathered (rows lost or misplaced), or the law state left behind (the
+cohesive records differ).
 """
 import pytest
 
@@ -29,7 +34,10 @@ HELPER = "_own_rows_mpi.py"
 CASES = {
     "mixed": dist_cases.wall("mixed", courses=3, per=3, joint=dist_cases.MIXED),
     "updated": dist_cases.wall("updated", courses=3, per=3).replace(
-        "[contact]\n", '[contact]\ngeometry = "updated"\nredetect_every = 2\npredictor = "extrapolated"\n'),
+        "[contact]\n", '[contact]\ngeometry = "updated"\nredetect_every = 2\npredictor = "extrapolated"\n'
+        'rebalance = 100.0\n'),
+    "rebalanced": dist_cases.wall("rebalanced", courses=3, per=3, joint=dist_cases.MIXED).replace(
+        "[contact]\n", '[contact]\ngeometry = "updated"\nrebalance = 1.0\n'),
 }
 
 
@@ -67,15 +75,21 @@ def test_each_rank_holds_and_steps_its_own_contacts_rows(serial, n):
     for r in ranks:
         k = len(r["own"])
         assert r["rows"]["P"] == r["rows"]["state"] == r["rows"]["par"] == r["rows"]["mu"] == k
-        assert r["snapshot_rows"] == k
-        for mine, ref in zip(r["steps"], one["steps"]):
-            assert mine["record_rows"] == k  # the record holds the rank's own rows; whole(), every contact's
+        assert r["own_counts"][2] == k and r["snapshot_rows"] == r["own_counts"][1]
+        for mine, ref, k_step in zip(r["steps"], one["steps"], r["own_counts"]):
+            assert mine["record_rows"] == k_step  # the record holds the rank's own rows; whole(), every contact's
             assert {key: v for key, v in mine.items() if key not in ("warm", "record_rows", "u")} == \
                 {key: v for key, v in ref.items() if key not in ("warm", "record_rows", "u")}
             assert mine["u"] and all(ref["u"][i] == v for i, v in mine["u"].items())  # the bodies it steps
         assert r["restored"] == {key: one["steps"][1][key] for key in ("P", "state")}
         assert r["again"] == r["steps"][2]
     assert one["again"] == one["steps"][2]
+    if name == "rebalanced":  # partitioned again at re-detections (the helper's partition turns with the step)
+        assert all(r["rebalanced"] >= 2 for r in ranks)
+        owners = ranks[0]["owners"]
+        assert all(r["owners"] == owners for r in ranks) and owners[0] != owners[1] != owners[2]
+    else:  # rebalance = 100 ("updated"), frozen geometry ("mixed"): the partition of the first step kept
+        assert all(r["rebalanced"] == 0 for r in ranks) and ranks[0]["owners"][0] == ranks[0]["owners"][2]
     total = 0.0  # the totals: exact sums of the contacts' terms, rounded once (math.fsum), on one process too
     for st in one["steps"]:
         total += st["fsum"][1]

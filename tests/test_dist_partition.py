@@ -240,3 +240,60 @@ def test_more_ranks_than_bodies(tmp_path):
     cs = serial_contacts(model)
     assert sum(len(R["cand_body"]) for R in ranks) == len(cs.gap) > 0
     assert all(np.all(owner[R["cand_body"]] == R["rank"]) for R in ranks)
+
+
+@pytest.mark.parametrize("n", [2, 3])
+def test_vertex_weights_balance_the_weight_of_each_rank(tmp_path, n):
+    """distributed/graph.py partition_graph with vertex weights (set in PETSc through ctypes: petsc4py 3.18 has no
+    MatPartitioningSetVertexWeights) on a 36 x 20 grid graph whose corner x < 12, y < 10 weighs 6 per vertex, the rest
+    1 (total 6 x 120 + 600 = 1 320): every rank's weight is within 3 % of 1 320 / n (PT-Scotch's imbalance tolerance
+    is 1 %; a vertex weighs at most 6 = 1.4 % of a share on 3 ranks), the same owner array on every rank. Without
+    weights the same graph is split by vertex count (within 3 % of 720 / n), which leaves the weights at least 20 %
+    apart: the weights reach PT-Scotch. Catches: the weights not passed (the plain split),
+    every rank passing the first rows' weights instead of its own block's (rank 1 of 2 would pass heavy weights for
+    light vertices)."""
+    from _mpi import rank_results, run_helper
+    run_helper(n, "_weights_mpi.py", tmp_path / "w")
+    ranks = rank_results(tmp_path / "w", n)
+    assert all(r == ranks[0] for r in ranks)
+    w = np.array(ranks[0]["w"])
+    assert w.sum() == 1320 and w.size == 720
+    weighted, plain = np.array(ranks[0]["weighted"]), np.array(ranks[0]["plain"])
+    per = np.bincount(weighted, weights=w, minlength=n)
+    assert np.all(np.abs(per - w.sum() / n) <= 0.03 * w.sum() / n), per
+    counts = np.bincount(plain, minlength=n)
+    assert np.all(np.abs(counts - w.size / n) <= 0.03 * w.size / n), counts
+    plain_w = np.bincount(plain, weights=w, minlength=n)
+    assert plain_w.max() >= 1.2 * plain_w.min(), plain_w
+
+
+@pytest.mark.parametrize("counts, bound, again", [
+    ((12, 8), 1.2, False),      # 12 = 1.2 x the mean 10 (24 = 1.2 x 20 exactly in doubles): at the bound, kept
+    ((12, 8), 1.1, True),       # 12 > 11: partitioned again
+    ((12, 8), 1.25, False),     # 12 <= 12.5
+    ((10, 10, 0), 1.1, True),   # a rank without contacts counts in the mean (20 / 3): 10 > 7.33
+    ((7, 7, 6), 1.0, True),     # rebalance = 1: any imbalance
+    ((5, 5, 5, 5), 1.0, False),  # none
+])
+def test_rebalance_partitions_again_beyond_the_bound(counts, bound, again):
+    """contact/step.py ContactStep._rebalance against its rule (docs/case-files.md `rebalance`): the bodies are
+    partitioned again iff the rank that owns most contacts (those of its candidate bodies) owns more than
+    rebalance x (contacts / ranks); the new partition is then the one in use, and the count of re-partitions grows.
+    One body per contact here, each owned as `counts` says; the partition is a stub (the rule is under test, not
+    PT-Scotch). Catches: >= for > (the first case), the mean over the ranks that own contacts (the fourth), the
+    new partition computed but not kept (the last assertion)."""
+    from types import SimpleNamespace
+    from fem_blocks.contact.step import ContactStep
+    from fem_blocks.specs import ContactOptions
+    owner = np.repeat(np.arange(len(counts)), counts)
+    step = ContactStep.__new__(ContactStep)
+    new = np.zeros(owner.size, dtype=np.int64)
+    step.comm = SimpleNamespace(Get_size=lambda: len(counts))
+    step.cs = SimpleNamespace(cand_body=np.arange(owner.size)[::-1].copy(), gap=np.zeros(owner.size))
+    step.body_owner = owner[::-1].copy()  # (contact c's candidate body is nc - 1 - c)
+    step.opts = ContactOptions(geometry="updated", rebalance=bound)
+    step.rebalanced = 0
+    step._partition = lambda: new
+    assert step._rebalance() is again
+    assert step.rebalanced == int(again)
+    assert (step.body_owner is new) is again

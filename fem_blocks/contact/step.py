@@ -124,6 +124,7 @@ class ContactStep:
         self.timers = dict(detection=0.0, delassus=0.0, nlgs=0.0, correction=0.0, local=0.0)
         self.comm = None  # MPI ranks sharing the contact solve (use_comm); None: this process alone
         self.body_owner = None  # N > 1 ranks: the rank of each body (distributed/graph.partition_graph)
+        self.rebalanced = 0  # N > 1 ranks, updated geometry: the bodies partitioned again (`_rebalance`) so far
         self._colours = None  # order = "colours": the colour solver of the current Delassus operator
         self._local = None  # N > 1 ranks in colour order: this rank's contacts (_RankContacts), else None
         self._linear = None  # N > 1 ranks, Newton: the shared linear solve (_SharedLinear)
@@ -162,13 +163,35 @@ class ContactStep:
         return opts
 
     def _owner(self) -> np.ndarray:
-        """N > 1 ranks: the rank of each contact, that of its candidate body (bodies partitioned once by PT-Scotch
-        on the body-contact graph, distributed/partition.py, or restored from the checkpoint)."""
+        """N > 1 ranks: the rank of each contact, that of its candidate body (bodies partitioned by PT-Scotch on the
+        body-contact graph at the first step, `_partition`, again at a re-detection that unbalances the ranks,
+        `_rebalance`, or restored from the checkpoint)."""
         if self.body_owner is None or len(self.body_owner) != self.scene.nb:
-            from ..distributed.graph import body_graph, partition_graph
-            g = body_graph(self.scene.nb, np.zeros((0, 2), dtype=np.int64), self.cs.cand_body, self.cs.ant_body)
-            self.body_owner = partition_graph(*g, self.comm)
+            self.body_owner = self._partition()
         return self.body_owner[self.cs.cand_body]
+
+    def _partition(self) -> np.ndarray:
+        """COLLECTIVE: the rank of each body, PETSc MatPartitioning (PT-Scotch) of the body-contact graph of the
+        current contact set (distributed/graph.py: edges weighted by their contacts, bodies by 1 + their contacts as
+        candidate), so that the ranks own about as many contacts each."""
+        from ..distributed.graph import body_graph, contact_weights, partition_graph
+        nb, cs = self.scene.nb, self.cs
+        g = body_graph(nb, np.zeros((0, 2), dtype=np.int64), cs.cand_body, cs.ant_body)
+        return partition_graph(*g, self.comm, vertex_weights=contact_weights(nb, cs.cand_body))
+
+    def _rebalance(self) -> bool:
+        """COLLECTIVE (N > 1 ranks in colour order, updated geometry, at a re-detection, the new contact set in
+        self.cs and the old partition's `_local` still in place): if the rank that would own most of the new
+        contacts owns more than `rebalance` × their mean per rank, partition the bodies again (`_partition`) and
+        return True (the caller moves the per-contact rows to their new owners), else False. Every rank holds the
+        same contact set and partition, so every rank decides the same."""
+        size = self.comm.Get_size()
+        counts = np.bincount(self.body_owner[self.cs.cand_body], minlength=size)
+        if counts.max(initial=0) * size <= self.opts.rebalance * len(self.cs.gap):
+            return False
+        self.body_owner = self._partition()
+        self.rebalanced += 1
+        return True
 
     def body_partition(self):
         """(comm, mine): on N > 1 ranks in colour order, once the bodies are partitioned (`_owner`, at the first step
@@ -489,18 +512,24 @@ class ContactStep:
                 m = match(old, self.cs)
                 ok = m >= 0
                 src = m[ok]
-                if self._local is not None:  # the old arrays hold the old own contacts' rows: a contact continues
-                    # one with the same candidate point, so of the same candidate body and owner; the others'
-                    # rows are another rank's (and cut at _own_rows)
+                old_state, old_built = self.state, self.g_built
+                if self._local is not None and self._rebalance():  # a new partition: the old own rows gathered
+                    # whole (each contact's rows are then cut to its new owner's at _own_rows)
+                    gather = self._gather()  # (the layout of the old partition's rows)
+                    oldP, old_state = gather(oldP), gather(old_state)
+                    old_built = None if old_built is None else gather(old_built)
+                elif self._local is not None:  # the old arrays hold the old own contacts' rows: a contact
+                    # continues one with the same candidate point, so of the same candidate body and owner; the
+                    # others' rows are another rank's (and cut at _own_rows)
                     old_own = self._local.own
                     pos = np.minimum(np.searchsorted(old_own, src), max(old_own.size - 1, 0))
                     hit = old_own[pos] == src if old_own.size else np.zeros(src.size, dtype=bool)
                     ok[ok] = hit
                     src = pos[hit]
                 self.P[ok] = oldP[src]
-                st[ok] = self.state[src]
-                if self.g_built is not None:
-                    built[ok] = self.g_built[src]
+                st[ok] = old_state[src]
+                if old_built is not None:
+                    built[ok] = old_built[src]
             self.state = st
             if ref:  # frozen geometry: reference gaps; "as_built" joints are closed in the initial configuration
                 self.gap_ref = self.cs.gap - self.cs.g0

@@ -3,9 +3,18 @@ distributed/partition.py.
 
 body graph: vertices the bodies, an edge between two bodies with a contact between them or within reach (`pairs`),
 weight = the number of contacts between them (at least 1); partition: PETSc MatPartitioning (PT-Scotch by default)
-of that graph into comm.size parts, the owner rank of every body on every rank.
+of that graph into comm.size parts, the owner rank of every body on every rank. With vertex weights w_b (the time
+stepper: w_b = 1 + the number of contacts whose candidate body is b, `contact_weights`) the parts balance
+Σ_{b ∈ part} w_b — the contacts each rank owns and sweeps — rather than the number of bodies, within PT-Scotch's
+imbalance tolerance (1 % by default).
+
+petsc4py 3.18 has no MatPartitioningSetVertexWeights: `_set_vertex_weights` calls it in the PETSc library the
+process has loaded (ctypes), with an array from PetscMalloc, which the MatPartitioning then owns and frees.
 """
 from __future__ import annotations
+
+import ctypes
+import warnings
 
 import numpy as np
 
@@ -30,11 +39,63 @@ def body_graph(nb: int, pairs: np.ndarray, cand: np.ndarray, ant: np.ndarray):
     return np.cumsum(indptr), cols, vals
 
 
-def partition_graph(indptr, indices, weights, comm, method: str = "ptscotch") -> np.ndarray:
+def contact_weights(nb: int, cand: np.ndarray) -> np.ndarray:
+    """Vertex weights of the bodies for the time stepper's partition: w_b = 1 + #{contacts c : cand_c = b} (a rank
+    owns the contacts of its candidate bodies and sweeps their rows; the 1 keeps a body without contacts, whose
+    free velocity a rank still solves, from weighing nothing)."""
+    return 1 + np.bincount(np.asarray(cand, dtype=np.int64), minlength=nb)
+
+
+def _petsc_library():
+    """The loaded shared object that exports MatPartitioningSetVertexWeights (libpetsc, or petsc4py's own module
+    when PETSc is linked statically), found in /proc/self/maps; None if there is none."""
+    from petsc4py import PETSc
+    paths = []
+    try:
+        with open("/proc/self/maps") as f:
+            paths = [line.split()[-1] for line in f if "petsc" in line.lower() and ".so" in line]
+    except OSError:
+        pass
+    paths = sorted(set(paths), key=lambda q: ("libpetsc" not in q, q)) + [PETSc.__file__]
+    for path in paths:
+        try:
+            lib = ctypes.CDLL(path)
+            lib.MatPartitioningSetVertexWeights  # noqa: B018 (the symbol must be there)
+            lib.PetscMallocA  # noqa: B018
+            return lib
+        except (OSError, AttributeError):
+            continue
+    return None
+
+
+def _set_vertex_weights(part, w_local: np.ndarray) -> bool:
+    """MatPartitioningSetVertexWeights(part, w) with w a PetscMalloc copy of this rank's rows' weights (PETSc's
+    PetscInt); the MatPartitioning frees it. False (nothing set) if no loaded library exports the function."""
+    from petsc4py import PETSc
+    lib = _petsc_library()
+    if lib is None:
+        return False
+    w = np.ascontiguousarray(w_local, dtype=PETSc.IntType)
+    ptr = ctypes.c_void_p()
+    lib.PetscMallocA.restype = ctypes.c_int
+    err = lib.PetscMallocA(ctypes.c_int(1), ctypes.c_int(0), ctypes.c_int(0), b"_set_vertex_weights", b"graph.py",
+                           ctypes.c_size_t(max(w.nbytes, w.itemsize)), ctypes.byref(ptr))
+    if err or not ptr.value:
+        raise MemoryError(f"PetscMallocA of {w.nbytes} bytes failed (PETSc error {err})")
+    ctypes.memmove(ptr, w.ctypes.data, w.nbytes)
+    lib.MatPartitioningSetVertexWeights.restype = ctypes.c_int
+    err = lib.MatPartitioningSetVertexWeights(ctypes.c_void_p(part.handle), ptr)
+    if err:
+        raise RuntimeError(f"MatPartitioningSetVertexWeights failed (PETSc error {err})")
+    return True
+
+
+def partition_graph(indptr, indices, weights, comm, method: str = "ptscotch", vertex_weights=None) -> np.ndarray:
     """owner (nb,) int64 on every rank: PETSc MatPartitioning of type `method` into comm.size parts of the graph
-    (CSR, symmetric, no diagonal, positive integer weights used as edge weights). Each rank inserts the rows of a
-    contiguous block of vertices (PETSc's default layout) into an MPIAIJ adjacency; the part of each row is
-    gathered with Allgatherv."""
+    (CSR, symmetric, no diagonal, positive integer weights used as edge weights; `vertex_weights` (nb,) positive
+    integers, the same on every rank, or None: every vertex weighs 1). Each rank inserts the rows of a contiguous
+    block of vertices (PETSc's default layout) into an MPIAIJ adjacency; the part of each row is gathered with
+    Allgatherv."""
     from petsc4py import PETSc
     nb = len(indptr) - 1
     size = comm.size
@@ -56,6 +117,11 @@ def partition_graph(indptr, indices, weights, comm, method: str = "ptscotch") ->
     opts[prefix + "mat_partitioning_use_edge_weights"] = "true"
     part.setAdjacency(A)
     part.setType(method)
+    if vertex_weights is not None and not _set_vertex_weights(part, np.asarray(vertex_weights)[start:start + n_loc]):
+        if comm.rank == 0:
+            warnings.warn("the bodies are partitioned without vertex weights (no loaded PETSc library exports "
+                          "MatPartitioningSetVertexWeights): the ranks get equal numbers of bodies, not of contacts",
+                          RuntimeWarning, stacklevel=2)
     part.setFromOptions()
     iset = PETSc.IS()
     part.apply(iset)
