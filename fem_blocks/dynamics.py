@@ -646,7 +646,8 @@ class Simulation:
     def max_velocity(self) -> float:
         """The largest speed [m/s] of a node of a deformable body and of a rigid body's centre (rigid bodies with a
         free translation dof): over the own bodies (`own_bodies`), and on N > 1 ranks with the bodies partitioned the
-        largest of the ranks' (one Allreduce MAX; a maximum is exact, so one process's value)."""
+        largest of the ranks' (`exact.largest`: one Allgather, NaN if any rank's is NaN; a maximum is exact, so one
+        process's value)."""
         cols, mine, comm = self.own_bodies()
         vals, d = [0.0], self.dim
         for gr, c in zip(self.groups, cols):

@@ -243,8 +243,8 @@ MUTATIONS = [
              "    out[:] = buf\n", ("tests/test_dist_own_rows.py",)),
     Mutation("own_rows_redetect_whole_index", "N ranks, own rows: a re-detected contact's impulse carried from its "
              "old number in the whole set, not from the old own rows", "fem_blocks/contact/step.py",
-             "                if self._local is not None:  # the old arrays hold the old own contacts' rows",
-             "                if False:  # the old arrays hold the old own contacts' rows",
+             "                elif self._local is not None:  # the old arrays hold the old own contacts' rows",
+             "                elif False:  # the old arrays hold the old own contacts' rows",
              ("tests/test_dist_own_rows.py",)),
     Mutation("own_rows_L_not_scattered", "N ranks, own rows: the impulses of the contacts L owned elsewhere not "
              "scattered (zero in H P)", "fem_blocks/contact/step.py",
@@ -324,16 +324,35 @@ MUTATIONS = [
              "        return exact_sums(terms, self.comm if self._local is not None else None)\n",
              "        return exact_sums(terms, None)\n", ("tests/test_dist_own_rows.py",)),
     Mutation("takeover_stale_blocks", "updated geometry: a colour solver taken over keeps the previous W's blocks",
-             "fem_blocks/distributed/colour.py", "        np.take(W.blocks, src, axis=0, out=bl)\n", "",
+             "fem_blocks/distributed/colour.py",
+             '        np.take(W.blocks, src, axis=0, out=bl, mode="clip")  # ("clip": not buffered; src is in range)\n',
+             "",
              ("tests/test_colour.py",)),
     Mutation("takeover_contact_order", "a colour solver taken over takes the new blocks in contact order, not in "
-             "sweep order", "fem_blocks/distributed/colour.py", "np.take(W.blocks, src, axis=0, out=bl)",
+             "sweep order", "fem_blocks/distributed/colour.py", 'np.take(W.blocks, src, axis=0, out=bl, mode="clip")',
              "bl[...] = W.blocks", ("tests/test_colour.py",)),
     Mutation("takeover_sig_no_bodies", "the take-over signature without the contacts' body pairs",
              "fem_blocks/distributed/colour.py",
              "            self._sig = _signature(W, n, np.asarray(cand, dtype=np.int64), np.asarray(ant, dtype=np.int64),\n"
              "                                   np.int64(nb))\n",
              "            self._sig = _signature(W, n)\n", ("tests/test_colour.py",)),
+    Mutation("largest_allreduce_max", "N ranks: the largest of the ranks' values by an Allreduce MAX (a NaN on a rank "
+             "other than the first is dropped)", "fem_blocks/distributed/exact.py",
+             "    return float(np.max(comm.allgather(float(x))))\n",
+             "    from mpi4py import MPI\n    return comm.allreduce(x, op=MPI.MAX)\n", ("tests/test_exact_sum.py",)),
+    Mutation("rebalance_rows_not_gathered", "updated geometry, a new partition: the old rows carried by the old own "
+             "positions, not gathered", "fem_blocks/contact/step.py",
+             "                if self._local is not None and self._rebalance():",
+             "                if self._local is not None and self._rebalance() and False:",
+             ("tests/test_dist_own_rows.py",)),
+    Mutation("rebalance_bound_inclusive", "a new partition also when the busiest rank owns exactly rebalance x the "
+             "mean", "fem_blocks/contact/step.py",
+             "if counts.max(initial=0) * size <= self.opts.rebalance * len(self.cs.gap):",
+             "if counts.max(initial=0) * size < self.opts.rebalance * len(self.cs.gap):",
+             ("tests/test_dist_partition.py",)),
+    Mutation("vertex_weights_first_rows", "every rank gives PT-Scotch the first rows' vertex weights, not its own "
+             "block's", "fem_blocks/distributed/graph.py", "np.asarray(vertex_weights)[start:start + n_loc]",
+             "np.asarray(vertex_weights)[:n_loc]", ("tests/test_dist_partition.py",)),
 ]
 
 IGNORE = shutil.ignore_patterns(".git", "__pycache__", ".venv", "*.pyc", ".pytest_cache", "out", "*.egg-info")

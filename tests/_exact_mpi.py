@@ -38,8 +38,12 @@ def main(out):
     s1 = exact.exact_sum(x[lo:hi], comm)
     s2 = exact.exact_sums([x[lo:hi], y[lo:hi], y[lo:hi][::-1]], PETSc.COMM_WORLD)  # a petsc4py communicator too
     got = comm.gather(np.array([s1] + s2 + [hi - lo]), root=0)
+    # exact.largest: every rank's rank number, then a NaN on rank k (k = 0 .. size-1) and the others finite
+    big = [exact.largest(float(rank), comm)] + [exact.largest(np.nan if rank == k else float(rank), comm)
+                                               for k in range(size)]
+    big = comm.gather(np.array(big), root=0)
     if rank == 0:
-        np.savez(out, got=np.array(got), x=x, y=y)
+        np.savez(out, got=np.array(got), x=x, y=y, largest=np.array(big))
 
 
 if __name__ == "__main__":

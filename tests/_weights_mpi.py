@@ -1,7 +1,7 @@
 """Run by tests/test_dist_partition.py under mpirun: the body graph's partition (distributed/graph.py
 partition_graph, PT-Scotch) of a grid graph of NX x NY vertices (4-neighbour edges, weight 1) whose vertices with
-x < NX // 3 and y < NY // 2 (a corner) weigh HEAVY and the others 1, with those vertex weights and without; writes OUT.<rank>.json with both
-owner arrays and the weights.
+x < NX // 3 and y < NY // 2 (a corner) weigh HEAVY and the others 1, with those vertex weights and without; writes
+OUT.<rank>.json with both owner arrays and the weights.
 
 Usage: mpirun -n N python tests/_weights_mpi.py OUT
 """

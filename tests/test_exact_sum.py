@@ -219,3 +219,9 @@ def test_mpirun_split_across_ranks_same_bits_on_every_rank(tmp_path, n):
     assert got[:, 4].sum() == x.size and (n == 1 or got[0, 4] == 0)
     expected = np.array([math.fsum(x), math.fsum(x), math.fsum(y), math.fsum(y)])
     assert np.array_equal(got[:, :4].view(np.int64), np.tile(expected, (n, 1)).view(np.int64))
+    # exact.largest (the history's largest velocity, dynamics.Simulation.max_velocity): the largest rank number
+    # n - 1 on every rank; NaN on every rank whichever rank holds the NaN (an Allreduce MAX of Python floats kept
+    # it only when it came first: max(v, nan) is v)
+    big = out["largest"]
+    assert big.shape == (n, n + 1) and np.all(big[:, 0] == n - 1)
+    assert np.isnan(big[:, 1:]).all(), big

@@ -96,8 +96,9 @@ def test_options_fields_defined_once():
     solver_fields = [f.name for f in dataclasses.fields(SolverOptions)]
     contact_fields = [f.name for f in dataclasses.fields(ContactOptions)]
     assert contact_fields[:len(solver_fields)] == solver_fields
-    assert contact_fields[len(solver_fields):] == ["geometry", "redetect_every", "on_nonconvergence",
-                                                   "max_refinements", "attempt_budget", "grow_after", "predictor"]
+    assert contact_fields[len(solver_fields):] == ["geometry", "redetect_every", "rebalance",
+                                                   "on_nonconvergence", "max_refinements", "attempt_budget",
+                                                   "grow_after", "predictor"]
     for cls in (SolverOptions, ContactOptions):
         assert {f.name: f.default for f in dataclasses.fields(cls)}["tol"] == 1e-6
         assert all(f.metadata.get("doc") for f in dataclasses.fields(cls))

@@ -316,9 +316,7 @@ class ColourSolver:
             same = bool(self.comm.allreduce(int(same), op=MPI.MIN))
         if not same:
             return False
-        sig = self._sig
-        self.__dict__.update({k: v for k, v in previous.__dict__.items() if k != "W"})
-        self._sig = sig
+        self.__dict__.update({k: v for k, v in previous.__dict__.items() if k != "W"})  # (its _sig is this one's)
         ip, ix, bl, dp = self.rows
         perm, ip0 = self._back, self._ip0  # sweep row i <- row perm[i] of the rows as assembled
         # src[k]: the block of W that goes to sweep position k, one int64 per block (no other temporary): ones,

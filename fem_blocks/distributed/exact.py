@@ -190,13 +190,14 @@ def exact_sums(xs, comm=None) -> list[float]:
 
 
 def largest(x: float, comm=None) -> float:
-    """The largest of every rank's x (one Allreduce MAX; collective). comm: mpi4py or petsc4py communicator; None or
-    size 1: x."""
+    """The largest of every rank's x, NaN if any rank's x is NaN (one Allgather of a double; collective): np.max of
+    the gathered values, so a NaN on any rank reaches every rank (an Allreduce MAX would apply max pairwise, and
+    max(v, nan) is v: whether a NaN survived would depend on its rank). comm: mpi4py or petsc4py communicator;
+    None or size 1: x."""
     comm = _mpi_comm(comm)
     if comm is None:
         return x
-    from mpi4py import MPI
-    return comm.allreduce(x, op=MPI.MAX)
+    return float(np.max(comm.allgather(float(x))))
 
 
 def exact_sum(x, comm=None) -> float:
