@@ -265,7 +265,8 @@ def test_a_solver_of_the_same_structure_takes_over_the_previous_one():
     from_rows (one rank, MPI.COMM_SELF). It does not take over another structure: the bodies renumbered (other
     groups), a block of zeros (colours from the values), or a previous solver that did not keep its layout.
     Catches: the new blocks not taken (the previous values swept), taken in contact order instead of sweep order, the
-    signature without the body pairs."""
+    signature without the body pairs; a solver built from scratch with take_rows leaving W its own arrays (its column
+    indices before the renumbering, a second int64 per block)."""
     from mpi4py import MPI
     from fem_blocks.distributed.colour import body_pair_groups
     W, q, mu, cand, ant = problem(seed=5, held=False)
@@ -280,8 +281,11 @@ def test_a_solver_of_the_same_structure_takes_over_the_previous_one():
         else:
             make = lambda A, **kw: ColourSolver.from_rows(A, ids, ids, n, group, np.zeros(n, int),  # noqa: E731
                                                           MPI.COMM_SELF, take_rows=True, **kw)
-        first = make(BlockCSR(*[np.array(a, copy=True) for a in (W.indptr, W.indices, W.blocks, W.diag_pos)]),
-                     reusable=True)
+        A1 = BlockCSR(*[np.array(a, copy=True) for a in (W.indptr, W.indices, W.blocks, W.diag_pos)])
+        first = make(A1, reusable=True)
+        # take_rows: W's arrays are the solver's (no array of W's own beside them, e.g. its column indices before
+        # the renumbering for the sweep)
+        assert all(a is b for a, b in zip((A1.indptr, A1.indices, A1.blocks, A1.diag_pos), first.rows)), how
         first.solve(q, mu, tol=1e-10, max_sweeps=200)
         held = first.rows[2]
         A2 = BlockCSR(*[np.array(a, copy=True) for a in (W2.indptr, W2.indices, W2.blocks, W2.diag_pos)])

@@ -224,6 +224,8 @@ class ColourSolver:
             self._sweep = lr.owned
             self._back = np.searchsorted(self.owned, self._sweep)  # sweep position -> position in `owned`
             self.rows = (lr.indptr, lr.indices, lr.blocks, lr.diag_pos)
+            if take_rows:
+                self._give_rows(W)
             self.order = [np.ascontiguousarray(np.flatnonzero(c_sweep == c), dtype=np.int64)
                           for c in range(self.n_colours)]
             self.r = np.zeros(self.d * n)
@@ -282,6 +284,8 @@ class ColourSolver:
             raise RuntimeError("ColourSolver.from_rows: a ghost contact whose group is not coupled to an own group "
                                "(the rows and the group graph disagree)")
         self._distribute(lr, col[pos], shared)
+        if take_rows:
+            self._give_rows(rows)
         return self
 
     def _distribute(self, lr, colour_local, shared: bool):
@@ -317,7 +321,7 @@ class ColourSolver:
         if not same:
             return False
         self.__dict__.update({k: v for k, v in previous.__dict__.items() if k != "W"})  # (its _sig is this one's)
-        ip, ix, bl, dp = self.rows
+        ip, _, bl, _ = self.rows
         perm, ip0 = self._back, self._ip0  # sweep row i <- row perm[i] of the rows as assembled
         # src[k]: the block of W that goes to sweep position k, one int64 per block (no other temporary): ones,
         # the jump to the source row at each row start, summed
@@ -331,8 +335,15 @@ class ColourSolver:
         np.take(W.blocks, src, axis=0, out=bl, mode="clip")  # ("clip": not buffered; src is in range)
         previous.dist = previous.rows = None  # (spent: its scatters and arrays are this solver's)
         if take_rows:
-            W.indptr, W.indices, W.blocks, W.diag_pos = ip, ix, bl, dp
+            self._give_rows(W)
         return True
+
+    def _give_rows(self, W: BlockCSR):
+        """take_rows: W's arrays become the solver's rows (in sweep order), so that W keeps no array of its own
+        beside them — its column indices before the renumbering for the sweep (`localise`) would otherwise stay, a
+        second copy of one int64 per block, or its blocks, if `coupling_rows` had copied them. W then only
+        identifies the operator the solver was built for."""
+        W.indptr, W.indices, W.blocks, W.diag_pos = self.rows
 
     @property
     def n_owned(self) -> int:
