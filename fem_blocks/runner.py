@@ -725,14 +725,21 @@ def _snapshot(sim: Simulation, model: Model, run: dict) -> dict:
     return d
 
 
-def _body_owner(model: Model, comm) -> np.ndarray:
-    """N ranks: the rank of each body, for the checkpoint's pieces: the contact step's partition (PT-Scotch, the
-    contacts' owners), else (no contact solved yet, no contacts) the ParaView pieces' blocks of bodies."""
+def _body_owner(model: Model, comm, arrays: dict | None = None) -> np.ndarray:
+    """N ranks: the rank of each body, for the pieces of the checkpoint `arrays`: the partition the arrays were
+    taken under (their "contact.body_owner": each rank's per-contact rows are those of that partition; a snapshot
+    taken before a step that partitioned the bodies again holds the old one), else the contact step's partition
+    (PT-Scotch, the contacts' owners), else (no contact solved yet, no contacts) the ParaView pieces' blocks of
+    bodies."""
     from .output.paraview import piece_owner
+    nb = len(model.bodies)
+    kept = None if arrays is None else arrays.get("contact.body_owner")
+    if kept is not None and len(kept) == nb:
+        return np.asarray(kept, dtype=np.int64)
     c = model.contact
-    if c is not None and c.body_owner is not None and len(c.body_owner) == len(model.bodies):
+    if c is not None and c.body_owner is not None and len(c.body_owner) == nb:
         return np.asarray(c.body_owner, dtype=np.int64)
-    return piece_owner(len(model.bodies), comm.Get_size())
+    return piece_owner(nb, comm.Get_size())
 
 
 def _run_arrays(run: dict) -> dict:
@@ -1032,7 +1039,7 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
         from .contact.step import ContactStep
         from .distributed.checkpoint import write_pieces
         from .dynamics import body_of_key
-        write_pieces(comm, out_dir, arrays, _body_owner(model, comm), body_of_key,
+        write_pieces(comm, out_dir, arrays, _body_owner(model, comm, arrays), body_of_key,
                      ContactStep.per_contact_keys(arrays), before=hist.flush)
 
     def finish(status: str, code: int | None = None) -> dict:

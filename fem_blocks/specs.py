@@ -384,9 +384,9 @@ class ContactOptions(SolverOptions):
     geometry: str = spec("frozen", doc="'frozen' (reference configuration) or 'updated' (re-detection)",
                          choices=("frozen", "updated"))
     redetect_every: int = spec(1, doc="steps between re-detections (updated geometry)", lo=1)
-    rebalance: float = spec(1.1, doc="N > 1 MPI ranks, updated geometry: the bodies are partitioned again at a "
-                            "re-detection where a rank would own more than rebalance x the mean number of contacts "
-                            "per rank", lo=1.0)
+    rebalance: float = spec(1.1, doc="N > 1 MPI ranks, updated geometry, Gauss-Seidel in colour order: the bodies "
+                            "are partitioned again at a re-detection where a rank would own more than rebalance x "
+                            "the mean number of contacts per rank", lo=1.0)
     on_nonconvergence: str = spec("warn", doc="what a step reaching max_sweeps does", choices=NONCONV,
                                   expected="'warn', 'fail', 'refine' or 'adaptive' (refine, adaptive: handled by the "
                                            "runner, warn here)")

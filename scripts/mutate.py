@@ -338,7 +338,7 @@ MUTATIONS = [
              "            self._sig = _signature(W, n)\n", ("tests/test_colour.py",)),
     Mutation("largest_allreduce_max", "N ranks: the largest of the ranks' values by an Allreduce MAX (a NaN on a rank "
              "other than the first is dropped)", "fem_blocks/distributed/exact.py",
-             "    return float(np.max(comm.allgather(float(x))))\n",
+             "    return float(np.max(every))\n",
              "    from mpi4py import MPI\n    return comm.allreduce(x, op=MPI.MAX)\n", ("tests/test_exact_sum.py",)),
     Mutation("rebalance_rows_not_gathered", "updated geometry, a new partition: the old rows carried by the old own "
              "positions, not gathered", "fem_blocks/contact/step.py",
@@ -347,9 +347,21 @@ MUTATIONS = [
              ("tests/test_dist_own_rows.py",)),
     Mutation("rebalance_bound_inclusive", "a new partition also when the busiest rank owns exactly rebalance x the "
              "mean", "fem_blocks/contact/step.py",
-             "if counts.max(initial=0) * size <= self.opts.rebalance * len(self.cs.gap):",
-             "if counts.max(initial=0) * size < self.opts.rebalance * len(self.cs.gap):",
+             "int(busiest * size > self.opts.rebalance * len(self.cs.gap))",
+             "int(busiest * size >= self.opts.rebalance * len(self.cs.gap))",
              ("tests/test_dist_partition.py",)),
+    Mutation("rebalance_kept_if_worse", "a new partition kept even when its busiest rank owns as many contacts",
+             "fem_blocks/contact/step.py",
+             "        if np.bincount(new[cand], minlength=size).max(initial=0) >= busiest:\n",
+             "        if False:\n", ("tests/test_dist_partition.py",)),
+    Mutation("partition_unweighted", "the time stepper's partition without the contact weights",
+             "fem_blocks/contact/step.py", "        return partition_graph(*g, self.comm, "
+             "vertex_weights=contact_weights(nb, cs.cand_body))\n",
+             "        return partition_graph(*g, self.comm)\n", ("tests/test_dist_partition.py",)),
+    Mutation("pieces_current_partition", "N ranks: a snapshot's checkpoint split by the partition in use, not the "
+             "snapshot's own (a failed step after a new partition)", "fem_blocks/runner.py",
+             '    kept = None if arrays is None else arrays.get("contact.body_owner")\n', "    kept = None\n",
+             ("tests/test_dist_own_rows.py",)),
     Mutation("vertex_weights_first_rows", "every rank gives PT-Scotch the first rows' vertex weights, not its own "
              "block's", "fem_blocks/distributed/graph.py", "np.asarray(vertex_weights)[start:start + n_loc]",
              "np.asarray(vertex_weights)[:n_loc]", ("tests/test_dist_partition.py",)),

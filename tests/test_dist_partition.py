@@ -267,12 +267,43 @@ def test_vertex_weights_balance_the_weight_of_each_rank(tmp_path, n):
     assert plain_w.max() >= 1.2 * plain_w.min(), plain_w
 
 
+class _Ranks:
+    """A stand-in communicator of `size` ranks for the contact step's rule (one process: its all-reduce returns
+    this rank's value, which every rank computes alike)."""
+
+    def __init__(self, size):
+        self.size = size
+
+    def Get_size(self):
+        return self.size
+
+    def allreduce(self, x, op=None):
+        return x
+
+
+def _stepper(counts, bound, new):
+    """A ContactStep holding only what `_rebalance` reads: one candidate body per contact, owned as `counts` says
+    (contact c's candidate body is nc - 1 - c), and a partition stub returning `new`."""
+    from types import SimpleNamespace
+    from fem_blocks.contact.step import ContactStep
+    from fem_blocks.specs import ContactOptions
+    owner = np.repeat(np.arange(len(counts)), counts)
+    step = ContactStep.__new__(ContactStep)
+    step.comm = _Ranks(len(counts))
+    step.cs = SimpleNamespace(cand_body=np.arange(owner.size)[::-1].copy(), gap=np.zeros(owner.size))
+    step.body_owner = owner[::-1].copy()
+    step.opts = ContactOptions(geometry="updated", rebalance=bound)
+    step.rebalanced = 0
+    step._partition = lambda: new
+    return step
+
+
 @pytest.mark.parametrize("counts, bound, again", [
     ((12, 8), 1.2, False),      # 12 = 1.2 x the mean 10 (24 = 1.2 x 20 exactly in doubles): at the bound, kept
     ((12, 8), 1.1, True),       # 12 > 11: partitioned again
     ((12, 8), 1.25, False),     # 12 <= 12.5
     ((10, 10, 0), 1.1, True),   # a rank without contacts counts in the mean (20 / 3): 10 > 7.33
-    ((7, 7, 6), 1.0, True),     # rebalance = 1: any imbalance
+    ((8, 6, 6), 1.0, True),     # rebalance = 1: any imbalance
     ((5, 5, 5, 5), 1.0, False),  # none
 ])
 def test_rebalance_partitions_again_beyond_the_bound(counts, bound, again):
@@ -280,20 +311,51 @@ def test_rebalance_partitions_again_beyond_the_bound(counts, bound, again):
     partitioned again iff the rank that owns most contacts (those of its candidate bodies) owns more than
     rebalance x (contacts / ranks); the new partition is then the one in use, and the count of re-partitions grows.
     One body per contact here, each owned as `counts` says; the partition is a stub (the rule is under test, not
-    PT-Scotch). Catches: >= for > (the first case), the mean over the ranks that own contacts (the fourth), the
-    new partition computed but not kept (the last assertion)."""
-    from types import SimpleNamespace
-    from fem_blocks.contact.step import ContactStep
-    from fem_blocks.specs import ContactOptions
-    owner = np.repeat(np.arange(len(counts)), counts)
-    step = ContactStep.__new__(ContactStep)
-    new = np.zeros(owner.size, dtype=np.int64)
-    step.comm = SimpleNamespace(Get_size=lambda: len(counts))
-    step.cs = SimpleNamespace(cand_body=np.arange(owner.size)[::-1].copy(), gap=np.zeros(owner.size))
-    step.body_owner = owner[::-1].copy()  # (contact c's candidate body is nc - 1 - c)
-    step.opts = ContactOptions(geometry="updated", rebalance=bound)
-    step.rebalanced = 0
-    step._partition = lambda: new
+    PT-Scotch: it returns an even split, which is better in every case here). Catches: >= for > (the first case),
+    the mean over the ranks that own contacts (the fourth), the new partition computed but not kept (the last
+    assertion)."""
+    n, size = sum(counts), len(counts)
+    new = (np.arange(n) * size // n).astype(np.int64)  # (as even as n allows)
+    step = _stepper(counts, bound, new)
     assert step._rebalance() is again
     assert step.rebalanced == int(again)
     assert (step.body_owner is new) is again
+
+
+def test_a_new_partition_no_better_is_not_kept():
+    """contact/step.py ContactStep._rebalance keeps a new partition only if its busiest rank owns fewer contacts
+    than the partition in use: PT-Scotch returning the same imbalance (14 + 6 contacts again, the ranks swapped)
+    leaves the partition in use, and nothing is counted; one contact better (13 + 7) is kept. Catches: the new
+    partition kept whatever it gives (the rows moved between ranks for nothing at every re-detection)."""
+    swapped = np.repeat([1, 0], [14, 6])[::-1].copy()
+    step = _stepper((14, 6), 1.1, swapped)
+    before = step.body_owner
+    assert step._rebalance() is False and step.body_owner is before and step.rebalanced == 0
+    better = np.repeat([0, 1], [13, 7])[::-1].copy()
+    step = _stepper((14, 6), 1.1, better)
+    assert step._rebalance() is True and step.body_owner is better and step.rebalanced == 1
+
+
+def test_the_time_steppers_partition_weighs_each_body_by_its_contacts(monkeypatch):
+    """contact/step.py ContactStep._partition gives PT-Scotch (distributed/graph.partition_graph, stubbed here) the
+    body graph of the contact set and a weight per body of 1 + its contacts as candidate (docs/scaling.md
+    "Rebalancing"), counted here by hand: bodies 0..4, contacts (cand, ant) = (0, 1), (0, 2), (3, 0), (3, 4),
+    (3, 1), (2, 4): weights 3, 1, 2, 4, 1. Catches: the partition made without the weights, or with the
+    antagonists' counts (3, 3, 2, 1, 3)."""
+    from types import SimpleNamespace
+    import fem_blocks.distributed.graph as graph
+    from fem_blocks.contact.step import ContactStep
+    seen = {}
+
+    def stub(indptr, indices, weights, comm, method="ptscotch", vertex_weights=None):
+        seen["w"] = None if vertex_weights is None else np.asarray(vertex_weights).tolist()
+        seen["edges"] = int(len(indices))
+        return np.zeros(len(indptr) - 1, dtype=np.int64)
+    monkeypatch.setattr(graph, "partition_graph", stub)
+    step = ContactStep.__new__(ContactStep)
+    step.comm = _Ranks(2)
+    step.scene = SimpleNamespace(nb=5)
+    step.cs = SimpleNamespace(cand_body=np.array([0, 0, 3, 3, 3, 2]), ant_body=np.array([1, 2, 0, 4, 1, 4]))
+    assert step._partition().tolist() == [0] * 5
+    assert seen["w"] == [3, 1, 2, 4, 1]
+    assert seen["edges"] == 12  # the 6 body pairs, both ways

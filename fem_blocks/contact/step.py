@@ -124,7 +124,7 @@ class ContactStep:
         self.timers = dict(detection=0.0, delassus=0.0, nlgs=0.0, correction=0.0, local=0.0)
         self.comm = None  # MPI ranks sharing the contact solve (use_comm); None: this process alone
         self.body_owner = None  # N > 1 ranks: the rank of each body (distributed/graph.partition_graph)
-        self.rebalanced = 0  # N > 1 ranks, updated geometry: the bodies partitioned again (`_rebalance`) so far
+        self.rebalanced = 0  # N > 1 ranks, updated geometry: new partitions kept (`_rebalance`) by this process
         self._colours = None  # order = "colours": the colour solver of the current Delassus operator
         self._local = None  # N > 1 ranks in colour order: this rank's contacts (_RankContacts), else None
         self._linear = None  # N > 1 ranks, Newton: the shared linear solve (_SharedLinear)
@@ -183,13 +183,21 @@ class ContactStep:
         """COLLECTIVE (N > 1 ranks in colour order, updated geometry, at a re-detection, the new contact set in
         self.cs and the old partition's `_local` still in place): if the rank that would own most of the new
         contacts owns more than `rebalance` × their mean per rank, partition the bodies again (`_partition`) and
-        return True (the caller moves the per-contact rows to their new owners), else False. Every rank holds the
-        same contact set and partition, so every rank decides the same."""
+        keep the new partition if its busiest rank owns fewer contacts; True if kept (the caller moves the
+        per-contact rows to their new owners), else False. Every rank holds the same contact set and partition
+        and decides the same; the decision is still taken as the ranks' largest (an all-reduce), so that ranks
+        whose contact sets differ (caught by `_check_replicas` after the assembly) do not part ways here."""
+        from mpi4py import MPI
         size = self.comm.Get_size()
-        counts = np.bincount(self.body_owner[self.cs.cand_body], minlength=size)
-        if counts.max(initial=0) * size <= self.opts.rebalance * len(self.cs.gap):
+        cand = self.cs.cand_body
+        busiest = np.bincount(self.body_owner[cand], minlength=size).max(initial=0)
+        again = self.comm.allreduce(int(busiest * size > self.opts.rebalance * len(self.cs.gap)), op=MPI.MAX)
+        if not again:
             return False
-        self.body_owner = self._partition()
+        new = self._partition()
+        if np.bincount(new[cand], minlength=size).max(initial=0) >= busiest:
+            return False  # (PT-Scotch did no better: the partition in use is kept)
+        self.body_owner = new
         self.rebalanced += 1
         return True
 

@@ -190,14 +190,16 @@ def exact_sums(xs, comm=None) -> list[float]:
 
 
 def largest(x: float, comm=None) -> float:
-    """The largest of every rank's x, NaN if any rank's x is NaN (one Allgather of a double; collective): np.max of
-    the gathered values, so a NaN on any rank reaches every rank (an Allreduce MAX would apply max pairwise, and
-    max(v, nan) is v: whether a NaN survived would depend on its rank). comm: mpi4py or petsc4py communicator;
-    None or size 1: x."""
+    """The largest of every rank's x, NaN if any rank's x is NaN (one Allgather of a double per rank; collective):
+    np.max of the gathered values, so a NaN on any rank reaches every rank (a reduction by max applies it pairwise,
+    and max(v, nan) is v: whether a NaN survived would depend on its rank). comm: mpi4py or petsc4py
+    communicator; None or size 1: x."""
     comm = _mpi_comm(comm)
     if comm is None:
         return x
-    return float(np.max(comm.allgather(float(x))))
+    every = np.empty(comm.Get_size())
+    comm.Allgather(np.array([x], dtype=np.float64), every)
+    return float(np.max(every))
 
 
 def exact_sum(x, comm=None) -> float:

@@ -68,12 +68,14 @@ def _petsc_library():
     return None
 
 
-def _set_vertex_weights(part, w_local: np.ndarray) -> bool:
-    """MatPartitioningSetVertexWeights(part, w) with w a PetscMalloc copy of this rank's rows' weights (PETSc's
-    PetscInt); the MatPartitioning frees it. False (nothing set) if no loaded library exports the function."""
+def _set_vertex_weights(part, w_local: np.ndarray, comm) -> bool:
+    """COLLECTIVE: MatPartitioningSetVertexWeights(part, w) with w a PetscMalloc copy of this rank's rows' weights
+    (PETSc's PetscInt); the MatPartitioning frees it. False (nothing set, on every rank: PT-Scotch needs the
+    weights of every rank or of none) if a rank's loaded libraries do not export the function."""
+    from mpi4py import MPI
     from petsc4py import PETSc
     lib = _petsc_library()
-    if lib is None:
+    if not comm.allreduce(int(lib is not None), op=MPI.MIN):
         return False
     w = np.ascontiguousarray(w_local, dtype=PETSc.IntType)
     ptr = ctypes.c_void_p()
@@ -117,7 +119,8 @@ def partition_graph(indptr, indices, weights, comm, method: str = "ptscotch", ve
     opts[prefix + "mat_partitioning_use_edge_weights"] = "true"
     part.setAdjacency(A)
     part.setType(method)
-    if vertex_weights is not None and not _set_vertex_weights(part, np.asarray(vertex_weights)[start:start + n_loc]):
+    if vertex_weights is not None and not _set_vertex_weights(part, np.asarray(vertex_weights)[start:start + n_loc],
+                                                              comm):
         if comm.rank == 0:
             warnings.warn("the bodies are partitioned without vertex weights (no loaded PETSc library exports "
                           "MatPartitioningSetVertexWeights): the ranks get equal numbers of bodies, not of contacts",
