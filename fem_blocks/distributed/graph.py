@@ -14,6 +14,7 @@ process has loaded (ctypes), with an array from PetscMalloc, which the MatPartit
 from __future__ import annotations
 
 import ctypes
+import functools
 import warnings
 
 import numpy as np
@@ -46,9 +47,11 @@ def contact_weights(nb: int, cand: np.ndarray) -> np.ndarray:
     return 1 + np.bincount(np.asarray(cand, dtype=np.int64), minlength=nb)
 
 
+@functools.lru_cache(maxsize=None)
 def _petsc_library():
     """The loaded shared object that exports MatPartitioningSetVertexWeights (libpetsc, or petsc4py's own module
-    when PETSc is linked statically), found in /proc/self/maps; None if there is none."""
+    when PETSc is linked statically), found in /proc/self/maps, with the return types of the two functions called
+    set; None if there is none. Looked up once per process (a run partitions again at re-detections)."""
     from petsc4py import PETSc
     paths = []
     try:
@@ -60,8 +63,8 @@ def _petsc_library():
     for path in paths:
         try:
             lib = ctypes.CDLL(path)
-            lib.MatPartitioningSetVertexWeights  # noqa: B018 (the symbol must be there)
-            lib.PetscMallocA  # noqa: B018
+            lib.MatPartitioningSetVertexWeights.restype = ctypes.c_int  # (the symbols must be there)
+            lib.PetscMallocA.restype = ctypes.c_int
             return lib
         except (OSError, AttributeError):
             continue
@@ -79,13 +82,11 @@ def _set_vertex_weights(part, w_local: np.ndarray, comm) -> bool:
         return False
     w = np.ascontiguousarray(w_local, dtype=PETSc.IntType)
     ptr = ctypes.c_void_p()
-    lib.PetscMallocA.restype = ctypes.c_int
     err = lib.PetscMallocA(ctypes.c_int(1), ctypes.c_int(0), ctypes.c_int(0), b"_set_vertex_weights", b"graph.py",
                            ctypes.c_size_t(max(w.nbytes, w.itemsize)), ctypes.byref(ptr))
     if err or not ptr.value:
         raise MemoryError(f"PetscMallocA of {w.nbytes} bytes failed (PETSc error {err})")
     ctypes.memmove(ptr, w.ctypes.data, w.nbytes)
-    lib.MatPartitioningSetVertexWeights.restype = ctypes.c_int
     err = lib.MatPartitioningSetVertexWeights(ctypes.c_void_p(part.handle), ptr)
     if err:
         raise RuntimeError(f"MatPartitioningSetVertexWeights failed (PETSc error {err})")
