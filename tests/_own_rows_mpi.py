@@ -44,7 +44,7 @@ def scripted_partition(step):
     """The case "rebalanced" (rebalance = 1.0): the first partition puts every body on rank 0 but one body on each
     other rank, so that the next re-detection partitions again; the later ones split the bodies, in order, into runs
     of about equal weight (1 + contacts as candidate, graph.contact_weights) and turn the ranks' labels with the
-    step count, so that the new partition is better than the first (kept: nearly every contact's rows move to
+    step count, so that the new partition is better than the first (kept: bodies and their contacts' rows move to
     another rank) and no better than the one before it (not kept). Any partition gives the same iterates; this one
     is the same for the same step (the step taken again after the restore) on every rank, as PT-Scotch's need not
     be."""
@@ -61,20 +61,19 @@ def scripted_partition(step):
 
 def snapshot_pieces(model, comm, snap, directory) -> dict:
     """The runner's checkpoint of the snapshot `snap` (what a failed step writes: the last good state) as one piece
-    per rank (runner._body_owner, distributed/checkpoint.write_pieces), read back whole (output/checkpoint.merge):
-    digests of its impulses and law states (one process: the snapshot's own arrays)."""
+    per rank (runner._body_owner, distributed/checkpoint.write_pieces), read back whole as a resumed run reads it
+    (output/checkpoint.latest_checkpoint: the pieces merged): digests of its impulses and law states (one process:
+    the snapshot's own arrays)."""
     if comm.Get_size() > 1:
-        import glob
         from fem_blocks.contact.step import ContactStep
         from fem_blocks.distributed.checkpoint import write_pieces
         from fem_blocks.dynamics import body_of_key
-        from fem_blocks.output.checkpoint import merge, read_checkpoint
+        from fem_blocks.output.checkpoint import latest_checkpoint
         from fem_blocks.runner import _body_owner
         write_pieces(comm, directory, snap, _body_owner(model, comm, snap), body_of_key,
                      ContactStep.per_contact_keys(snap))
         comm.Barrier()
-        snap = merge([read_checkpoint(f) for f in sorted(glob.glob(f"{directory}/checkpoint.rank*.npz"))
-                      if not f.endswith(".prev.npz")])
+        snap = latest_checkpoint(directory)[1]
     return dict(P=digest(snap["contact.P"]), state=digest(snap["contact.state"]))
 
 
@@ -86,8 +85,11 @@ def main(path, out):
     if path.endswith("rebalanced.toml") and comm.Get_size() > 1:
         step._partition = lambda: scripted_partition(step)  # (this object only: the others keep PT-Scotch's)
     res = dict(rank=comm.Get_rank(), size=comm.Get_size(), steps=[], owners=[], own_counts=[])
+    pieces = f"{out}.pieces"
+    if comm.Get_rank() == 0:
+        os.makedirs(pieces, exist_ok=True)
     for k in range(3):
-        if k == 2:  # the runner's snapshot of the last good state (runner._snapshot)
+        if k >= 1:  # the runner's snapshot of the last good state (runner._snapshot)
             snap = sim.export_state()
             snap.update({key: (v.copy() if isinstance(v, np.ndarray) else v)
                          for key, v in step.export_state().items()})
@@ -96,13 +98,10 @@ def main(path, out):
         res["steps"].append(record(sim, step))
         res["owners"].append(None if step.body_owner is None else np.asarray(step.body_owner).tolist())
         res["own_counts"].append(own_contacts(step, comm).size)
-    # the snapshot of step 2 written as the runner's checkpoint after step 3 (a failed step writes the last good
-    # state; here step 3 may have partitioned the bodies again)
-    pieces = f"{out}.pieces"
-    if comm.Get_rank() == 0:
-        os.makedirs(pieces, exist_ok=True)
-    comm.Barrier()
-    res["snapshot_pieces"] = snapshot_pieces(model, comm, snap, pieces)
+        if k == 1:  # the snapshot of step 1 written as the runner's checkpoint after step 2 (what a failed step
+            # writes: the last good state; "rebalanced" partitions the bodies again at step 2)
+            comm.Barrier()
+            res["snapshot_pieces"] = snapshot_pieces(model, comm, snap, pieces)
     sim.restore_state(snap)
     back = sim.last_contact.whole()
     res["restored"] = dict(P=digest(back.P), state=digest(back.state))
