@@ -20,11 +20,12 @@ from .linalg import BlockCSR
 
 
 @njit(cache=True)
-def _row_pattern(nc, rows, order, ent_contact, starts, side_body):
-    """Block-CSR pattern of the rows `rows` of the Delassus operator (any block size): row i (contact rows[i])
-    holds every contact sharing a body with it (once, columns = contact numbers 0..nc-1), columns sorted.
-    `order`/`starts` list the (contact, side) entities of each body (see body_entities). Returns indptr,
-    indices, diag_pos (position of the diagonal block of each row)."""
+def _row_pattern(nc, rows, dest, order, ent_contact, starts, side_body):
+    """Block-CSR pattern of the rows `rows` of the Delassus operator (any block size): contact rows[i]'s row is
+    output row dest[i] (a permutation of 0..len(rows)-1) and holds every contact sharing a body with it (once,
+    columns = contact numbers 0..nc-1), columns sorted. `order`/`starts` list the (contact, side) entities of each
+    body (see body_entities). Returns indptr, indices, diag_pos (position of the diagonal block of each output
+    row)."""
     nr = rows.shape[0]
     marker = -np.ones(nc, dtype=np.int64)
     counts = np.zeros(nr, dtype=np.int64)
@@ -36,7 +37,7 @@ def _row_pattern(nc, rows, order, ent_contact, starts, side_body):
                 c = ent_contact[order[e]]
                 if marker[c] != a:
                     marker[c] = a
-                    counts[i] += 1
+                    counts[dest[i]] += 1
     indptr = np.zeros(nr + 1, dtype=np.int64)
     for i in range(nr):
         indptr[i + 1] = indptr[i] + counts[i]
@@ -45,7 +46,8 @@ def _row_pattern(nc, rows, order, ent_contact, starts, side_body):
     marker[:] = -1
     for i in range(nr):
         a = rows[i]
-        k = indptr[i]
+        o = dest[i]
+        k = indptr[o]
         for s in range(2):
             b = side_body[a, s]
             for e in range(starts[b], starts[b + 1]):
@@ -54,11 +56,11 @@ def _row_pattern(nc, rows, order, ent_contact, starts, side_body):
                     marker[c] = a
                     indices[k] = c
                     k += 1
-        row = indices[indptr[i]:indptr[i + 1]]
+        row = indices[indptr[o]:indptr[o + 1]]
         row.sort()
-        for kk in range(indptr[i], indptr[i + 1]):
+        for kk in range(indptr[o], indptr[o + 1]):
             if indices[kk] == a:
-                diag_pos[i] = kk
+                diag_pos[o] = kk
     return indptr, indices, diag_pos
 
 
@@ -76,10 +78,10 @@ def body_entities(side_body, nb: int):
 
 
 @njit(cache=True)
-def _assemble_rows(nc, rows, order, ent_contact, ent_side, starts, side_body, side_dofs, side_G, W_flat, W_offset,
-                   W_size):
+def _assemble_rows(nc, rows, dest, order, ent_contact, ent_side, starts, side_body, side_dofs, side_G, W_flat,
+                   W_offset, W_size):
     """Row-by-row block-CSR assembly of w^{αβ} = Σ_{shared body b} G^α_s W_b G^β_s'ᵀ (d x d blocks, d =
-    side_G.shape[2]): the pattern of _row_pattern; per side s of row α, GW = G^α_s W_b over all of body b's dofs
+    side_G.shape[2]): the pattern of _row_pattern (contact rows[i]'s row is output row dest[i]); per side s of row α, GW = G^α_s W_b over all of body b's dofs
     once (GW[r, j] = Σ_i G^α_s[r, i] W_b[d_i, j], i in slot order), then one d x d product per entity (β, s') of
     b. Duplicates (β meeting α on both bodies) are summed in place; memory is the final number of blocks only.
 
@@ -91,7 +93,7 @@ def _assemble_rows(nc, rows, order, ent_contact, ent_side, starts, side_body, si
     d = side_G.shape[2]
     nd = side_dofs.shape[2]
     nr = rows.shape[0]
-    indptr, indices, diag_pos = _row_pattern(nc, rows, order, ent_contact, starts, side_body)
+    indptr, indices, diag_pos = _row_pattern(nc, rows, dest, order, ent_contact, starts, side_body)
     blocks = np.zeros((indptr[nr], d, d))
     pos_of = -np.ones(nc, dtype=np.int64)
     maxsz = 0
@@ -100,7 +102,8 @@ def _assemble_rows(nc, rows, order, ent_contact, ent_side, starts, side_body, si
     GW = np.zeros((d, maxsz))
     for i in range(nr):
         a = rows[i]
-        for kk in range(indptr[i], indptr[i + 1]):
+        o = dest[i]
+        for kk in range(indptr[o], indptr[o + 1]):
             pos_of[indices[kk]] = kk
         for s in range(2):
             b = side_body[a, s]
@@ -187,9 +190,12 @@ def assemble(G, W_flat, W_offset, W_size, nb: int, rows=None, couplings: bool = 
     """Block-CSR Delassus operator w^{αβ} = G^α W H^β (d x d blocks, local order (n, t) or (n, t, s)) from the G
     blocks of either dimension (side_body (nc, 2), side_dofs (nc, 2, nd), side_G (nc, 2, d, nd)) and the per-body
     dense W stored flat (row-major square block of size W_size[b] at W_offset[b], in the body's W numbering).
-    rows: the contacts (increasing) whose rows to assemble, None for all; row i of the result is row rows[i] of the
-    whole operator, bitwise (columns: all nc contacts; diag_pos: the position of block (rows[i], rows[i])), so a
-    rank of a distributed run assembles only the rows of its own contacts.
+    rows: the contacts (distinct, in any order) whose rows to assemble, None for all; row i of the result is row
+    rows[i] of the whole operator, bitwise (columns: all nc contacts; diag_pos: the position of block (rows[i],
+    rows[i])), so a rank of a distributed run assembles only the rows of its own contacts, and in the order it sweeps
+    them (distributed/colour.sweep_plan). The rows are computed in increasing contact number whatever their output
+    order (neighbouring contacts share bodies: their data is read while in cache; 1.4 times faster than in the
+    colour order of a wall) and each is written at its output position.
     couplings: keep only the blocks that couple (the diagonal blocks and the off-diagonal blocks with a nonzero
     entry): the blocks of zeros between contacts that share only a body held in every dof (W_b = 0: a fixed
     foundation, O(contacts on it²) of them) are dropped as the rows are assembled, so the result is
@@ -208,8 +214,9 @@ def assemble(G, W_flat, W_offset, W_size, nb: int, rows=None, couplings: bool = 
         raise InputError("G blocks: a dof index exceeds its body's W size")
     ent_contact, ent_side, order, starts = body_entities(G.side_body, nb)
     rows = np.arange(nc, dtype=np.int64) if rows is None else np.ascontiguousarray(rows, dtype=np.int64)
+    dest = np.argsort(rows, kind="stable").astype(np.int64)  # computed in increasing contact number, row dest[i]
     indptr, indices, blocks, diag_pos = _assemble_rows(
-        nc, rows, order, ent_contact, ent_side, starts, np.ascontiguousarray(G.side_body, dtype=np.int64),
+        nc, rows[dest], dest, order, ent_contact, ent_side, starts, np.ascontiguousarray(G.side_body, dtype=np.int64),
         np.ascontiguousarray(G.side_dofs, dtype=np.int64), np.ascontiguousarray(G.side_G, dtype=np.float64),
         np.ascontiguousarray(W_flat, dtype=float), np.asarray(W_offset, dtype=np.int64), W_size)
     if couplings:

@@ -324,18 +324,15 @@ MUTATIONS = [
              "        return exact_sums(terms, self.comm if self._local is not None else None)\n",
              "        return exact_sums(terms, None)\n", ("tests/test_dist_own_rows.py",)),
     Mutation("takeover_stale_blocks", "updated geometry: a colour solver taken over keeps the previous W's blocks",
-             "fem_blocks/distributed/colour.py",
-             '        np.take(W.blocks, src, axis=0, out=bl, mode="clip")  # ("clip": not buffered; src is in range)\n',
-             "",
-             ("tests/test_colour.py",)),
-    Mutation("takeover_contact_order", "a colour solver taken over takes the new blocks in contact order, not in "
-             "sweep order", "fem_blocks/distributed/colour.py", 'np.take(W.blocks, src, axis=0, out=bl, mode="clip")',
-             "bl[...] = W.blocks", ("tests/test_colour.py",)),
-    Mutation("takeover_sig_no_bodies", "the take-over signature without the contacts' body pairs",
-             "fem_blocks/distributed/colour.py",
-             "            self._sig = _signature(W, n, np.asarray(cand, dtype=np.int64), np.asarray(ant, dtype=np.int64),\n"
-             "                                   np.int64(nb))\n",
-             "            self._sig = _signature(W, n)\n", ("tests/test_colour.py",)),
+             "fem_blocks/distributed/colour.py", "        self.rows = (ip, ix, lr.blocks, dp)\n",
+             "        self.rows = previous.rows\n", ("tests/test_colour.py",)),
+    Mutation("takeover_no_colours", "a colour solver taken over when only the colours differ (the same sweep order "
+             "and count)", "fem_blocks/distributed/colour.py",
+             "(previous._colour_local, colour_local),\n", "\n", ("tests/test_colour.py",)),
+    Mutation("takeover_no_pattern", "a colour solver taken over when the rows' column numbers differ (same row "
+             "lengths)", "fem_blocks/distributed/colour.py",
+             "                (ip, lr.indptr), (dp, lr.diag_pos), (ix, lr.indices)))",
+             "                (ip, lr.indptr), (dp, lr.diag_pos)))", ("tests/test_colour.py",)),
     Mutation("largest_allreduce_max", "N ranks: the largest of the ranks' values by an Allreduce MAX (a NaN on a rank "
              "other than the first is dropped)", "fem_blocks/distributed/exact.py",
              "    return float(np.max(every))\n",
@@ -365,11 +362,28 @@ MUTATIONS = [
     Mutation("vertex_weights_first_rows", "every rank gives PT-Scotch the first rows' vertex weights, not its own "
              "block's", "fem_blocks/distributed/graph.py", "np.asarray(vertex_weights)[start:start + n_loc]",
              "np.asarray(vertex_weights)[:n_loc]", ("tests/test_dist_partition.py",)),
-    Mutation("rows_not_given", "from_rows with take_rows leaves W its own arrays (its column indices before the "
-             "renumbering: a second int64 per block)", "fem_blocks/distributed/colour.py",
-             "        self._distribute(lr, col[pos], shared)\n        if take_rows:\n",
-             "        self._distribute(lr, col[pos], shared)\n        if take_rows and False:\n",
+    Mutation("rows_not_given", "a colour solver taken over leaves W its own index arrays (a second int64 per block "
+             "beside the solver's)", "fem_blocks/distributed/colour.py",
+             "        previous.dist = previous.rows = None  # (spent: its scatters and arrays are this solver's)\n"
+             "        self._give_rows(self.W)\n",
+             "        previous.dist = previous.rows = None  # (spent: its scatters and arrays are this solver's)\n",
              ("tests/test_colour.py",)),
+    Mutation("couplings_held_bodies", "the colours read from the bodies couple groups through a held body too "
+             "(W_b = 0)", "fem_blocks/distributed/colour.py", "    keep = moving[body]\n",
+             "    keep = np.ones(body.size, dtype=bool)\n", ("tests/test_colour.py",)),
+    Mutation("moving_bodies_length", "moving_bodies reads W_size[b] entries of a body's block, not W_size[b]²",
+             "fem_blocks/distributed/colour.py",
+             "np.searchsorted(nz, lo + np.asarray(W_size, dtype=np.int64) ** 2)",
+             "np.searchsorted(nz, lo + np.asarray(W_size, dtype=np.int64))", ("tests/test_colour.py",)),
+    Mutation("assemble_rows_in_computing_order", "Delassus rows asked in another order written in increasing "
+             "contact order", "fem_blocks/delassus.py",
+             "    for i in range(nr):\n        a = rows[i]\n        o = dest[i]\n        for kk in range(indptr[o]",
+             "    for i in range(nr):\n        a = rows[i]\n        o = i\n        for kk in range(indptr[o]",
+             ("tests/test_detection_delassus.py",)),
+    Mutation("sweep_plan_unsorted", "the sweep plan's rows in contact order, not by colour",
+             "fem_blocks/distributed/colour.py",
+             '    rows = own[np.argsort(colour[own], kind="stable")]\n', "    rows = own\n",
+             ("tests/test_colour.py", "tests/test_dist_run.py")),
 ]
 
 IGNORE = shutil.ignore_patterns(".git", "__pycache__", ".venv", "*.pyc", ".pytest_cache", "out", "*.egg-info")

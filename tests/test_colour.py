@@ -94,17 +94,16 @@ def test_colours_separate_coupled_groups_and_keep_groups_whole():
 def test_serial_colour_solver_is_nlgs_sweeps_in_colour_order_with_exact_sums():
     """k sweeps of ColourSolver = k passes of nlgs.sweep over the contacts sorted by colour (stable), bitwise; the
     reported change is sqrt(fsum(Δr²)/fsum(r²)) of the last sweep, bitwise. The solver sweeps its rows renumbered in
-    sweep order (a colour's rows contiguous): W is left as it was, and with take_rows=True (its arrays moved in place)
-    the iterates are the same. Catches a colour skipped or swept twice, a sweep over the whole W instead of the
-    coupling rows with another order, a running (inexact) sum, a row's blocks, diagonal or columns renumbered
-    wrongly, the impulses returned in sweep order instead of contact order, W changed without take_rows."""
+    sweep order (a colour's rows contiguous): W is left as it was. Catches a colour skipped or swept twice, a sweep
+    over the whole W instead of the coupling rows with another order, a running (inexact) sum, a row's blocks,
+    diagonal or columns renumbered wrongly, the impulses returned in sweep order instead of contact order, W
+    changed."""
     W, q, mu, cand, ant = problem()
     keep = [np.array(getattr(W, k), copy=True) for k in ("indptr", "indices", "blocks", "diag_pos")]
     cs = ColourSolver(W, bodies=(cand, ant, 9))
     for k, a in zip(("indptr", "indices", "blocks", "diag_pos"), keep):
         assert np.array_equal(getattr(W, k), a), k
-    taken = ColourSolver(BlockCSR(*[a.copy() for a in keep]), bodies=(cand, ant, 9), take_rows=True)
-    assert not np.array_equal(taken._sweep, np.arange(W.n))  # the rows did move
+    assert not np.array_equal(cs._sweep, np.arange(W.n))  # the rows did move
     order = np.argsort(cs.colour, kind="stable").astype(np.int64)
     Wc = coupling_rows(W)
     for k in (1, 2, 7):
@@ -115,7 +114,6 @@ def test_serial_colour_solver_is_nlgs_sweeps_in_colour_order_with_exact_sums():
             nlgs.sweep(Wc.indptr, Wc.indices, Wc.blocks, Wc.diag_pos, q, mu, r, order)
         assert res.sweeps == k and not res.converged
         assert np.array_equal(res.r, r)
-        assert taken.solve(q, mu, tol=1e-300, max_sweeps=k).r.tobytes() == res.r.tobytes()
         dr = r - before
         assert res.change == math.sqrt(math.fsum(dr * dr) / math.fsum(r * r))
 
@@ -148,30 +146,87 @@ def test_ranks_whose_models_differ_stop_with_a_clear_error():
         step._check_replicas()
 
 
-def test_a_ranks_rows_give_the_colours_and_iterates_of_the_whole_operator():
-    """ColourSolver.from_rows (a rank holding only the rows of its own contacts, here one rank holding them all, on
-    MPI.COMM_SELF): the colours are colour_groups' on the whole W (the group graph from the rows' nonzero blocks) and
-    the solve gives the whole-operator solver's r, u and sweep count, bit for bit. Catches: groups coupled through a
-    block of zeros (the held body, 25 colours instead of 6 on a wall), a colour per group read in contact order. (Rows
-    split among ranks, the gathered group graph: tests/test_dist_run.py, bitwise against one process.)"""
-    from mpi4py import MPI
-    from fem_blocks.distributed.colour import body_pair_groups
+def _rows_in_order(W, order):
+    """The rows of coupling_rows(W) of the contacts `order`, in that order (global column numbers): what
+    delassus.assemble(..., rows=order, couplings=True) gives the time stepper."""
+    C = coupling_rows(W)
+    starts, cnt = C.indptr[order], np.diff(C.indptr)[order]
+    pos = np.concatenate([np.arange(a, a + c) for a, c in zip(starts, cnt)]).astype(np.int64)
+    indptr = np.concatenate([[0], np.cumsum(cnt)]).astype(np.int64)
+    return BlockCSR(indptr, C.indices[pos].copy(), C.blocks[pos].copy(),
+                    (C.diag_pos[order] - starts + indptr[:-1]).astype(np.int64))
+
+
+def test_the_colours_read_from_the_bodies_are_those_of_the_operator():
+    """sweep_plan (the time stepper's colours, before W is assembled: groups coupled when they share a moving body)
+    gives colour_groups' colours on the assembled W (groups coupled by W's nonzero blocks), and the sweep order of
+    ColourSolver(W): on the random bodies with a held one (body 0: W_b = 0, blocks of zeros) and without.
+    moving_bodies reads W_b = 0 from the flat per-body blocks. Catches: a held body counted as coupling (more
+    colours), an edge lost (a body's groups not all paired), a sweep order not by colour or not increasing within
+    one."""
+    from fem_blocks.distributed.colour import body_pair_groups, moving_bodies, sweep_plan
+    for held in (True, False):
+        W, q, mu, cand, ant = problem(seed=4, held=held)
+        moving = np.arange(9) != 0 if held else np.ones(9, dtype=bool)
+        group = body_pair_groups(cand, ant, 9)[0]
+        plan = sweep_plan(group, cand, ant, moving)
+        ref = ColourSolver(W, bodies=(cand, ant, 9))
+        assert np.array_equal(plan.colour, colour_groups(W, cand, ant, 9)) and plan.n_colours == ref.n_colours
+        assert np.array_equal(plan.rows, ref._sweep), held
+    sizes = np.array([2, 1, 2, 0, 1])
+    offsets = np.array([0, 4, 5, 9, 5])  # body 4 shares body 2's block
+    flat = np.zeros(9)
+    flat[[2, 4]] = [1.0, -3.0]  # body 0's last entry but one, body 1's only one
+    assert moving_bodies(flat, offsets, sizes).tolist() == [True, True, False, False, False]
+    flat[8] = 1e-300
+    assert moving_bodies(flat, offsets, sizes).tolist() == [True, True, True, False, False]
+
+
+def test_group_couplings_pair_the_groups_of_every_moving_body():
+    """group_couplings against the pairs of contacts written out one by one: (g_a, g_b) is an edge iff contacts a
+    and b share a body that moves; own_groups keeps the edges from those groups. Catches a segment of a body cut
+    short or run into the next body's, the held bodies' pairs kept."""
+    from fem_blocks.distributed.colour import body_pair_groups, group_couplings
+    rng = np.random.default_rng(3)
+    nb, nc = 12, 60
+    cand = rng.integers(0, nb, nc)
+    ant = (cand + rng.integers(1, nb, nc)) % nb
+    moving = rng.random(nb) < 0.7
+    group = body_pair_groups(cand, ant, nb)[0]
+    want = {(int(group[a]), int(group[b])) for a in range(nc) for b in range(nc)
+            if any(moving[x] for x in {cand[a], ant[a]} & {cand[b], ant[b]})}
+    ga, gb = group_couplings(group, cand, ant, moving)
+    assert set(zip(ga.tolist(), gb.tolist())) == want
+    own = np.array([1, 4, 7])
+    ga, gb = group_couplings(group, cand, ant, moving, own_groups=own)
+    assert set(zip(ga.tolist(), gb.tolist())) == {e for e in want if e[0] in own}
+
+
+def test_rows_in_sweep_order_solve_as_the_whole_operator():
+    """ColourSolver.from_sweep_rows (the time stepper: rows assembled in the plan's sweep order, global columns)
+    sweeps as ColourSolver(W) on the whole operator: the same colours' order, r, u and sweep count, bit for bit; W's
+    arrays become the solver's (no second copy of its column numbers). Catches local column numbers in another order
+    than the sweep's, a diagonal position not carried, the rows' arrays copied."""
+    from fem_blocks.distributed.colour import SweepPlan, body_pair_groups, sweep_plan
     W, q, mu, cand, ant = problem(seed=4)
     n = W.n
     ref = ColourSolver(W, bodies=(cand, ant, 9))
-    rows = BlockCSR(W.indptr.copy(), W.indices.copy(), W.blocks.copy(), W.diag_pos.copy())
-    ids = np.arange(n)
-    got = ColourSolver.from_rows(rows, ids, ids, n, body_pair_groups(cand, ant, 9)[0], np.zeros(n, int),
-                                 MPI.COMM_SELF)
-    try:
-        assert got.n_colours == ref.n_colours
-        for c in range(ref.n_colours):
-            assert np.array_equal(got.order[c], ref.order[c])
-        a = ref.solve(q, mu, tol=1e-10, max_sweeps=300)
-        b = got.solve(q, mu, tol=1e-10, max_sweeps=300)
-        assert a.sweeps == b.sweeps and np.array_equal(a.r, b.r) and np.array_equal(a.u, b.u)
-    finally:
-        got.destroy()
+    plan = sweep_plan(body_pair_groups(cand, ant, 9)[0], cand, ant, np.arange(9) != 0)
+    rows = _rows_in_order(W, plan.rows)
+    got = ColourSolver.from_sweep_rows(rows, plan, np.arange(n), n)
+    assert all(a is b for a, b in zip((rows.indptr, rows.indices, rows.blocks, rows.diag_pos), got.rows))
+    assert got.n_colours == ref.n_colours
+    for c in range(ref.n_colours):
+        assert np.array_equal(got.order[c], ref.order[c])
+    a = ref.solve(q, mu, tol=1e-10, max_sweeps=300)
+    b = got.solve(q, mu, tol=1e-10, max_sweeps=300)
+    assert a.sweeps == b.sweeps and np.array_equal(a.r, b.r) and np.array_equal(a.u, b.u)
+    # a plan that does not cover every contact on one process is refused
+    import pytest
+    from fem_blocks.errors import InputError
+    part = SweepPlan(plan.rows[:-1], plan.colour, plan.n_colours, 0)
+    with pytest.raises(InputError, match="rows of all"):
+        ColourSolver.from_sweep_rows(_rows_in_order(W, part.rows), part, np.arange(n), n)
 
 
 def test_colour_order_run_sweeps_the_delassus_arrays_without_a_copy(tmp_path):
@@ -200,7 +255,9 @@ def test_colour_order_run_sweeps_the_delassus_arrays_without_a_copy(tmp_path):
         a, b, c0, c1 = ip[i], ip[i + 1], C.indptr[g], C.indptr[g + 1]
         assert np.array_equal(sweep[ix[a:b]], C.indices[c0:c1]) and np.array_equal(bl[a:b], C.blocks[c0:c1]), g
         assert dp[i] - a == C.diag_pos[g] - c0
-    colour = step._colours.colour[sweep]
+    colour = step._colours._colour_local  # (one process: the colour of each row, in sweep order)
+    ref = colour_groups(whole, step.cs.cand_body, step.cs.ant_body, step.scene.nb)  # from the values of W
+    assert np.array_equal(colour, ref[sweep]) and colour.max() + 1 == step._colours.n_colours
     assert np.all(np.diff(colour) >= 0)  # a colour's rows one after the other ...
     for c in range(step._colours.n_colours):  # ... in increasing contact number
         assert np.all(np.diff(sweep[colour == c]) > 0)
@@ -209,7 +266,7 @@ def test_colour_order_run_sweeps_the_delassus_arrays_without_a_copy(tmp_path):
 
 
 def test_a_step_after_close_assembles_w_again(tmp_path):
-    """The colour solver holds W's arrays in its own order (take_rows): after ContactStep.close() drops it, the next
+    """The colour solver holds W's arrays in its own order (from_sweep_rows): after ContactStep.close() drops it, the next
     step must assemble W again, not hand the reordered arrays to a new solver. Expectation: the same run without
     close(), bitwise. Catches close() leaving W_dirty unset (the next solver reads the rows as if in contact order)."""
     import dist_cases
@@ -259,58 +316,52 @@ def _same_pattern(W, seed):
 
 
 def test_a_solver_of_the_same_structure_takes_over_the_previous_one():
-    """ColourSolver(..., previous=): the operator of the next step with the same contacts, body pairs and block
-    pattern (other values) takes over the previous solver's colours, sweep order and rows (its blocks array, refilled)
-    and solves as a solver built from scratch, bit for bit (r, u, sweeps, change); on one process and through
-    from_rows (one rank, MPI.COMM_SELF). It does not take over another structure: the bodies renumbered (other
-    groups), a block of zeros (colours from the values), or a previous solver that did not keep its layout.
-    Catches: the new blocks not taken (the previous values swept), taken in contact order instead of sweep order, the
-    signature without the body pairs; a solver built from scratch with take_rows leaving W its own arrays (its column
-    indices before the renumbering, a second int64 per block)."""
-    from mpi4py import MPI
-    from fem_blocks.distributed.colour import body_pair_groups
+    """from_sweep_rows(..., previous=): the rows of the next step with the same contacts, sweep order, colours and
+    block pattern (other values) take over the previous solver's layout (its index arrays, scatters on N > 1) with
+    the new blocks, and solve as a solver built from scratch, bit for bit (r, u, sweeps, change), again after a
+    take-over. It does not take over another structure: a block pattern that differs (a block less; a column
+    number changed, the same row lengths), colours that differ with the same sweep order and count, another sweep
+    order. Catches: the new blocks not taken (the previous values swept),
+    one of the structure's comparisons left out, a spent solver taken over again."""
+    from fem_blocks.distributed.colour import SweepPlan, body_pair_groups, sweep_plan
     W, q, mu, cand, ant = problem(seed=5, held=False)
-    W2 = _same_pattern(W, 1)
-    fresh = ColourSolver(_same_pattern(W, 1), bodies=(cand, ant, 9))
-    ref = fresh.solve(q, mu, tol=1e-10, max_sweeps=200)
-    ids, n = np.arange(W.n), W.n
-    group = body_pair_groups(cand, ant, 9)[0]
-    for how in ("serial", "rows"):
-        if how == "serial":
-            make = lambda A, **kw: ColourSolver(A, bodies=(cand, ant, 9), take_rows=True, **kw)  # noqa: E731
-        else:
-            make = lambda A, **kw: ColourSolver.from_rows(A, ids, ids, n, group, np.zeros(n, int),  # noqa: E731
-                                                          MPI.COMM_SELF, take_rows=True, **kw)
-        A1 = BlockCSR(*[np.array(a, copy=True) for a in (W.indptr, W.indices, W.blocks, W.diag_pos)])
-        first = make(A1, reusable=True)
-        # take_rows: W's arrays are the solver's (no array of W's own beside them, e.g. its column indices before
-        # the renumbering for the sweep)
-        assert all(a is b for a, b in zip((A1.indptr, A1.indices, A1.blocks, A1.diag_pos), first.rows)), how
-        first.solve(q, mu, tol=1e-10, max_sweeps=200)
-        held = first.rows[2]
-        A2 = BlockCSR(*[np.array(a, copy=True) for a in (W2.indptr, W2.indices, W2.blocks, W2.diag_pos)])
-        second = make(A2, previous=first)
-        assert first.rows is None and second.rows[2] is held and A2.blocks is held, how  # taken over, refilled
-        got = second.solve(q, mu, tol=1e-10, max_sweeps=200)
-        assert got.sweeps == ref.sweeps and got.change == ref.change, how
-        assert got.r.tobytes() == ref.r.tobytes() and got.u.tobytes() == ref.u.tobytes(), how
-        third = make(_same_pattern(W, 2), previous=second)  # (and again: the taken-over solver keeps its layout)
-        assert second.rows is None and third.rows[2] is held
-        third.destroy()
+    n = W.n
+    plan = sweep_plan(body_pair_groups(cand, ant, 9)[0], cand, ant, np.ones(9, dtype=bool))
+    make = lambda A, p=plan, **kw: ColourSolver.from_sweep_rows(_rows_in_order(A, p.rows), p, np.arange(n), n,  # noqa
+                                                                **kw)
+    ref = make(_same_pattern(W, 1)).solve(q, mu, tol=1e-10, max_sweeps=200)
+    first = make(W)
+    first.solve(q, mu, tol=1e-10, max_sweeps=200)
+    ix = first.rows[1]
+    second = make(_same_pattern(W, 1), previous=first)
+    assert first.rows is None and second.rows[1] is ix and second.W.indices is ix  # taken over
+    got = second.solve(q, mu, tol=1e-10, max_sweeps=200)
+    assert got.sweeps == ref.sweeps and got.change == ref.change
+    assert got.r.tobytes() == ref.r.tobytes() and got.u.tobytes() == ref.u.tobytes()
+    third = make(_same_pattern(W, 1), previous=second)  # (and again: the taken-over solver keeps its layout)
+    assert second.rows is None and third.rows[1] is ix
+    assert third.solve(q, mu, tol=1e-10, max_sweeps=200).r.tobytes() == ref.r.tobytes()
+    assert make(W, previous=second).rows[1] is not ix  # (spent: nothing to take over)
     # not the same structure: a fresh build, the previous solver left whole
-    prev = ColourSolver(_same_pattern(W, 3), bodies=(cand, ant, 9), take_rows=True, reusable=True)
-    other = ColourSolver(_same_pattern(W, 1), bodies=((cand + 1) % 9, (ant + 1) % 9, 9), take_rows=True,
-                         previous=prev)
-    assert prev.rows is not None and other.rows[2] is not prev.rows[2]
-    Wz, *_ = problem(seed=5)  # body 0 held: blocks of zeros
-    zp = ColourSolver(_same_pattern(Wz, 3), bodies=(cand, ant, 9), take_rows=True, reusable=True)
-    zn = ColourSolver(_same_pattern(Wz, 1), bodies=(cand, ant, 9), take_rows=True, previous=zp)
-    assert zp.rows is not None and zn.rows[2] is not zp.rows[2]
-    plain = ColourSolver(_same_pattern(W, 3), bodies=(cand, ant, 9), take_rows=True)  # (not reusable)
-    again = ColourSolver(_same_pattern(W, 1), bodies=(cand, ant, 9), take_rows=True, previous=plain)
-    assert plain.rows is not None
-    b = again.solve(q, mu, tol=1e-10, max_sweeps=200)
-    assert b.r.tobytes() == ref.r.tobytes()
+    Wp = _same_pattern(W, 2)
+    k = Wp.diag_pos[0] + 1 if Wp.diag_pos[0] + 1 < Wp.indptr[1] else Wp.diag_pos[0] - 1
+    Wp.blocks[k] = 0.0  # one coupling block less in row 0 (coupling_rows drops it)
+    other = make(Wp, previous=third)
+    assert third.rows is not None and other.rows[1] is not ix
+    R = _rows_in_order(W, plan.rows)  # a column number of row 0 changed (the same row lengths)
+    k = R.diag_pos[0] + 1 if R.diag_pos[0] + 1 < R.indptr[1] else R.diag_pos[0] - 1
+    R.indices[k] = next(j for j in range(n) if j not in set(R.indices[R.indptr[0]:R.indptr[1]].tolist()))
+    assert ColourSolver.from_sweep_rows(R, plan, np.arange(n), n, previous=third).rows[1] is not ix
+    assert third.rows is not None
+    c = plan.colour.copy()
+    first1 = plan.rows[np.flatnonzero(c[plan.rows] == 1)[0]]
+    c[c == c[first1]] = -7  # the first group of colour 1 in colour 0: the same sweep order and number of colours
+    c[c == -7] = 0
+    moved = SweepPlan(plan.rows, c, plan.n_colours, 0)
+    assert np.array_equal(moved.rows, plan.rows[np.argsort(c[plan.rows], kind="stable")])
+    assert make(W, p=moved, previous=third).rows[1] is not ix and third.rows is not None
+    shuffled = SweepPlan(plan.rows[::-1].copy(), plan.colour, plan.n_colours, 0)
+    assert make(W, p=shuffled, previous=third).rows[1] is not ix and third.rows is not None
 
 
 def test_updated_geometry_takes_over_the_colour_solver_between_redetections(tmp_path, monkeypatch):
@@ -328,13 +379,13 @@ def test_updated_geometry_takes_over_the_colour_solver_between_redetections(tmp_
     real = colour.ColourSolver._take_over
     runs, taken = [], []
 
-    def counted(self, previous, W, take_rows):
-        ok = real(self, previous, W, take_rows)
+    def counted(self, previous, lr, colour_local):
+        ok = real(self, previous, lr, colour_local)
         taken.append(ok)
         return ok
     for refuse in (False, True):
         monkeypatch.setattr(colour.ColourSolver, "_take_over",
-                            (lambda self, p, W, t: False) if refuse else counted)
+                            (lambda self, p, lr, c: False) if refuse else counted)
         _, model, sim, _ = stepping(str(path), None)
         out = []
         for _ in range(5):

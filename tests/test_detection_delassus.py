@@ -227,7 +227,7 @@ def test_coupling_blocks_only_are_the_coupling_rows_of_the_whole_operator_bitwis
     W_flat = W_flat.copy()
     W_flat[W_offset[2]:] = 0.0  # body 2 held in every dof
     B = delassus.assemble(G, W_flat, W_offset, W_size, nb=3)
-    for rows in (None, np.array([1, 2, 5, 6])):
+    for rows in (None, np.array([1, 2, 5, 6]), np.array([6, 2, 5, 1])):
         E = coupling_rows(B if rows is None else delassus.assemble(G, W_flat, W_offset, W_size, nb=3, rows=rows))
         C = delassus.assemble(G, W_flat, W_offset, W_size, nb=3, rows=rows, couplings=True)
         assert C.indices.size < (B.indices.size if rows is None else B.indptr[rows + 1].sum() - B.indptr[rows].sum())
@@ -246,17 +246,19 @@ def test_rows_of_the_operator_are_its_rows_bitwise():
     the contacts (kin.build_G on cs.subset): both must be the whole operator's and the whole G's, bit for bit, or a
     distributed run would not reproduce the serial iterates. Expectation: the whole assembly, itself checked against
     the dense G W Gᵀ above. Catches: row i assembled for contact i instead of rows[i]; the diagonal position taken
-    in the whole operator's numbering; a G block that depends on the other contacts of the set."""
+    in the whole operator's numbering; a G block that depends on the other contacts of the set. Rows asked in
+    another order than the contacts' (a colour solver's sweep order) come in that order: catches a row written at
+    its computing position (the rows are computed in increasing contact number) instead of its output one."""
     cs, G, kind, rot, center, Wb, U_offset, Wd, Wr, nbn = scene_G(seed=5)
     B = delassus.assemble(G, *Wb, nb=3)
-    rows = np.array([1, 4, 6])
-    R = delassus.assemble(G, *Wb, nb=3, rows=rows)
-    assert R.n == len(rows)
-    for i, a in enumerate(rows):
-        s, e = B.indptr[a], B.indptr[a + 1]
-        assert np.array_equal(R.indices[R.indptr[i]:R.indptr[i + 1]], B.indices[s:e])
-        assert np.array_equal(R.blocks[R.indptr[i]:R.indptr[i + 1]], B.blocks[s:e])
-        assert R.indices[R.diag_pos[i]] == a and R.diag_pos[i] - R.indptr[i] == B.diag_pos[a] - s
+    for rows in (np.array([1, 4, 6]), np.array([6, 1, 4]), np.array([5, 0, 6, 2, 1, 4, 3])):
+        R = delassus.assemble(G, *Wb, nb=3, rows=rows)
+        assert R.n == len(rows)
+        for i, a in enumerate(rows):
+            s, e = B.indptr[a], B.indptr[a + 1]
+            assert np.array_equal(R.indices[R.indptr[i]:R.indptr[i + 1]], B.indices[s:e]), (rows, i)
+            assert np.array_equal(R.blocks[R.indptr[i]:R.indptr[i + 1]], B.blocks[s:e]), (rows, i)
+            assert R.indices[R.diag_pos[i]] == a and R.diag_pos[i] - R.indptr[i] == B.diag_pos[a] - s
     sub = np.array([0, 2, 3, 6])
     Gs = kin.build_G(cs.subset(sub), kind, rot, center, np.concatenate([np.arange(nbn), np.arange(4)]),
                      np.array([0, 0, nbn]))

@@ -126,6 +126,7 @@ class ContactStep:
         self.body_owner = None  # N > 1 ranks: the rank of each body (distributed/graph.partition_graph)
         self.rebalanced = 0  # N > 1 ranks, updated geometry: new partitions kept (`_rebalance`) by this process
         self._colours = None  # order = "colours": the colour solver of the current Delassus operator
+        self._plan = None  # order = "colours": the colours and sweep order of the next Delassus operator (_delassus)
         self._local = None  # N > 1 ranks in colour order: this rank's contacts (_RankContacts), else None
         self._linear = None  # N > 1 ranks, Newton: the shared linear solve (_SharedLinear)
 
@@ -393,28 +394,23 @@ class ContactStep:
         self._colours = self._linear = None
 
     def _colour_solver(self):
-        """order = "colours": the colour solver of the current Delassus operator (rebuilt with it); on N > 1
-        ranks each contact is owned by the rank of its candidate body. W's arrays are given to the solver
-        (take_rows: put in its sweep order in place, no second copy); in colour order nothing else reads them, and
-        `Wdel` then only identifies the operator the solver was built for. Updated geometry assembles W at every
-        step, mostly for the same contacts: the new solver takes over the previous one's colours, sweep order and
-        scatters when the structure is the same (ColourSolver's `previous`: the same solver, bit for bit)."""
+        """order = "colours": the colour solver of the current Delassus operator (rebuilt with it), whose rows
+        `_delassus` assembled in the sweep order of `_plan`; on N > 1 ranks each contact is owned by the rank of its
+        candidate body. W's arrays become the solver's (ColourSolver.from_sweep_rows: nothing else reads them in
+        colour order; `Wdel` then only identifies the operator the solver was built for). Updated geometry
+        assembles W at every step, mostly for the same contacts: the new solver takes over the previous one's
+        scatters and layout when the structure is the same (from_sweep_rows' `previous`: the same solver, bit for
+        bit)."""
         if self.opts.order != "colours":
             return None
         if self._colours is not None and self._colours.W is self.Wdel:
             return self._colours
-        from ..distributed.colour import ColourSolver, body_pair_groups
-        prev, updated = self._colours, self.opts.geometry == "updated"
-        reuse = dict(take_rows=True, previous=prev if updated else None, reusable=updated)
-        if self._local is not None:
-            cs = self.cs
-            self._colours = ColourSolver.from_rows(self.Wdel, self._local.own, self._local.L, len(cs.gap),
-                                                   body_pair_groups(cs.cand_body, cs.ant_body, self.scene.nb)[0],
-                                                   self._owner(), self.comm, **reuse)
-        else:
-            owner = self._owner() if self.comm is not None else None
-            self._colours = ColourSolver(self.Wdel, owner, self.comm,
-                                         bodies=(self.cs.cand_body, self.cs.ant_body, self.scene.nb), **reuse)
+        from ..distributed.colour import ColourSolver
+        prev = self._colours
+        columns = self._local.L if self._local is not None else np.arange(len(self.cs.gap), dtype=np.int64)
+        self._colours = ColourSolver.from_sweep_rows(self.Wdel, self._plan, columns, len(self.cs.gap), self.comm,
+                                                     previous=prev if self.opts.geometry == "updated" else None)
+        self._plan = None
         if prev is not None:
             prev.destroy()  # (nothing left to release if the new solver took it over)
         return self._colours
@@ -448,13 +444,28 @@ class ContactStep:
         return cs
 
     def _delassus(self, W_flat, W_offset, W_size):
-        """W of the contact set; N > 1 ranks in colour order: the rows of this rank's own contacts, columns the
-        contacts L (delassus.assemble's rows). In colour order only the blocks that couple are assembled
-        (delassus.assemble's couplings): the rows the colour solver sweeps, held once."""
+        """W of the contact set. In colour order only the blocks that couple are assembled (delassus.assemble's
+        couplings): the rows the colour solver sweeps, held once, assembled directly in its sweep order (`_plan`,
+        colours read from the bodies: distributed/colour.sweep_plan); on N > 1 ranks the rows of this rank's own
+        contacts only, columns the contacts L."""
         from .. import delassus
-        rows = None if self._local is None else self._local.own_pos
-        return delassus.assemble(self.G, W_flat, W_offset, W_size, self.scene.nb, rows=rows,
-                                 couplings=self.opts.order == "colours")
+        if self.opts.order != "colours":
+            return delassus.assemble(self.G, W_flat, W_offset, W_size, self.scene.nb)
+        from ..distributed.colour import body_pair_groups, moving_bodies, sweep_plan
+        cs, loc = self.cs, self._local
+        group = body_pair_groups(cs.cand_body, cs.ant_body, self.scene.nb)[0]
+        moving = moving_bodies(W_flat, W_offset, W_size)
+        if loc is None:
+            self._plan = sweep_plan(group, cs.cand_body, cs.ant_body, moving)
+        else:
+            owner = self._owner()
+            one = np.zeros(int(group.max()) + 1 if group.size else 0, dtype=np.int64)
+            one[group] = np.arange(group.size)  # a contact of each group: its owner is the group's
+            L = loc.L
+            self._plan = sweep_plan(group[L], cs.cand_body[L], cs.ant_body[L], moving, own=loc.own_pos,
+                                    owner_of=lambda g: owner[one[g]], comm=self.comm)
+        return delassus.assemble(self.G, W_flat, W_offset, W_size, self.scene.nb, rows=self._plan.rows,
+                                 couplings=True)
 
     def _initial_state(self):
         """Committed law state of new contacts: 2D (nc, NSTATE); 3D one more column, S_US = NSTATE (u_S)."""

@@ -19,13 +19,22 @@ is one exchange between ranks: on the running-bond walls of bench/bench_dist.py 
 contact colours against 6 group colours. Blocks of zeros count: with them, the contacts on a fixed foundation all
 couple and the groups need 25 and 74 colours.)
 
+The time stepper reads the group graph from the bodies instead, before W is assembled (`sweep_plan`): the groups of
+two contacts are coupled when the contacts share a body whose W_b ≠ 0 (`group_couplings`, `moving_bodies`), since
+W_αβ = Σ_{shared bodies b} G^α_b W_b G^βᵀ_b. That graph holds every nonzero block's pair, so its colours keep the
+contacts of one colour and different groups uncoupled; it equals the graph of W's nonzero blocks unless a block
+between contacts sharing a moving body is exactly zero (none on the demos and benchmark walls: the same colours,
+checked). Knowing the sweep order first, the contact step assembles the rows of W directly in it
+(delassus.assemble's `rows`) and no permutation of W's rows is needed (`ColourSolver.from_sweep_rows`).
+
 Distribution (comm with N > 1 ranks; distributed/sweep.py). Rank p owns the contacts `owner == p` (the time stepper:
 the rank of the contact's candidate body, distributed/partition.py; with groups, one group's contacts must have one
 owner) and holds their rows of W (without the blocks of zeros, `coupling_rows`, as the serial sweep; column order of
 the global row kept, so every v_α is summed exactly as serially), q_α, μ_α, the law data and the impulses of its
 contacts and of the *ghost* contacts its rows couple to. The rows come from the whole W (`ColourSolver`) or are
-assembled by the rank itself (`ColourSolver.from_rows`, the time stepper: each rank colours its own groups from its
-rows, distributed/greedy.py, the colours of the whole group graph without gathering it). After colour c, one PETSc
+assembled by the rank itself in its sweep order (`ColourSolver.from_sweep_rows`, the time stepper: each rank colours
+its own groups from the bodies of its contacts, distributed/greedy.py, the colours of the whole group graph without
+gathering it). After colour c, one PETSc
 scatter carries the new impulses of colour c to the ranks that hold them as ghosts (neighbour ranks only). The iterates
 are the serial ones, bitwise, for any N and any ownership.
 
@@ -54,6 +63,7 @@ from __future__ import annotations
 
 import sys
 import time
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -127,6 +137,83 @@ def coupling_rows(W: BlockCSR) -> BlockCSR:
                     np.ascontiguousarray(W.blocks[keep]), diag)
 
 
+def moving_bodies(W_flat, W_offset, W_size) -> np.ndarray:
+    """(nb,) bool: the bodies whose dense W_b (delassus.assemble's blocks per body: W_size[b]² entries at
+    W_offset[b] of W_flat) has a nonzero entry. A body held in every dof (a fixed foundation) has W_b = 0: the
+    contacts it carries are not coupled through it."""
+    nz = np.flatnonzero(np.asarray(W_flat))
+    lo = np.asarray(W_offset, dtype=np.int64)
+    return np.searchsorted(nz, lo + np.asarray(W_size, dtype=np.int64) ** 2) > np.searchsorted(nz, lo)
+
+
+def group_couplings(group, cand, ant, moving, own_groups=None) -> tuple[np.ndarray, np.ndarray]:
+    """Edges (ga, gb) of the group graph read from the bodies: the groups of two contacts are coupled when the
+    contacts share a moving body (`moving_bodies`), since W_αβ = Σ_{shared bodies b} G^α_b W_b G^βᵀ_b is zero
+    when every shared body has W_b = 0. group, cand, ant: per contact (one array entry each); own_groups
+    (increasing): only the edges whose ga is one of them (a rank's own groups), else every edge. Each edge once per
+    moving body the two groups share, both directions, self-pairs included (the colourings ignore them)."""
+    group = np.asarray(group, dtype=np.int64)
+    moving = np.asarray(moving, dtype=bool)
+    body = np.concatenate([np.asarray(cand, dtype=np.int64), np.asarray(ant, dtype=np.int64)])
+    g = np.concatenate([group, group])
+    keep = moving[body]
+    ng = int(group.max()) + 1 if group.size else 1
+    code = np.unique(body[keep] * ng + g[keep])  # the distinct (body, group) pairs, grouped by body
+    eb, eg = code // ng, code % ng
+    start = np.searchsorted(eb, eb)              # first pair of the same body
+    count = np.searchsorted(eb, eb, side="right") - start
+    src = np.arange(eg.size) if own_groups is None else np.flatnonzero(np.isin(eg, own_groups))
+    rep = count[src]
+    k = np.arange(int(rep.sum()), dtype=np.int64) - np.repeat(np.cumsum(rep) - rep, rep)
+    return np.repeat(eg[src], rep), eg[np.repeat(start[src], rep) + k]
+
+
+@dataclass
+class SweepPlan:
+    """The colours of a rank's contacts and the order it sweeps them, known before W is assembled (`sweep_plan`):
+    the contact step assembles the rows of W directly in that order (delassus.assemble's `rows`)."""
+    rows: np.ndarray     # positions, among the contacts given, of this rank's own contacts in sweep order
+    colour: np.ndarray   # colour of every contact given (-1: its group is not coupled to an own group)
+    n_colours: int       # over every rank
+    rounds: int          # rounds of the distributed greedy colouring (0 on one process)
+
+
+def sweep_plan(group, cand, ant, moving, own=None, owner_of=None, comm=None) -> SweepPlan:
+    """Colours and sweep order from the contacts' bodies (the time stepper, before it assembles W): contacts grouped
+    by body pair (group: the global group number of each contact given, `body_pair_groups` of the whole contact
+    set), groups coupled when they share a moving body (`group_couplings`), coloured greedily in increasing group
+    number (`colour_group_graph` on one process; on N > 1 ranks `greedy.greedy_colours`, each rank colouring its own
+    groups: the same colours). The sweep order: own contacts by colour, increasing within a colour (stable sort of
+    their positions). own: positions of this rank's contacts among those given (None: all, one process);
+    owner_of(g): the rank owning each group of the array g (N > 1).
+
+    The colours are those of `colour_groups` on the assembled W unless a block between contacts sharing a moving
+    body is exactly zero (then these separate more groups): the group graph read from the bodies holds every
+    nonzero block, so contacts of one colour and different groups stay uncoupled."""
+    group = np.asarray(group, dtype=np.int64)
+    n = group.size
+    own = np.arange(n, dtype=np.int64) if own is None else np.asarray(own, dtype=np.int64)
+    colour = -np.ones(n, dtype=np.int64)
+    rounds = 0
+    if comm is None or comm.Get_size() == 1:
+        if n:
+            ga, gb = group_couplings(group, cand, ant, moving)
+            colour = colour_group_graph(int(group.max()) + 1, ga, gb)[group]
+        n_colours = int(colour.max()) + 1 if n else 0
+    else:
+        from mpi4py import MPI
+        from .greedy import greedy_colours
+        mine = np.unique(group[own])
+        ga, gb = group_couplings(group, cand, ant, moving, own_groups=mine)
+        ids, col, rounds = greedy_colours(mine, ga, gb, owner_of, comm)
+        pos = np.minimum(np.searchsorted(ids, group), max(ids.size - 1, 0))
+        known = ids[pos] == group if ids.size else np.zeros(n, dtype=bool)
+        colour[known] = col[pos[known]]
+        n_colours = comm.allreduce(int(col.max()) + 1 if col.size else 0, op=MPI.MAX)
+    rows = own[np.argsort(colour[own], kind="stable")]
+    return SweepPlan(rows.astype(np.int64), colour, int(n_colours), int(rounds))
+
+
 def _in_sweep_order(lr, colour_own, shared: bool, fresh_indices: bool = False):
     """The rows `lr` (sweep.LocalRows) with the owned contacts renumbered in sweep order: by colour, increasing
     contact number within a colour (the order the sweep visits them), so that the rows of a colour lie one after
@@ -152,56 +239,25 @@ def _in_sweep_order(lr, colour_own, shared: bool, fresh_indices: bool = False):
             colour_own[perm])
 
 
-def _signature(W: BlockCSR, *arrays) -> bytes | None:
-    """What fixes a colour solver's structure besides its blocks' values (ColourSolver's `previous`): W's block
-    pattern (indptr, indices) and the arrays given (contacts, groups, owners), as a digest (SHA-256: 2.5 times
-    faster than blake2b on this CPU's SHA instructions, 0.04 s for 50 MB); None if W has an off-diagonal block of
-    zeros (its colours would depend on the values: `coupling_rows`)."""
-    import hashlib
-    if coupling_rows(W) is not W:
-        return None
-    h = hashlib.sha256()
-    for a in (W.indptr, W.indices) + arrays:
-        a = np.ascontiguousarray(a)
-        h.update(f"{a.dtype.str}{a.shape};".encode())
-        h.update(a.tobytes() if a.ndim == 0 else memoryview(a).cast("B"))
-    return h.digest()
-
-
 class ColourSolver:
     """The colour-order NLGS for one Delassus operator W (set up once per W; collective when `comm` has N > 1
-    ranks). contact_owner: (nc,) rank of each contact (N > 1); comm: an mpi4py communicator or None (serial);
-    bodies: (cand, ant, nb) the contacts' body pairs and the number of bodies (colours of body-pair groups,
-    `colour_groups`; every group must have one owner), or None (contacts coloured one by one).
+    ranks). Two ways in:
 
-    The solver sweeps its rows in sweep order (`_in_sweep_order`: a colour's rows one after the other in memory).
-    take_rows=True gives it W's arrays: they are put in that order in place and W, kept as `self.W` only to
-    recognise the operator, is no longer a valid operator (the contact step, which assembles W for the solver
-    alone); otherwise the solver works on its own copy (W unchanged).
+    * `ColourSolver(W, contact_owner, comm, bodies)`: the whole W in contact order (the file driver, tests), its
+      colours read from W's nonzero blocks: contact_owner (nc,) the rank of each contact (N > 1); comm an mpi4py
+      communicator or None (serial); bodies (cand, ant, nb) the contacts' body pairs and the number of bodies
+      (colours of body-pair groups, `colour_groups`; every group must have one owner), or None (contacts coloured
+      one by one). The solver copies the rows it sweeps into sweep order (`_in_sweep_order`); W is unchanged.
+    * `ColourSolver.from_sweep_rows(...)`: the time stepper's rows, assembled by the rank itself in the sweep order
+      of a `SweepPlan` (colours from the bodies, before W): no permutation; the rows' arrays become the solver's.
 
-    previous: the solver of the operator before (updated geometry: W is assembled again at every step, mostly for
-    the same contacts). When the new operator has the structure of the previous one — the same contacts, body-pair
-    groups and owners, the same block pattern row by row, and no block of zeros (`_signature`) — the colours, the
-    sweep order and the PETSc scatters are those the new operator would get (they depend on that structure only),
-    so they are taken over (`_take_over`) and only the new blocks are put in sweep order: the same solver, bit for
-    bit, as one built from scratch, without the colouring and the rows' permutation (most of the set-up). On N > 1
-    ranks the ranks take over only if every rank can (one all-reduce). `previous` is then spent (its PETSc objects
-    are this solver's); otherwise it is left as it is, for its owner to destroy. reusable: keep what a next
-    solver needs to take this one over (set when `previous` is given)."""
+    The solver sweeps its rows in sweep order: a colour's rows one after the other in memory."""
 
-    def __init__(self, W: BlockCSR, contact_owner=None, comm=None, bodies=None, take_rows: bool = False,
-                 previous: "ColourSolver | None" = None, reusable: bool = False):
+    def __init__(self, W: BlockCSR, contact_owner=None, comm=None, bodies=None):
         self.W = W
         self.d = W.dim
         n = self.n = W.n
         self.comm = comm if comm is not None and comm.Get_size() > 1 else None
-        self._sig = None
-        if (previous is not None or reusable) and bodies is not None and self.comm is None:
-            cand, ant, nb = bodies
-            self._sig = _signature(W, n, np.asarray(cand, dtype=np.int64), np.asarray(ant, dtype=np.int64),
-                                   np.int64(nb))
-            if self._take_over(previous, W, take_rows):
-                return
         if bodies is not None:
             cand, ant, nb = bodies
             if len(cand) != n or len(ant) != n:
@@ -215,20 +271,10 @@ class ColourSolver:
         Wc = coupling_rows(W) if n else W
         if self.comm is None:
             from .sweep import LocalRows
-            self.owned = np.arange(n, dtype=np.int64)
-            self.ghost = np.zeros(0, dtype=np.int64)
-            lr = LocalRows(self.owned, self.ghost, Wc.indptr, Wc.indices, Wc.blocks, Wc.diag_pos, np.zeros(0),
-                           np.zeros(0))
-            self._ip0 = np.array(lr.indptr, dtype=np.int64) if self._sig is not None else None
-            lr, c_sweep = _in_sweep_order(lr, colour, shared=Wc is W and not take_rows)
-            self._sweep = lr.owned
-            self._back = np.searchsorted(self.owned, self._sweep)  # sweep position -> position in `owned`
-            self.rows = (lr.indptr, lr.indices, lr.blocks, lr.diag_pos)
-            if take_rows:
-                self._give_rows(W)
-            self.order = [np.ascontiguousarray(np.flatnonzero(c_sweep == c), dtype=np.int64)
-                          for c in range(self.n_colours)]
-            self.r = np.zeros(self.d * n)
+            lr = LocalRows(np.arange(n, dtype=np.int64), np.zeros(0, dtype=np.int64), Wc.indptr, Wc.indices,
+                           Wc.blocks, Wc.diag_pos, np.zeros(0), np.zeros(0))
+            lr, c_sweep = _in_sweep_order(lr, colour, shared=Wc is W)
+            self._serial(lr, c_sweep)
             return
         from .sweep import local_rows
         owner = np.asarray(contact_owner, dtype=np.int64)
@@ -236,113 +282,121 @@ class ColourSolver:
             raise InputError(f"contact_owner: expected {n} ranks (one per contact), got shape {owner.shape}")
         lr = local_rows(Wc, np.zeros(self.d * n), np.zeros(n), np.flatnonzero(owner == self.comm.Get_rank()))
         del Wc
-        self._distribute(lr, colour[np.concatenate([lr.owned, lr.ghost])], shared=False)
+        colour_local = colour[np.concatenate([lr.owned, lr.ghost])]
+        lr, c_sweep = _in_sweep_order(lr, colour_local[:lr.owned.size], shared=False, fresh_indices=True)
+        self._distribute(lr, np.concatenate([c_sweep, colour_local[lr.owned.size:]]))
 
     @classmethod
-    def from_rows(cls, rows: BlockCSR, owned, columns, n: int, group, owner, comm,
-                  take_rows: bool = False, previous: "ColourSolver | None" = None,
-                  reusable: bool = False) -> "ColourSolver":
-        """The colour solver of a run whose ranks hold only the rows of their own contacts (collective on `comm`,
-        N > 1 ranks). rows: the rows of W of this rank's contacts `owned` (global numbers, increasing; row i is
-        contact owned[i]), their column k meaning contact columns[k] (global numbers, increasing), as
-        delassus.assemble(..., rows=...) gives them on a rank's contact subset; n: the number of contacts of the
-        whole run; group: (n,) the body-pair group of every contact (`body_pair_groups`); owner: (n,) the rank of
-        every contact (one per group). The colours are those of `colour_groups` on the whole W: the greedy colouring
-        of the group graph, each rank colouring its own groups from the nonzero blocks of its rows
-        (distributed/greedy.py, no rank holds the whole graph), so the iterates are those of one process in colour
-        order, bitwise. take_rows, previous, reusable: as for the constructor."""
-        from .greedy import greedy_colours
-        from .sweep import localise
+    def from_sweep_rows(cls, rows: BlockCSR, plan: SweepPlan, columns, n: int, comm=None,
+                        previous: "ColourSolver | None" = None) -> "ColourSolver":
+        """The colour solver of rows assembled in sweep order (the time stepper; collective on `comm` when it has
+        N > 1 ranks). columns: the contacts (global numbers, increasing) of the rows' column numbers and of the
+        plan's positions (a rank's contacts L, or every contact); rows: row i is the row of contact
+        columns[plan.rows[i]], without off-diagonal blocks of zeros (delassus.assemble(..., rows=plan.rows,
+        couplings=True)); n: the number of contacts of the whole run. The rows' arrays become the solver's (column
+        numbers made local in place: own contacts in sweep order, then the ghosts, the other columns met,
+        increasing); W (`rows`) then only identifies the operator the solver was built for.
+
+        previous: the solver of the operator before (updated geometry assembles W at every step, mostly for the
+        same contacts). When the new rows have its structure — the same contacts in the same sweep order, ghosts,
+        colours and block pattern (on N > 1 ranks on every rank: one all-reduce) — its PETSc scatters and layout are
+        taken over with the new blocks (`_take_over`): the same solver, bit for bit, as one built from scratch.
+        `previous` is then spent; otherwise it is left as it is, for its owner to destroy."""
         self = cls.__new__(cls)
         self.W, self.d, self.n = rows, rows.dim, int(n)
-        self.comm = comm
-        owned = np.asarray(owned, dtype=np.int64)
+        self.comm = comm if comm is not None and comm.Get_size() > 1 else None
+        self.colour, self.dist = None, None
+        self.n_colours = int(plan.n_colours)
+        self.colour_rounds = int(plan.rounds)
         columns = np.asarray(columns, dtype=np.int64)
-        group = np.asarray(group, dtype=np.int64)
-        owner = np.asarray(owner, dtype=np.int64)
-        self._sig = None
-        if previous is not None or reusable:
-            self._sig = _signature(rows, np.int64(n), np.int64(comm.Get_size()), owned, columns, group[columns],
-                                   owner[columns])
-            if self._take_over(previous, rows, take_rows):
-                return self
-        one = np.zeros(int(group.max()) + 1 if group.size else 0, dtype=np.int64)
-        one[group] = np.arange(group.size)  # a contact of each group: its owner is the group's
-        r_loc, c_loc = _nonzero_blocks(rows)
-        ids, col, self.colour_rounds = greedy_colours(group[owned], group[owned[r_loc]], group[columns[c_loc]],
-                                                      lambda g: owner[one[g]], comm)
-        from mpi4py import MPI
-        self.n_colours = comm.allreduce(int(col.max()) + 1 if col.size else 0, op=MPI.MAX)
-        self.colour = None
-        Wc = coupling_rows(rows)
-        lr = localise(owned, Wc.indptr, columns[Wc.indices], Wc.blocks, Wc.diag_pos)
-        shared = Wc is rows and not take_rows
-        del Wc
-        g_local = group[np.concatenate([lr.owned, lr.ghost])]
-        pos = np.minimum(np.searchsorted(ids, g_local), max(ids.size - 1, 0))
-        if g_local.size and not np.array_equal(ids[pos], g_local):
-            raise RuntimeError("ColourSolver.from_rows: a ghost contact whose group is not coupled to an own group "
-                               "(the rows and the group graph disagree)")
-        self._distribute(lr, col[pos], shared)
-        if take_rows:
-            self._give_rows(rows)
-        return self
+        sweep = np.asarray(plan.rows, dtype=np.int64)
+        ix = rows.indices
+        # local numbers over the positions in `columns`: own contacts in sweep order, then the other columns met
+        seen = np.zeros(columns.size, dtype=bool)
+        seen[ix] = True
+        seen[sweep] = False
+        gpos = np.flatnonzero(seen)
+        lut = np.empty(columns.size, dtype=np.int64)
+        lut[sweep] = np.arange(sweep.size, dtype=np.int64)
+        lut[gpos] = sweep.size + np.arange(gpos.size, dtype=np.int64)
+        np.take(lut, ix, out=ix, mode="clip")  # in place ("clip": not buffered; ix is in range)
+        local = np.concatenate([sweep, gpos])
+        colour_local = np.asarray(plan.colour, dtype=np.int64)[local]
+        if np.any(colour_local < 0):
+            raise RuntimeError("ColourSolver.from_sweep_rows: a ghost contact whose group is not coupled to an own "
+                               "group (the rows and the plan's group graph disagree)")
+        from .sweep import LocalRows
+        lr = LocalRows(columns[sweep], columns[gpos], np.asarray(rows.indptr, dtype=np.int64), ix, rows.blocks,
+                       np.asarray(rows.diag_pos, dtype=np.int64), np.zeros(0), np.zeros(0))
+        if self._take_over(previous, lr, colour_local):
+            return self
+        if self.comm is None:
+            if gpos.size or sweep.size != self.n:
+                raise InputError(f"from_sweep_rows: on one process the rows of all {self.n} contacts, got "
+                                 f"{sweep.size} rows and {gpos.size} other columns")
+            self._serial(lr, colour_local)
+        else:
+            self._distribute(lr, colour_local)
+        return self  # (the solver's rows are W's arrays: its column numbers made local in place)
 
-    def _distribute(self, lr, colour_local, shared: bool):
-        """N > 1 ranks: this rank's rows `lr` (sweep.LocalRows; shared: its blocks are the caller's), the colours of
-        its owned then ghost contacts; the rows put in sweep order (`_in_sweep_order`), the PETSc scatters
-        (sweep.DistSweep) and the layout of the Allgatherv of the owned rows (`gather`)."""
+    def _serial(self, lr, c_sweep):
+        """One process: the rows `lr` in sweep order (sweep.LocalRows, every contact, no ghost), their colours."""
+        self.owned = np.arange(lr.owned.size, dtype=np.int64)
+        self.ghost = np.zeros(0, dtype=np.int64)
+        self._sweep = lr.owned
+        self._back = lr.owned  # sweep position -> position in `owned`
+        self.rows = (lr.indptr, lr.indices, lr.blocks, lr.diag_pos)
+        self._colour_local = np.asarray(c_sweep, dtype=np.int64)
+        self.order = [np.ascontiguousarray(np.flatnonzero(c_sweep == c), dtype=np.int64)
+                      for c in range(self.n_colours)]
+        self.r = np.zeros(self.d * lr.owned.size)
+
+    def _distribute(self, lr, colour_local):
+        """N > 1 ranks: this rank's rows `lr` in sweep order (sweep.LocalRows: owned contacts in sweep order, then
+        the ghosts), the colours of its owned then ghost contacts; the PETSc scatters (sweep.DistSweep) and the layout
+        of the Allgatherv of the owned rows (`gather`)."""
         from .sweep import DistSweep
         self.dist = None
-        self.owned, self.ghost = lr.owned, lr.ghost
-        self._ip0 = np.array(lr.indptr, dtype=np.int64) if self._sig is not None else None
-        lr, c_sweep = _in_sweep_order(lr, colour_local[:lr.owned.size], shared=shared, fresh_indices=True)
-        self._sweep = lr.owned
+        self._sweep, self.ghost = lr.owned, lr.ghost
+        self.owned = np.sort(lr.owned)
         self._back = np.searchsorted(self.owned, self._sweep)  # sweep position -> position in `owned`
         self.rows = (lr.indptr, lr.indices, lr.blocks, lr.diag_pos)
-        self.dist = DistSweep(lr, np.concatenate([c_sweep, colour_local[self.owned.size:]]), self.n_colours,
-                              self.comm)
+        self._colour_local = np.asarray(colour_local, dtype=np.int64)
+        self.dist = DistSweep(lr, colour_local, self.n_colours, self.comm)
         self.order = self.dist.order
         self.r = self.dist.r  # owned then ghost impulses; the owned part is the PETSc vector's array
         counts = np.array(self.comm.allgather(self.owned.size), dtype=np.int64)
         self._counts = counts
         self._ids = np.concatenate(self.comm.allgather(self.owned))  # gathered owned contacts, in rank order
 
-    def _take_over(self, previous, W: BlockCSR, take_rows: bool) -> bool:
-        """Become `previous` with the blocks of W (module docstring of the class, `previous`) if both have the same
-        signature (`_sig`; on N > 1 ranks if every rank's has: one all-reduce); False, and nothing done, if not.
-        W's rows are in `previous`'s layout before its sweep order (the structure is the same): the new blocks are
-        taken row by row into the sweep order (one gather into the solver's own blocks array, which held the
-        previous operator's); with take_rows W's arrays become the solver's, as when its rows are moved in place."""
-        same = previous is not None and self._sig is not None and previous._sig == self._sig
+    def _take_over(self, previous, lr, colour_local) -> bool:
+        """Become `previous` with the blocks of `lr` (`from_sweep_rows`'s previous) if both have the same structure:
+        the same run size, contacts in sweep order, ghosts, colours and rows' pattern (on N > 1 ranks on every rank:
+        one all-reduce); False, and nothing done, if not. The solver then keeps the previous index arrays (equal)
+        and W's blocks; W's arrays become these."""
+        same = (previous is not None and getattr(previous, "rows", None) is not None
+                and previous.comm is self.comm and previous.n == self.n
+                and previous.n_colours == self.n_colours and previous.d == self.d)
+        if same:
+            ip, ix, _, dp = previous.rows
+            same = all(np.array_equal(a, b) for a, b in (
+                (previous._sweep, lr.owned), (previous.ghost, lr.ghost), (previous._colour_local, colour_local),
+                (ip, lr.indptr), (dp, lr.diag_pos), (ix, lr.indices)))
         if self.comm is not None:
             from mpi4py import MPI
             same = bool(self.comm.allreduce(int(same), op=MPI.MIN))
         if not same:
             return False
-        self.__dict__.update({k: v for k, v in previous.__dict__.items() if k != "W"})  # (its _sig is this one's)
-        ip, _, bl, _ = self.rows
-        perm, ip0 = self._back, self._ip0  # sweep row i <- row perm[i] of the rows as assembled
-        # src[k]: the block of W that goes to sweep position k, one int64 per block (no other temporary): ones,
-        # the jump to the source row at each row start, summed
-        lens = ip[1:] - ip[:-1]
-        full = lens > 0
-        a, n_ = ip0[:-1][perm][full], lens[full]
-        src = np.ones(int(ip[-1]), dtype=np.int64)
-        if src.size:
-            src[ip[:-1][full]] = a - np.concatenate([[0], a[:-1] + n_[:-1] - 1])
-            np.cumsum(src, out=src)
-        np.take(W.blocks, src, axis=0, out=bl, mode="clip")  # ("clip": not buffered; src is in range)
+        self.__dict__.update({k: v for k, v in previous.__dict__.items() if k not in ("W", "colour_rounds")})
+        ip, ix, _, dp = previous.rows
+        self.rows = (ip, ix, lr.blocks, dp)
         previous.dist = previous.rows = None  # (spent: its scatters and arrays are this solver's)
-        if take_rows:
-            self._give_rows(W)
+        self._give_rows(self.W)
         return True
 
     def _give_rows(self, W: BlockCSR):
-        """take_rows: W's arrays become the solver's rows (in sweep order), so that W keeps no array of its own
-        beside them — its column indices before the renumbering for the sweep (`localise`) would otherwise stay, a
-        second copy of one int64 per block, or its blocks, if `coupling_rows` had copied them. W then only
-        identifies the operator the solver was built for."""
+        """W's arrays become the solver's rows (in sweep order, local column numbers), so that W keeps no array of
+        its own beside them. W then only identifies the operator the solver was built for."""
         W.indptr, W.indices, W.blocks, W.diag_pos = self.rows
 
     @property

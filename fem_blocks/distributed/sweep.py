@@ -100,7 +100,6 @@ class DistSweep:
     def __init__(self, rows: LocalRows, colour_local, n_colours: int, comm):
         from petsc4py import PETSc
         self.comm = comm
-        self.rows = rows
         d = rows.dim
         self.d = d
         n_own, n_gh = rows.owned.size, rows.ghost.size
