@@ -384,6 +384,20 @@ MUTATIONS = [
              "fem_blocks/distributed/colour.py",
              '    rows = own[np.argsort(colour[own], kind="stable")]\n', "    rows = own\n",
              ("tests/test_colour.py", "tests/test_dist_run.py")),
+    Mutation("detect_subset_own_grid", "a rank's detection runs its broad phase on the grid of its own edges, not "
+             "the whole set's", "fem_blocks/contact/detection_2d.py",
+             "cell, origin=lo.min(axis=0), top=hi.max(axis=0))]", "cell)]",
+             ("tests/test_placement.py", "tests/test_detection_delassus.py")),
+    Mutation("near_bodies_one_side", "a rank's detection misses the neighbours numbered below its bodies",
+             "fem_blocks/contact/detection_2d.py", "        near[pairs[mine[:, 1], 0]] = True\n", "",
+             ("tests/test_placement.py",)),
+    Mutation("detect_matches_not_filtered", "a rank's detection keeps the contacts of its neighbours' candidates",
+             "fem_blocks/contact/detection_2d.py", "        m = bodies[bedge_body[ce]]\n",
+             "        m = np.ones(ce.size, dtype=bool)\n", ("tests/test_placement.py",)),
+    Mutation("gather_set_rank_order", "the ranks' parts of the contact set gathered in rank order, not in key order",
+             "fem_blocks/contact/step.py",
+             '        order[np.argsort(keys, kind="stable")] = np.arange(keys.size, dtype=np.int64)',
+             "        order = np.arange(keys.size, dtype=np.int64)", ("tests/test_dist_own_rows.py",)),
 ]
 
 IGNORE = shutil.ignore_patterns(".git", "__pycache__", ".venv", "*.pyc", ".pytest_cache", "out", "*.egg-info")

@@ -91,11 +91,15 @@ def _grid_pairs(lo, hi, group, cell, origin, dims):
     return out[:m]
 
 
-def grid_pairs(lo, hi, group, cell: float) -> np.ndarray:
+def grid_pairs(lo, hi, group, cell: float, origin=None, top=None) -> np.ndarray:
     """(m, 2) int64: every pair (i, j), i < j, of overlapping boxes [lo_i, hi_i] (n, d) with group[i] != group[j],
-    once, in the order of their grid cells (cells of size `cell`, see the module docstring); n >= 1."""
+    once, in the order of their grid cells (cells of size `cell`, see the module docstring); n >= 1.
+    origin, top: the grid's corners (default: the boxes' min lo and max hi). A subset of the boxes on the grid of the
+    whole set (the whole set's origin and top) gives the pairs of the subset in the whole set's relative order: each
+    pair is reported from the same cell, and the boxes of a cell keep their increasing order."""
     lo = np.ascontiguousarray(lo, dtype=float)
     hi = np.ascontiguousarray(hi, dtype=float)
-    origin = lo.min(axis=0)
-    dims = np.floor((hi.max(axis=0) - origin) / cell).astype(np.int64) + 1
+    origin = lo.min(axis=0) if origin is None else np.ascontiguousarray(origin, dtype=float)
+    top = hi.max(axis=0) if top is None else np.asarray(top, dtype=float)
+    dims = np.floor((top - origin) / cell).astype(np.int64) + 1
     return _grid_pairs(lo, hi, np.ascontiguousarray(group, dtype=np.int64), float(cell), origin, dims)

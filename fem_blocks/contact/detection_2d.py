@@ -29,7 +29,9 @@ MAX_ANGLE = 60°: one edge of a right-angled corner faces a flat antagonist at a
 the edge, with -(reach) <= g <= g0 + alert.
 
 Broad phase: edge boxes enlarged by the search distance on a uniform grid (contact/broadphase.py, shared with
-3D; numba, linear in the number of edges); each edge pair of two bodies is examined once.
+3D; numba, linear in the number of edges); each edge pair of two bodies is examined once. A rank's detection
+(`detect(..., bodies=)`: the contacts of its own candidate bodies) runs it on the edges of its bodies and their
+neighbours on the whole set's grid, which keeps the whole detection's order: the same contacts, bit for bit.
 """
 from __future__ import annotations
 
@@ -261,9 +263,33 @@ def _body_slots(mask, node, ant_body, cand_body) -> np.ndarray:
     return slot
 
 
+def _near_bodies(bodies, lo, hi, bedge_body) -> np.ndarray:
+    """(nb,) bool: the bodies of `bodies` (bool mask) and every body whose box (its edges' boxes lo/hi, already
+    enlarged by the search distance) overlaps one of theirs: every body an edge of `bodies` can pair with."""
+    if np.any(np.diff(bedge_body) < 0):  # (edges grouped by body, as the scene lists them: one reduceat)
+        o = np.argsort(bedge_body, kind="stable")
+        lo, hi, bedge_body = lo[o], hi[o], bedge_body[o]
+    ids, first = np.unique(bedge_body, return_index=True)  # the bodies with edges, their first edge
+    near = bodies.copy()
+    if ids.size > 1:
+        blo = np.minimum.reduceat(lo, first, axis=0)
+        bhi = np.maximum.reduceat(hi, first, axis=0)
+        size = float(np.median(np.max(bhi - blo, axis=1)))
+        pairs = ids[grid_pairs(blo, bhi, ids, max(size, 1e-12))]
+        mine = bodies[pairs]
+        near[pairs[mine[:, 0], 1]] = True
+        near[pairs[mine[:, 1], 0]] = True
+    return near
+
+
 def detect(bx, bnode_body, bnode_local, bedges, bedge_body, kind, body_group, table: InterfaceTable,
-           reach_frac: float = 0.25) -> ContactSet:
-    """Contact points between bodies (see module docstring). All inputs are flat arrays (architecture.md)."""
+           reach_frac: float = 0.25, bodies=None) -> ContactSet:
+    """Contact points between bodies (see module docstring). All inputs are flat arrays (architecture.md).
+    bodies: (nb,) bool, or None: only the contacts whose candidate body is one of `bodies` (a rank's own bodies),
+    bitwise the rows of the whole detection that have such a candidate, in the same (key) order. The broad phase runs
+    on the edges of these bodies and of the bodies near them, on the grid of the whole set: their pairs come in the
+    whole set's relative order, so are their matches, and every sum over the matches of a point (the overlap and
+    node points' tributary lengths) adds the same terms in the same order."""
     bx = np.ascontiguousarray(bx, dtype=np.float64)
     bedges = np.ascontiguousarray(bedges, dtype=np.int64)
     if bx.ndim != 2 or bx.shape[1] != 2:
@@ -282,8 +308,17 @@ def detect(bx, bnode_body, bnode_local, bedges, bedge_body, kind, body_group, ta
         raise InputError(f"body {int(bedge_body[e])}: boundary edge {e} has zero length (degenerate edge)")
     search = float(np.max(table.g0 + table.alert)) if len(table.g0) else 0.0
     cell = max(float(np.median(L)) if len(L) else 1.0, 2 * search, 1e-12)
-    pairs = grid_pairs(np.minimum(a, b) - search, np.maximum(a, b) + search, bedge_body, cell) if len(L) > 1 \
-        else np.zeros((0, 2), dtype=np.int64)
+    lo, hi = np.minimum(a, b) - search, np.maximum(a, b) + search
+    if len(L) <= 1:
+        pairs = np.zeros((0, 2), dtype=np.int64)
+    elif bodies is None:
+        pairs = grid_pairs(lo, hi, bedge_body, cell)
+    else:
+        bodies = np.asarray(bodies, dtype=bool)
+        sub = np.flatnonzero(_near_bodies(bodies, lo, hi, bedge_body)[bedge_body])
+        pairs = sub[grid_pairs(lo[sub], hi[sub], bedge_body[sub], cell, origin=lo.min(axis=0), top=hi.max(axis=0))] \
+            if sub.size > 1 else np.zeros((0, 2), dtype=np.int64)
+        pairs = pairs[bodies[bedge_body[pairs[:, 0]]] | bodies[bedge_body[pairs[:, 1]]]]
     ce, ae, sk, lam, gap, itf, pk, tr = _narrow(pairs, bx, bedges, bedge_body, kind, body_group,
                                             np.ascontiguousarray(table.pair_iface, dtype=np.int64),
                                             table.g0.astype(float), table.alert.astype(float),
@@ -291,6 +326,9 @@ def detect(bx, bnode_body, bnode_local, bedges, bedge_body, kind, body_group, ta
                                             np.ascontiguousarray(table.positions, dtype=float),
                                             table.cand_group.astype(np.int64), table.cos_max_angle.astype(float),
                                             float(reach_frac))
+    if bodies is not None:  # the matches of the candidates of `bodies` (every match of their points)
+        m = bodies[bedge_body[ce]]
+        ce, ae, sk, lam, gap, itf, pk, tr = ce[m], ae[m], sk[m], lam[m], gap[m], itf[m], pk[m], tr[m]
     P = table.positions.shape[1]
     nodes_pl = table.placement[itf] == 1
     ovl_pl = table.placement[itf] == 2

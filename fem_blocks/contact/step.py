@@ -434,14 +434,37 @@ class ContactStep:
         return det3.InterfaceTable.from_2d(table)
 
     def _detect(self, bx):
+        """The contact set at positions bx. 2D on N > 1 ranks in colour order once the bodies are partitioned: each
+        rank detects the contacts of its own candidate bodies (detection_2d.detect's `bodies`: bitwise the whole
+        detection's rows of those contacts) and the ranks' parts are gathered whole, in key order (`_gather_set`):
+        every rank then holds the serial contact set, and the detection's work is split."""
         s = self.scene
         if self.dim == 3:
             return det3.detect(bx, s.bnode_body, s.bnode_local, s.bfaces, s.bface_body, s.kind, self.body_group,
                                self.table)
+        split = self._split() and self.body_owner is not None and len(self.body_owner) == s.nb
         cs = det.detect(bx, s.bnode_body, s.bnode_local, s.bedges, s.bedge_body, s.kind, self.body_group,
-                        self.table)
+                        self.table, bodies=self.body_owner == self.comm.Get_rank() if split else None)
+        if split:
+            cs = self._gather_set(cs)
         cs.area = cs.area * self.body_thickness[cs.cand_body]  # tributary length x thickness
         return cs
+
+    def _gather_set(self, part):
+        """COLLECTIVE: the ranks' parts of a contact set (each the whole set's rows of its own candidates, in key
+        order) as the whole set on every rank, in key order (the keys are distinct: one per candidate point), which
+        is the order of the whole detection. One Allgatherv per field."""
+        from ..distributed.sweep import gather_rows
+        counts = np.array(self.comm.allgather(len(part.gap)), dtype=np.int64)
+        keys = gather_rows(self.comm, np.arange(int(counts.sum()), dtype=np.int64), counts, part.key.astype(np.int64))
+        order = np.empty(keys.size, dtype=np.int64)
+        order[np.argsort(keys, kind="stable")] = np.arange(keys.size, dtype=np.int64)  # rank-major row -> key order
+        out = {}
+        for k, v in part.__dict__.items():
+            v = np.asarray(v)
+            dt = np.float64 if v.dtype.kind == "f" else np.int64
+            out[k] = gather_rows(self.comm, order, counts, v.astype(dt, copy=False)).astype(v.dtype, copy=False)
+        return type(part)(**out)
 
     def _delassus(self, W_flat, W_offset, W_size):
         """W of the contact set. In colour order only the blocks that couple are assembled (delassus.assemble's
