@@ -81,9 +81,10 @@ def body_entities(side_body, nb: int):
 def _assemble_rows(nc, rows, dest, order, ent_contact, ent_side, starts, side_body, side_dofs, side_G, W_flat,
                    W_offset, W_size):
     """Row-by-row block-CSR assembly of w^{αβ} = Σ_{shared body b} G^α_s W_b G^β_s'ᵀ (d x d blocks, d =
-    side_G.shape[2]): the pattern of _row_pattern (contact rows[i]'s row is output row dest[i]); per side s of row α, GW = G^α_s W_b over all of body b's dofs
-    once (GW[r, j] = Σ_i G^α_s[r, i] W_b[d_i, j], i in slot order), then one d x d product per entity (β, s') of
-    b. Duplicates (β meeting α on both bodies) are summed in place; memory is the final number of blocks only.
+    side_G.shape[2]): the pattern of _row_pattern (contact rows[i]'s row is output row dest[i]); per side s of row
+    α, GW = G^α_s W_b over all of body b's dofs once (GW[r, j] = Σ_i G^α_s[r, i] W_b[d_i, j], i in slot order),
+    then one d x d product per entity (β, s') of b. Duplicates (β meeting α on both bodies) are summed in place;
+    memory is the final number of blocks only.
 
     The loops are unrolled per dimension (a loop over d measured 2x slower in 3D; the 2D product runs over the 4
     slots of a 2D side, a loop over nd measured 20 % slower). Summation order of an entry,
@@ -194,8 +195,8 @@ def assemble(G, W_flat, W_offset, W_size, nb: int, rows=None, couplings: bool = 
     rows[i] of the whole operator, bitwise (columns: all nc contacts; diag_pos: the position of block (rows[i],
     rows[i])), so a rank of a distributed run assembles only the rows of its own contacts, and in the order it sweeps
     them (distributed/colour.sweep_plan). The rows are computed in increasing contact number whatever their output
-    order (neighbouring contacts share bodies: their data is read while in cache; 1.4 times faster than in the
-    colour order of a wall) and each is written at its output position.
+    order (neighbouring contacts share bodies: their data is read while in cache; docs/scaling.md "Rows assembled in
+    sweep order") and each is written at its output position.
     couplings: keep only the blocks that couple (the diagonal blocks and the off-diagonal blocks with a nonzero
     entry): the blocks of zeros between contacts that share only a body held in every dof (W_b = 0: a fixed
     foundation, O(contacts on it²) of them) are dropped as the rows are assembled, so the result is
@@ -215,8 +216,11 @@ def assemble(G, W_flat, W_offset, W_size, nb: int, rows=None, couplings: bool = 
     ent_contact, ent_side, order, starts = body_entities(G.side_body, nb)
     rows = np.arange(nc, dtype=np.int64) if rows is None else np.ascontiguousarray(rows, dtype=np.int64)
     dest = np.argsort(rows, kind="stable").astype(np.int64)  # computed in increasing contact number, row dest[i]
+    srt = rows[dest]
+    if srt.size and (srt[0] < 0 or srt[-1] >= nc or np.any(srt[1:] == srt[:-1])):
+        raise ValueError(f"rows: expected distinct contact numbers in 0..{nc - 1}")
     indptr, indices, blocks, diag_pos = _assemble_rows(
-        nc, rows[dest], dest, order, ent_contact, ent_side, starts, np.ascontiguousarray(G.side_body, dtype=np.int64),
+        nc, srt, dest, order, ent_contact, ent_side, starts, np.ascontiguousarray(G.side_body, dtype=np.int64),
         np.ascontiguousarray(G.side_dofs, dtype=np.int64), np.ascontiguousarray(G.side_G, dtype=np.float64),
         np.ascontiguousarray(W_flat, dtype=float), np.asarray(W_offset, dtype=np.int64), W_size)
     if couplings:

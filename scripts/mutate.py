@@ -398,6 +398,14 @@ MUTATIONS = [
              "fem_blocks/contact/step.py",
              '        order[np.argsort(keys, kind="stable")] = np.arange(keys.size, dtype=np.int64)',
              "        order = np.arange(keys.size, dtype=np.int64)", ("tests/test_dist_own_rows.py",)),
+    Mutation("detect_error_not_shared", "a detection error found by one rank raised there only (the others wait in "
+             "the gather)", "fem_blocks/contact/step.py",
+             "            first = next((e for e in self.comm.allgather(err) if e is not None), None)\n",
+             "            first = err\n", ("tests/test_colour.py",)),
+    Mutation("replicas_no_positions", "updated geometry, detection split: the ranks' positions left out of the "
+             "replica check", "fem_blocks/contact/step.py",
+             "            mine += (zlib.crc32(np.ascontiguousarray(bx[::max(1, len(bx) // 4096)]).tobytes()),)\n", "",
+             ("tests/test_colour.py",)),
 ]
 
 IGNORE = shutil.ignore_patterns(".git", "__pycache__", ".venv", "*.pyc", ".pytest_cache", "out", "*.egg-info")

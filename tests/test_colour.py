@@ -121,7 +121,9 @@ def test_serial_colour_solver_is_nlgs_sweeps_in_colour_order_with_exact_sums():
 def test_ranks_whose_models_differ_stop_with_a_clear_error():
     """N ranks each build the model: the contact step compares their contact sets and Delassus operators when it
     rebuilds W and raises RankMismatchError (on every rank: the comparison is all-gathered) if one differs; equal
-    copies pass. (A fake communicator stands for the ranks.)"""
+    copies pass; in colour order in updated geometry (the contact set gathered, equal on every rank) the positions
+    the ranks detected at are compared (one last bit of one coordinate differs: raised). (A fake communicator stands
+    for the ranks.) Catches a check left without anything that can differ once the detection is split."""
     import types
 
     import pytest
@@ -142,6 +144,19 @@ def test_ranks_whose_models_differ_stop_with_a_clear_error():
     step.comm = Comm(lambda x: x)
     step._check_replicas()
     step.comm = Comm(lambda x: (x[0], x[1], x[2] + 1, x[3]))
+    with pytest.raises(RankMismatchError, match="ranks' copies of the model differ"):
+        step._check_replicas()
+    # colour order, updated geometry: the contact set is gathered from the ranks' parts, so the positions are compared
+    from fem_blocks.contact.step import ContactOptions
+    pos = np.arange(12.0).reshape(6, 2)
+    step._local, step.opts = object(), ContactOptions(geometry="updated", order="colours")
+    step.scene = types.SimpleNamespace(positions=lambda: pos)
+    import zlib
+    step.comm = Comm(lambda x: x[:2] + (zlib.crc32(pos.tobytes()),))  # (the other rank at the same positions)
+    step._check_replicas()
+    other = pos.copy()
+    other[3, 1] = np.nextafter(other[3, 1], 10.0)
+    step.comm = Comm(lambda x: x[:2] + (zlib.crc32(other.tobytes()),))
     with pytest.raises(RankMismatchError, match="ranks' copies of the model differ"):
         step._check_replicas()
 
@@ -234,7 +249,8 @@ def test_colour_order_run_sweeps_the_delassus_arrays_without_a_copy(tmp_path):
     colour solver sweeps those arrays themselves (a copy without the blocks of zeros doubled the largest array of a
     run). The wall stands on a fixed foundation, whose contacts share only it: blocks of zeros in the whole
     operator. Expectation: the whole operator assembled here from the step's own G, through coupling_rows.
-    Catches: the couplings flag not passed (the solver copies), the blocks of zeros kept."""
+    Catches: the couplings flag not passed (blocks of zeros in the rows: they differ from coupling_rows'), the
+    rows not in sweep order, the solver sweeping a copy."""
     import dist_cases
     from _case_steps import stepping
     from fem_blocks import delassus
@@ -266,9 +282,10 @@ def test_colour_order_run_sweeps_the_delassus_arrays_without_a_copy(tmp_path):
 
 
 def test_a_step_after_close_assembles_w_again(tmp_path):
-    """The colour solver holds W's arrays in its own order (from_sweep_rows): after ContactStep.close() drops it, the next
-    step must assemble W again, not hand the reordered arrays to a new solver. Expectation: the same run without
-    close(), bitwise. Catches close() leaving W_dirty unset (the next solver reads the rows as if in contact order)."""
+    """The colour solver holds W's arrays, their column numbers made its own (from_sweep_rows): after
+    ContactStep.close() drops it, the next step must assemble W again, not hand those arrays to a new solver.
+    Expectation: the same run without close(), bitwise. Catches close() leaving W_dirty unset (the next step finds
+    no sweep plan: RuntimeError)."""
     import dist_cases
     from _case_steps import stepping
     path = tmp_path / "w.toml"
@@ -322,7 +339,9 @@ def test_a_solver_of_the_same_structure_takes_over_the_previous_one():
     take-over. It does not take over another structure: a block pattern that differs (a block less; a column
     number changed, the same row lengths), colours that differ with the same sweep order and count, another sweep
     order. Catches: the new blocks not taken (the previous values swept),
-    one of the structure's comparisons left out, a spent solver taken over again."""
+    the comparison of the colours or of the column numbers left out, a spent solver taken over again (the
+    comparisons of the sweep order, ghosts, row starts and diagonal positions are not tested alone: a change of the
+    sweep order or of a row's length changes the column numbers too)."""
     from fem_blocks.distributed.colour import SweepPlan, body_pair_groups, sweep_plan
     W, q, mu, cand, ant = problem(seed=5, held=False)
     n = W.n
@@ -355,7 +374,7 @@ def test_a_solver_of_the_same_structure_takes_over_the_previous_one():
     assert third.rows is not None
     c = plan.colour.copy()
     first1 = plan.rows[np.flatnonzero(c[plan.rows] == 1)[0]]
-    c[c == c[first1]] = -7  # the first group of colour 1 in colour 0: the same sweep order and number of colours
+    c[c == c[first1]] = -7  # colour 1 merged into colour 0: the same sweep order and number of colours
     c[c == -7] = 0
     moved = SweepPlan(plan.rows, c, plan.n_colours, 0)
     assert np.array_equal(moved.rows, plan.rows[np.argsort(c[plan.rows], kind="stable")])
@@ -400,3 +419,53 @@ def test_updated_geometry_takes_over_the_colour_solver_between_redetections(tmp_
     assert taken[3] == (sets[3] == sets[2])
     assert runs[0] == runs[1]
     assert len(set(p for p, _, _ in runs[0])) == 5
+
+
+def test_a_detection_error_of_one_rank_is_raised_on_every_rank(tmp_path, monkeypatch):
+    """With the 2D detection split among the ranks, an error only one rank finds (its own bodies' contacts, e.g. a
+    node facing more than SLOTS bodies) must stop every rank with the same message, not leave the others waiting in
+    the gather of the parts (the ranks' messages all-gathered before it). A fake communicator of 2 ranks stands for
+    the other rank: its error is raised here though this rank's detection succeeded, and this rank's error is raised
+    after the all-gather. Catches the error raised only where it was found (the other ranks hang)."""
+    import dist_cases
+    import pytest
+    from _case_steps import stepping
+    from fem_blocks.contact import detection_2d
+    from fem_blocks.errors import InputError
+    path = tmp_path / "w.toml"
+    path.write_text(dist_cases.wall("w", courses=2, per=3))
+    _, model, sim, _ = stepping(str(path), None)
+    sim.step()
+    step = model.contact
+    seen = []
+
+    class Comm:
+        def __init__(self, other):
+            self.other = other
+
+        def Get_rank(self):
+            return 0
+
+        def Get_size(self):
+            return 2
+
+        def allgather(self, x):
+            seen.append(x)
+            return [x, self.other]
+
+    step.body_owner = np.zeros(step.scene.nb, dtype=np.int64)
+    step.comm = Comm("contact detection: a boundary node of body 3 faces more than 8 bodies")
+    with pytest.raises(InputError, match="body 3 faces more than 8"):
+        step._detect(step.scene.positions())
+    assert seen == [None]  # (this rank's detection succeeded; the message came from the other)
+    real = detection_2d.detect
+
+    def failing(*a, **kw):
+        assert kw.get("bodies") is not None  # (the split detection)
+        raise InputError("this rank's error")
+    monkeypatch.setattr(detection_2d, "detect", failing)
+    step.comm = Comm(None)
+    with pytest.raises(InputError, match="this rank's error"):
+        step._detect(step.scene.positions())
+    assert seen[-1] == "this rank's error"
+    monkeypatch.setattr(detection_2d, "detect", real)

@@ -216,7 +216,7 @@ def test_detection_of_some_candidate_bodies_is_the_whole_detections_rows(placeme
     candidate body is in the mask, every field bit for bit and in the same order, and the parts of a partition merged
     by key give the whole set. A running-bond wall of 4 courses on a foundation, each brick's bottom and top edges in
     1 to 4 elements drawn at random (non-matching meshes: overlap points at antagonist corners, candidate nodes
-    facing two bricks, tributary lengths of several matches), bricks lifted by up to half the alert distance.
+    facing two bricks, tributary lengths of several matches), courses lifted by up to the alert distance.
     The foundation is rigid: the bricks on it are its candidates though numbered above it. Expectation: the whole
     detection (tested above for each placement). Catches: the subset's broad phase on its own grid (pairs, hence the
     overlap sums and ties, in another order), a neighbour body missing (a contact lost near the border of the mask,
@@ -247,7 +247,9 @@ def test_detection_of_some_candidate_bodies_is_the_whole_detections_rows(placeme
             det.build_table([itf], {"a": 0}))
     whole = det.detect(*args)
     assert len(whole) > 40 and np.any(whole.ant_body == 0) and np.all(whole.cand_body != 0)
-    for owner in (np.arange(nb) % 3, rng.integers(0, 3, nb), (np.arange(nb) >= nb // 2).astype(int)):
+    # (the last two: a rank without bodies, a rank whose only body, the foundation, is no contact's candidate)
+    for owner in (np.arange(nb) % 3, rng.integers(0, 3, nb), (np.arange(nb) >= nb // 2).astype(int), np.arange(nb) % 2,
+                  np.where(np.arange(nb) == 0, 2, np.arange(nb) % 2)):
         parts = []
         for p in range(3):
             mask = owner == p

@@ -367,11 +367,17 @@ class ContactStep:
     def _check_replicas(self):
         """N > 1 ranks: every rank built its own copy of the model; their contact sets and Delassus operators must
         agree (nodes whose BLAS or CPU differ can give different bits). Compared by the contact count and a checksum
-        of the gaps, and, when every rank holds the whole W (not in colour order), its block count and a checksum of
-        a sample of its blocks; RankMismatchError on every rank if they differ."""
+        of the gaps; in colour order in updated geometry (the contact set gathered from the ranks' parts, so equal
+        everywhere) a checksum of a sample of the positions the ranks detected at; when every rank holds the whole W
+        (not in colour order), its block count and a checksum of a sample of its blocks; RankMismatchError on every
+        rank if they differ."""
         import zlib
         from ..errors import RankMismatchError
         mine = (len(self.cs.gap), zlib.crc32(np.ascontiguousarray(self.cs.gap).tobytes()))
+        if self._local is not None and self.opts.geometry == "updated":  # every rank steps every body; the contact
+            # set is gathered from the ranks' parts (`_detect`), equal everywhere: the positions it came from are not
+            bx = self.scene.positions()
+            mine += (zlib.crc32(np.ascontiguousarray(bx[::max(1, len(bx) // 4096)]).tobytes()),)
         if self._local is None:  # (else each rank holds its own rows of W)
             W = self.Wdel
             step = max(1, W.blocks.shape[0] // 4096)
@@ -385,7 +391,8 @@ class ContactStep:
 
     def close(self):
         """Release the PETSc objects of a run on N > 1 ranks (collective: every rank calls it at the end). A step
-        after it assembles W again: the colour solver that goes held W's arrays in its own order (take_rows)."""
+        after it assembles W again: the colour solver that goes held W's arrays, their column numbers made its own
+        (ColourSolver.from_sweep_rows)."""
         for obj in (self._colours, self._linear, self._local):
             if obj is not None:
                 obj.destroy()
@@ -406,9 +413,12 @@ class ContactStep:
         if self._colours is not None and self._colours.W is self.Wdel:
             return self._colours
         from ..distributed.colour import ColourSolver
-        prev = self._colours
-        columns = self._local.L if self._local is not None else np.arange(len(self.cs.gap), dtype=np.int64)
-        self._colours = ColourSolver.from_sweep_rows(self.Wdel, self._plan, columns, len(self.cs.gap), self.comm,
+        if self._plan is None:
+            raise RuntimeError("contact step: no sweep plan for the Delassus operator (W assembled outside _delassus)")
+        prev, loc = self._colours, self._local
+        columns = loc.L if loc is not None else np.arange(len(self.cs.gap), dtype=np.int64)
+        self._colours = ColourSolver.from_sweep_rows(self.Wdel, self._plan, columns, len(self.cs.gap),
+                                                     self.comm if loc is not None else None,
                                                      previous=prev if self.opts.geometry == "updated" else None)
         self._plan = None
         if prev is not None:
@@ -443,9 +453,19 @@ class ContactStep:
             return det3.detect(bx, s.bnode_body, s.bnode_local, s.bfaces, s.bface_body, s.kind, self.body_group,
                                self.table)
         split = self._split() and self.body_owner is not None and len(self.body_owner) == s.nb
-        cs = det.detect(bx, s.bnode_body, s.bnode_local, s.bedges, s.bedge_body, s.kind, self.body_group,
-                        self.table, bodies=self.body_owner == self.comm.Get_rank() if split else None)
-        if split:
+        if not split:
+            cs = det.detect(bx, s.bnode_body, s.bnode_local, s.bedges, s.bedge_body, s.kind, self.body_group,
+                            self.table)
+        else:  # (an error found by one rank, e.g. a node facing too many bodies, raised on every rank alike)
+            cs, err = None, None
+            try:
+                cs = det.detect(bx, s.bnode_body, s.bnode_local, s.bedges, s.bedge_body, s.kind, self.body_group,
+                                self.table, bodies=self.body_owner == self.comm.Get_rank())
+            except InputError as e:
+                err = str(e)
+            first = next((e for e in self.comm.allgather(err) if e is not None), None)
+            if first is not None:
+                raise InputError(first)
             cs = self._gather_set(cs)
         cs.area = cs.area * self.body_thickness[cs.cand_body]  # tributary length x thickness
         return cs

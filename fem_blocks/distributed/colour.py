@@ -23,9 +23,11 @@ The time stepper reads the group graph from the bodies instead, before W is asse
 two contacts are coupled when the contacts share a body whose W_b ≠ 0 (`group_couplings`, `moving_bodies`), since
 W_αβ = Σ_{shared bodies b} G^α_b W_b G^βᵀ_b. That graph holds every nonzero block's pair, so its colours keep the
 contacts of one colour and different groups uncoupled; it equals the graph of W's nonzero blocks unless a block
-between contacts sharing a moving body is exactly zero (none on the demos and benchmark walls: the same colours,
-checked). Knowing the sweep order first, the contact step assembles the rows of W directly in it
-(delassus.assemble's `rows`) and no permutation of W's rows is needed (`ColourSolver.from_sweep_rows`).
+between contacts sharing a moving body is exactly zero (by chance, or a contact whose side on that body touches
+only dofs that W_b does not move): then it separates more groups, and the sweep is still the Gauss–Seidel sweep in
+the order of its colours, the same on any N (docs/scaling.md "Rows assembled in sweep order"). Knowing the sweep
+order first, the contact step assembles the rows of W directly in it (delassus.assemble's `rows`) and no permutation
+of W's rows is needed (`ColourSolver.from_sweep_rows`).
 
 Distribution (comm with N > 1 ranks; distributed/sweep.py). Rank p owns the contacts `owner == p` (the time stepper:
 the rank of the contact's candidate body, distributed/partition.py; with groups, one group's contacts must have one
@@ -337,7 +339,8 @@ class ColourSolver:
             self._serial(lr, colour_local)
         else:
             self._distribute(lr, colour_local)
-        return self  # (the solver's rows are W's arrays: its column numbers made local in place)
+        self._give_rows(rows)  # (W's own arrays already, its column numbers made local in place)
+        return self
 
     def _serial(self, lr, c_sweep):
         """One process: the rows `lr` in sweep order (sweep.LocalRows, every contact, no ghost), their colours."""

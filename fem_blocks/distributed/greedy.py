@@ -6,7 +6,8 @@ smallest colour that none of its already coloured neighbours has,
     c(v) = min { k ≥ 0 : k ≠ c(w) for every neighbour w < v } .
 
 Here each rank p owns the vertices V_p (the body-pair groups of its contacts) and knows the edges it was given
-(the group pairs of the nonzero blocks of its own rows of W). Rank p colours v ∈ V_p as soon as every neighbour
+(the time stepper: the pairs of its own groups with the groups sharing one of their moving bodies,
+colour.sweep_plan). Rank p colours v ∈ V_p as soon as every neighbour
 w < v has its colour (Jones–Plassmann with the vertex numbers as priorities): then c(v) is the formula above, so
 the colours are those of the sequential greedy, on any number of ranks and for any ownership. One round:
 

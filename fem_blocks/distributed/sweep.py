@@ -39,7 +39,7 @@ from ..linalg import BlockCSR
 class LocalRows:
     """The rows of W owned by one rank. Local contact numbering: owned[0..n_own) then ghost[0..n_ghost).
     indptr/indices/blocks/diag_pos: block-CSR of the owned rows, column indices local, in the global row's order."""
-    owned: np.ndarray    # (n_own,) int64 global contact numbers, increasing
+    owned: np.ndarray    # (n_own,) int64 global contact numbers, increasing (in the solver: in sweep order)
     ghost: np.ndarray    # (n_ghost,) int64 global numbers of the coupled contacts owned elsewhere, increasing
     indptr: np.ndarray
     indices: np.ndarray
@@ -55,7 +55,8 @@ class LocalRows:
 
 def local_rows(W: BlockCSR, q, mu, owned) -> LocalRows:
     """The rows of the contacts `owned` (global numbers) of a global block-CSR W (a test and file driver's helper:
-    in the time stepper each rank assembles its own rows directly, `localise`)."""
+    in the time stepper each rank assembles its own rows directly, in its sweep order,
+    colour.ColourSolver.from_sweep_rows)."""
     owned = np.unique(np.asarray(owned, dtype=np.int64))
     d = W.dim
     q = np.asarray(q, dtype=np.float64).reshape(-1, d)
