@@ -36,9 +36,8 @@ the global row kept, so every v_α is summed exactly as serially), q_α, μ_α, 
 contacts and of the *ghost* contacts its rows couple to. The rows come from the whole W (`ColourSolver`) or are
 assembled by the rank itself in its sweep order (`ColourSolver.from_sweep_rows`, the time stepper: each rank colours
 its own groups from the bodies of its contacts, distributed/greedy.py, the colours of the whole group graph without
-gathering it). After colour c, one PETSc
-scatter carries the new impulses of colour c to the ranks that hold them as ghosts (neighbour ranks only). The iterates
-are the serial ones, bitwise, for any N and any ownership.
+gathering it). After colour c, one PETSc scatter carries the new impulses of colour c to the ranks that hold them as
+ghosts (neighbour ranks only). The iterates are the serial ones, bitwise, for any N and any ownership.
 
 Stopping tests, as solver/nlgs.py's `_run` / `_run_cohesive` / `solve_cohesive`, with every sum over contacts exact
 (distributed/exact.py: correctly rounded, independent of the order of the terms and of how they are split among
