@@ -310,31 +310,21 @@ class ColourSolver:
         self.n_colours = int(plan.n_colours)
         self.colour_rounds = int(plan.rounds)
         columns = np.asarray(columns, dtype=np.int64)
-        sweep = np.asarray(plan.rows, dtype=np.int64)
-        ix = rows.indices
-        # local numbers over the positions in `columns`: own contacts in sweep order, then the other columns met
-        seen = np.zeros(columns.size, dtype=bool)
-        seen[ix] = True
-        seen[sweep] = False
-        gpos = np.flatnonzero(seen)
-        lut = np.empty(columns.size, dtype=np.int64)
-        lut[sweep] = np.arange(sweep.size, dtype=np.int64)
-        lut[gpos] = sweep.size + np.arange(gpos.size, dtype=np.int64)
-        np.take(lut, ix, out=ix, mode="clip")  # in place ("clip": not buffered; ix is in range)
-        local = np.concatenate([sweep, gpos])
-        colour_local = np.asarray(plan.colour, dtype=np.int64)[local]
+        from .sweep import localise
+        # local numbers over the positions in `columns` (own contacts in sweep order, then the other columns met),
+        # W's column numbers renumbered in place; then the positions made global contact numbers
+        lr = localise(plan.rows, rows.indptr, rows.indices, rows.blocks, rows.diag_pos, in_place=True)
+        colour_local = np.asarray(plan.colour, dtype=np.int64)[np.concatenate([lr.owned, lr.ghost])]
         if np.any(colour_local < 0):
             raise RuntimeError("ColourSolver.from_sweep_rows: a ghost contact whose group is not coupled to an own "
                                "group (the rows and the plan's group graph disagree)")
-        from .sweep import LocalRows
-        lr = LocalRows(columns[sweep], columns[gpos], np.asarray(rows.indptr, dtype=np.int64), ix, rows.blocks,
-                       np.asarray(rows.diag_pos, dtype=np.int64), np.zeros(0), np.zeros(0))
+        lr.owned, lr.ghost = columns[lr.owned], columns[lr.ghost]
         if self._take_over(previous, lr, colour_local):
             return self
         if self.comm is None:
-            if gpos.size or sweep.size != self.n:
+            if lr.ghost.size or lr.owned.size != self.n:
                 raise InputError(f"from_sweep_rows: on one process the rows of all {self.n} contacts, got "
-                                 f"{sweep.size} rows and {gpos.size} other columns")
+                                 f"{lr.owned.size} rows and {lr.ghost.size} other columns")
             self._serial(lr, colour_local)
         else:
             self._distribute(lr, colour_local)

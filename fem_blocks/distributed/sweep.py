@@ -72,10 +72,12 @@ def local_rows(W: BlockCSR, q, mu, owned) -> LocalRows:
     return rows
 
 
-def localise(owned, indptr, cols, blocks, diag_pos) -> LocalRows:
-    """LocalRows of the rows of the contacts `owned` (global numbers, increasing): block-CSR indptr, global column
-    numbers `cols` (increasing per row), blocks and the diagonal positions within these rows; the columns renumbered
-    owned first, then the ghosts (the other columns, increasing), their order within a row kept. q and mu empty."""
+def localise(owned, indptr, cols, blocks, diag_pos, in_place: bool = False) -> LocalRows:
+    """LocalRows of the rows of the contacts `owned` (global numbers, distinct; row i is owned[i]'s): block-CSR
+    indptr, global column numbers `cols` (increasing per row), blocks and the diagonal positions within these rows;
+    the columns renumbered owned first (in the order given), then the ghosts (the other columns, increasing), their
+    order within a row kept. in_place: `cols` (int64) itself renumbered, no second array of column numbers. q and
+    mu empty."""
     owned = np.asarray(owned, dtype=np.int64)
     cols = np.asarray(cols, dtype=np.int64)
     # a table over the global numbers (linear in the blocks and the contacts, no sort of the blocks' columns):
@@ -89,7 +91,8 @@ def localise(owned, indptr, cols, blocks, diag_pos) -> LocalRows:
     lut = np.empty(top, dtype=np.int64)
     lut[owned] = np.arange(owned.size, dtype=np.int64)
     lut[ghost] = owned.size + np.arange(ghost.size, dtype=np.int64)
-    return LocalRows(owned, ghost, np.asarray(indptr, dtype=np.int64), lut[cols], blocks,
+    local = np.take(lut, cols, out=cols, mode="clip") if in_place else lut[cols]  # ("clip": not buffered)
+    return LocalRows(owned, ghost, np.asarray(indptr, dtype=np.int64), local, blocks,
                      np.asarray(diag_pos, dtype=np.int64), np.zeros(0), np.zeros(0))
 
 
