@@ -364,19 +364,18 @@ class ContactStep:
         self._linear.bind(self.Wdel, self._owner)
         return self._linear
 
-    def _check_replicas(self):
+    def _check_replicas(self, bx=None):
         """N > 1 ranks: every rank built its own copy of the model; their contact sets and Delassus operators must
         agree (nodes whose BLAS or CPU differ can give different bits). Compared by the contact count and a checksum
         of the gaps; in colour order in updated geometry (the contact set gathered from the ranks' parts, so equal
-        everywhere) a checksum of a sample of the positions the ranks detected at; when every rank holds the whole W
-        (not in colour order), its block count and a checksum of a sample of its blocks; RankMismatchError on every
-        rank if they differ."""
+        everywhere) a checksum of a sample of the positions bx of the step's geometry (`_geometry`'s: the ranks
+        detected at them); when every rank holds the whole W (not in colour order), its block count and a checksum of
+        a sample of its blocks; RankMismatchError on every rank if they differ."""
         import zlib
         from ..errors import RankMismatchError
         mine = (len(self.cs.gap), zlib.crc32(np.ascontiguousarray(self.cs.gap).tobytes()))
         if self._local is not None and self.opts.geometry == "updated":  # every rank steps every body; the contact
             # set is gathered from the ranks' parts (`_detect`), equal everywhere: the positions it came from are not
-            bx = self.scene.positions()
             mine += (zlib.crc32(np.ascontiguousarray(bx[::max(1, len(bx) // 4096)]).tobytes()),)
         if self._local is None:  # (else each rank holds its own rows of W)
             W = self.Wdel
@@ -558,6 +557,7 @@ class ContactStep:
         if updated:
             s.refresh_frames()  # co-rotational bodies: G in the frames of the step's start (docs/method.md §7)
         redetect = first or (updated and self.steps % self.opts.redetect_every == 0)
+        bx = None  # the positions of this step's geometry (updated geometry and every re-detection)
         if redetect:
             ref = first and not updated
             bx = s.positions(reference=ref)
@@ -601,8 +601,10 @@ class ContactStep:
                     ab = self._as_built()[self.cs.interface] if nc else np.zeros(0, dtype=bool)
                     built[ab] = (self.cs.gap - self.cs.g0)[ab]
                 self.g_built = built
-        elif updated and len(self.cs.gap):  # between re-detections: same pairs, current points, frames and gaps
-            self.cs = self._det.update_geometry(self.cs, s.positions(), s.bedges if self.dim == 2 else s.bfaces)
+        elif updated:  # between re-detections: same pairs, current points, frames and gaps
+            bx = s.positions()
+            if len(self.cs.gap):
+                self.cs = self._det.update_geometry(self.cs, bx, s.bedges if self.dim == 2 else s.bfaces)
         if redetect or updated:
             self._build_G(s.centers(reference=redetect and first and not updated), new_set=redetect)
             if redetect:
@@ -616,7 +618,7 @@ class ContactStep:
             self.Wdel = self._delassus(W_flat, W_offset, W_size)
             self.W_dirty = False
             if self.comm is not None:
-                self._check_replicas()
+                self._check_replicas(bx)
             self.timers["delassus"] += perf_counter() - c
 
     def _check_initial_penetration(self, first, bx):
