@@ -389,7 +389,7 @@ MUTATIONS = [
              "cell, origin=lo.min(axis=0), top=hi.max(axis=0))]", "cell)]",
              ("tests/test_placement.py", "tests/test_detection_delassus.py")),
     Mutation("near_bodies_one_side", "a rank's detection misses the neighbours numbered below its bodies",
-             "fem_blocks/contact/detection_2d.py", "        near[pairs[mine[:, 1], 0]] = True\n", "",
+             "fem_blocks/contact/detection_2d.py", "    near[pairs[mine[:, 1], 0]] = True\n", "",
              ("tests/test_placement.py",)),
     Mutation("detect_matches_not_filtered", "a rank's detection keeps the contacts of its neighbours' candidates",
              "fem_blocks/contact/detection_2d.py", "        m = bodies[bedge_body[ce]]\n",

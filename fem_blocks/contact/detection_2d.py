@@ -263,22 +263,30 @@ def _body_slots(mask, node, ant_body, cand_body) -> np.ndarray:
     return slot
 
 
+def _body_pairs(lo, hi, body) -> np.ndarray:
+    """(m, 2) int64: the pairs of bodies whose boxes overlap, a body's box spanning the boxes lo/hi (n, 2) of its
+    items (nodes, edges) grouped by body (`body` non-decreasing): the grid broad phase on the bodies' boxes, cells of
+    the median body size. Bodies without items have no box."""
+    ids, first = np.unique(body, return_index=True)  # the bodies with items, their first item
+    if ids.size < 2:
+        return np.zeros((0, 2), dtype=np.int64)
+    blo = np.minimum.reduceat(lo, first, axis=0)
+    bhi = np.maximum.reduceat(hi, first, axis=0)
+    size = float(np.median(np.max(bhi - blo, axis=1)))
+    return ids[grid_pairs(blo, bhi, ids, max(size, 1e-12))]
+
+
 def _near_bodies(bodies, lo, hi, bedge_body) -> np.ndarray:
     """(nb,) bool: the bodies of `bodies` (bool mask) and every body whose box (its edges' boxes lo/hi, already
     enlarged by the search distance) overlaps one of theirs: every body an edge of `bodies` can pair with."""
-    if np.any(np.diff(bedge_body) < 0):  # (edges grouped by body, as the scene lists them: one reduceat)
+    if np.any(np.diff(bedge_body) < 0):  # (edges grouped by body, as the scene lists them)
         o = np.argsort(bedge_body, kind="stable")
         lo, hi, bedge_body = lo[o], hi[o], bedge_body[o]
-    ids, first = np.unique(bedge_body, return_index=True)  # the bodies with edges, their first edge
+    pairs = _body_pairs(lo, hi, bedge_body)
     near = bodies.copy()
-    if ids.size > 1:
-        blo = np.minimum.reduceat(lo, first, axis=0)
-        bhi = np.maximum.reduceat(hi, first, axis=0)
-        size = float(np.median(np.max(bhi - blo, axis=1)))
-        pairs = ids[grid_pairs(blo, bhi, ids, max(size, 1e-12))]
-        mine = bodies[pairs]
-        near[pairs[mine[:, 0], 1]] = True
-        near[pairs[mine[:, 1], 0]] = True
+    mine = bodies[pairs]
+    near[pairs[mine[:, 0], 1]] = True
+    near[pairs[mine[:, 1], 0]] = True
     return near
 
 
@@ -448,12 +456,7 @@ def find_overlap(bx, bnode_body, bedges, bedge_body, tol: float):
     edge_start[1:] = np.cumsum(np.bincount(bedge_body, minlength=nb))
     if np.any(np.diff(bnode_body) < 0) or np.any(np.diff(bedge_body) < 0):
         raise ValueError("find_overlap: nodes and edges must be sorted by body")
-    lo = np.full((nb, 2), np.inf)
-    hi = np.full((nb, 2), -np.inf)
-    np.minimum.at(lo, bnode_body, bx)
-    np.maximum.at(hi, bnode_body, bx)
-    size = float(np.median(np.max(hi - lo, axis=1)))
-    pairs = grid_pairs(lo, hi, np.arange(nb, dtype=np.int64), max(size, 1e-12))
+    pairs = _body_pairs(bx, bx, np.asarray(bnode_body, dtype=np.int64))  # the bodies' boxes: their nodes'
     if len(pairs) == 0:
         return None
     depth = _inside_depth(pairs, bx, bedges, node_start, edge_start, float(tol))
