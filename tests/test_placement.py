@@ -70,8 +70,9 @@ def test_overlap_equals_nodes_on_matching_meshes():
         assert np.allclose(a, [0.25, 0.5, 0.25], rtol=1e-12)
 
 
-def detect_many(polys, placement, thickness=1.0):
-    """Contact set of bodies given as counter-clockwise boundary polygons (body i = polys[i]), one interface."""
+def many_args(polys, placement, thickness=1.0, kind=None):
+    """detect's arguments for bodies given as counter-clockwise boundary polygons (body i = polys[i]), one interface;
+    kind: per body (0 deformable, 1 rigid), default all deformable."""
     itf = SimpleNamespace(name="i", groups=("a", "a"), g0=0.0, alert=1e-3, placement=placement,
                           positions=(0.25, 0.75), candidate=None, orientation="any", thickness=thickness)
     bx = np.vstack(polys).astype(float)
@@ -84,8 +85,13 @@ def detect_many(polys, placement, thickness=1.0):
         start += n
     body = np.concatenate(body)
     nb = len(polys)
-    return det.detect(bx, body, np.concatenate(local), np.vstack(edges), body, np.zeros(nb, int), np.zeros(nb, int),
-                      det.build_table([itf], {"a": 0}))
+    return (bx, body, np.concatenate(local), np.vstack(edges), body, np.zeros(nb, int) if kind is None else kind,
+            np.zeros(nb, int), det.build_table([itf], {"a": 0}))
+
+
+def detect_many(polys, placement, thickness=1.0):
+    """Contact set of bodies given as counter-clockwise boundary polygons (body i = polys[i]), one interface."""
+    return det.detect(*many_args(polys, placement, thickness))
 
 
 def test_overlap_node_at_a_head_joint_keeps_both_bodies():
@@ -231,20 +237,9 @@ def test_detection_of_some_candidate_bodies_is_the_whole_detections_rows(placeme
             y0 = row * h + rng.uniform(0.0, 5e-4) + row * 5e-4
             polys.append(_brick(x0 + rng.uniform(-1e-4, 1e-4), y0, w, h, *rng.integers(1, 5, 2)))
     nb = len(polys)
-    itf = SimpleNamespace(name="i", groups=("a", "a"), g0=0.0, alert=1e-3, placement=placement,
-                          positions=(0.25, 0.75), candidate=None, orientation="any", thickness=1.0)
-    bx = np.vstack(polys).astype(float)
-    edges, body, local, start = [], [], [], 0
-    for i, p in enumerate(polys):
-        edges.append(start + np.column_stack([np.arange(len(p)), np.roll(np.arange(len(p)), -1)]))
-        body.append(np.full(len(p), i))
-        local.append(np.arange(len(p)))
-        start += len(p)
-    body = np.concatenate(body)
     kind = (np.arange(nb) == 0).astype(int)  # the foundation rigid: the bricks above it are its candidates (a body
     #                                          numbered below its candidates, as the case-file order allows)
-    args = (bx, body, np.concatenate(local), np.vstack(edges), body, kind, np.zeros(nb, int),
-            det.build_table([itf], {"a": 0}))
+    args = many_args(polys, placement, kind=kind)
     whole = det.detect(*args)
     assert len(whole) > 40 and np.any(whole.ant_body == 0) and np.all(whole.cand_body != 0)
     # (the last two: a rank without bodies, a rank whose only body, the foundation, is no contact's candidate)
