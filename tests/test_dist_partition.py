@@ -359,3 +359,45 @@ def test_the_time_steppers_partition_weighs_each_body_by_its_contacts(monkeypatc
     assert step._partition().tolist() == [0] * 5
     assert seen["w"] == [3, 1, 2, 4, 1]
     assert seen["edges"] == 12  # the 6 body pairs, both ways
+
+
+@pytest.mark.parametrize("err", [0, 73])
+def test_the_vertex_weights_buffer_is_freed_when_petsc_does_not_take_it(monkeypatch, err):
+    """distributed/graph._set_vertex_weights hands MatPartitioningSetVertexWeights a PetscMalloc copy of the weights,
+    which the MatPartitioning then owns; if the call fails, the buffer is still ours and is freed (PetscFreeA, given
+    the pointer's address as PetscFree passes it) before the error. The PETSc library is a stand-in that records the
+    calls (PETSc's own call cannot be made to fail). Catches: the buffer leaked on failure, freed on success (PETSc
+    would free it twice), or PetscFreeA given the pointer instead of its address."""
+    import ctypes
+    from types import SimpleNamespace
+    from mpi4py import MPI
+    from petsc4py import PETSc
+    import fem_blocks.distributed.graph as graph
+
+    class Lib:
+        def __init__(self):
+            self.freed, self.got, self.buf = [], None, None
+
+        def PetscMallocA(self, n, clear, line, func, file, size, pptr):
+            self.buf = ctypes.create_string_buffer(size.value)
+            pptr._obj.value = ctypes.addressof(self.buf)  # (byref's object: the caller's pointer)
+            return 0
+
+        def MatPartitioningSetVertexWeights(self, part, ptr):
+            self.got = np.frombuffer(self.buf, dtype=PETSc.IntType).tolist()
+            return err
+
+        def PetscFreeA(self, n, line, func, file, pptr):
+            self.freed.append(pptr._obj.value)
+            return 0
+    lib = Lib()
+    monkeypatch.setattr(graph, "_petsc_library", lambda: lib)
+    part = SimpleNamespace(handle=1)
+    if err:
+        with pytest.raises(RuntimeError, match="MatPartitioningSetVertexWeights failed \\(PETSc error 73\\)"):
+            graph._set_vertex_weights(part, np.array([3, 1, 2]), MPI.COMM_SELF)
+        assert lib.freed == [ctypes.addressof(lib.buf)]
+    else:
+        assert graph._set_vertex_weights(part, np.array([3, 1, 2]), MPI.COMM_SELF) is True
+        assert lib.freed == []
+    assert lib.got == [3, 1, 2]

@@ -65,6 +65,7 @@ def _petsc_library():
             lib = ctypes.CDLL(path)
             lib.MatPartitioningSetVertexWeights.restype = ctypes.c_int  # (the symbols must be there)
             lib.PetscMallocA.restype = ctypes.c_int
+            lib.PetscFreeA.restype = ctypes.c_int
             return lib
         except (OSError, AttributeError):
             continue
@@ -73,8 +74,9 @@ def _petsc_library():
 
 def _set_vertex_weights(part, w_local: np.ndarray, comm) -> bool:
     """COLLECTIVE: MatPartitioningSetVertexWeights(part, w) with w a PetscMalloc copy of this rank's rows' weights
-    (PETSc's PetscInt); the MatPartitioning frees it. False (nothing set, on every rank: PT-Scotch needs the
-    weights of every rank or of none) if a rank's loaded libraries do not export the function."""
+    (PETSc's PetscInt); the MatPartitioning frees it (this function does if the call fails). False (nothing set, on
+    every rank: PT-Scotch needs the weights of every rank or of none) if a rank's loaded libraries do not export the
+    function."""
     from mpi4py import MPI
     from petsc4py import PETSc
     lib = _petsc_library()
@@ -88,7 +90,8 @@ def _set_vertex_weights(part, w_local: np.ndarray, comm) -> bool:
         raise MemoryError(f"PetscMallocA of {w.nbytes} bytes failed (PETSc error {err})")
     ctypes.memmove(ptr, w.ctypes.data, w.nbytes)
     err = lib.MatPartitioningSetVertexWeights(ctypes.c_void_p(part.handle), ptr)
-    if err:
+    if err:  # (not taken: the buffer is still ours)
+        lib.PetscFreeA(ctypes.c_int(1), ctypes.c_int(0), b"_set_vertex_weights", b"graph.py", ctypes.byref(ptr))
         raise RuntimeError(f"MatPartitioningSetVertexWeights failed (PETSc error {err})")
     return True
 
