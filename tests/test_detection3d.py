@@ -269,6 +269,66 @@ def test_many_blocks_contact_count():
     assert len(pairs) == faces
 
 
+def split_box(origin, size, nx):
+    """A box [origin, origin + size] in nx elements along x (conforming quads, outward): its top and bottom faces
+    have nodes at x0 + k size_x / nx."""
+    o, (L, T, H) = np.asarray(origin, float), size
+    V = np.array([o + [i * L / nx, j * T, k * H] for i in range(nx + 1) for j in (0, 1) for k in (0, 1)])
+
+    def n(i, j, k):
+        return 4 * i + 2 * j + k
+    F = []
+    for i in range(nx):
+        F += [[n(i, 0, 0), n(i, 1, 0), n(i + 1, 1, 0), n(i + 1, 0, 0)], [n(i, 0, 1), n(i + 1, 0, 1), n(i + 1, 1, 1),
+              n(i, 1, 1)], [n(i, 0, 0), n(i + 1, 0, 0), n(i + 1, 0, 1), n(i, 0, 1)],
+              [n(i + 1, 1, 0), n(i, 1, 0), n(i, 1, 1), n(i + 1, 1, 1)]]
+    F += [[n(0, 1, 0), n(0, 0, 0), n(0, 0, 1), n(0, 1, 1)], [n(nx, 0, 0), n(nx, 1, 0), n(nx, 1, 1), n(nx, 0, 1)]]
+    return V, np.array(F)
+
+
+@pytest.mark.parametrize("placement", ["nodes", "positions"])
+def test_detection_of_some_candidate_bodies_is_the_whole_detections_rows(placement):
+    """detect(..., bodies=mask) (a rank's own bodies on N > 1 ranks) gives the whole detection's contacts whose
+    candidate body is in the mask, every field bit for bit and in the same order, and the parts of a partition merged
+    by (key, antagonist body) give the whole set. A running-bond wall of 3 courses on a rigid foundation (body 0,
+    numbered below the bricks that are its candidates), each brick in 1 to 3 elements along its length drawn at
+    random (nodes at the head joints of the course above: a node point facing two bricks, its area summed over its
+    candidate faces), courses lifted by up to half the alert distance. Expectation: the whole detection (tested
+    above). Catches: a body pair of the mask dropped (a contact lost, e.g. with the foundation), the matches not
+    filtered by their candidate (another rank's contacts kept), a partial sum of a node point's area."""
+    rng = np.random.default_rng(5)
+    L, T, H = 0.5, 0.3, 0.25
+    bodies = [box((-0.5, -0.1, -0.2), (3.0, 0.5, 0.2))]
+    for row in range(3):
+        for k in range(4 + row % 2):
+            x0 = k * L - (0.5 * L if row % 2 else 0.0) + rng.uniform(-1e-4, 1e-4)
+            bodies.append(split_box((x0, 0.0, row * H + rng.uniform(0.0, 5e-4)), (L, T, H), int(rng.integers(1, 4))))
+    nb = len(bodies)
+    flat = d3.flatten_boundaries([b[0] for b in bodies], [b[1] for b in bodies])
+    kind = (np.arange(nb) == 0).astype(int)
+    args = (*flat, kind, np.zeros(nb, int), d3.simple_table(placement=placement))
+    whole = d3.detect(*args)
+    assert len(whole) > 60 and np.any(whole.ant_body == 0) and np.all(whole.cand_body != 0)
+    if placement == "nodes":  # nodes facing two bodies: one contact per (key, antagonist body)
+        assert len(np.unique(whole.key)) < len(whole)
+    for owner in (np.arange(nb) % 3, rng.integers(0, 3, nb), (np.arange(nb) >= nb // 2).astype(int), np.arange(nb) % 2,
+                  np.where(np.arange(nb) == 0, 2, np.arange(nb) % 2)):
+        parts = []
+        for p in range(3):
+            mask = owner == p
+            part = d3.detect(*args, bodies=mask)
+            want = whole.subset(np.flatnonzero(mask[whole.cand_body]))
+            for k, v in want.__dict__.items():
+                assert getattr(part, k).tobytes() == v.tobytes(), (placement, p, k)
+            parts.append(part)
+        cat = {k: np.concatenate([getattr(q, k) for q in parts]) for k in whole.__dict__}
+        o = np.lexsort((cat["ant_body"], cat["key"]))
+        for k, v in whole.__dict__.items():
+            assert cat[k][o].tobytes() == v.tobytes(), (placement, k)
+    with pytest.raises(InputError, match=rf"bodies: expected {nb} booleans \(one per body\), got bool \({nb - 1},\)"):
+        d3.detect(*args, bodies=np.ones(nb - 1, dtype=bool))
+
+
 # ----------------------------------------------------------------------------- broad phase
 def test_box_pairs_vs_brute_force():
     rng = np.random.default_rng(0)

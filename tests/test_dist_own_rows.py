@@ -15,11 +15,14 @@ step), its pieces merge into the serial snapshot.
 Cases: a wall with mixed-mode cohesive joints (law state carried and committed per rank) in frozen geometry, a
 dry wall in updated geometry re-detected every other step (at step 3, and again after the restore: the impulses
 carried to the new contact set by their owners; at step 2 the contacts are those of step 1, and the colour solver
-of the new W takes over the previous one's colours and PETSc scatters: contact/step.py `_colour_solver`), and a
+of the new W takes over the previous one's colours and PETSc scatters: contact/step.py `_colour_solver`), a
 wall with mixed-mode joints in updated geometry re-detected at every step with `rebalance = 1.0`, whose bodies are
 partitioned again at a re-detection (contact/step.py `_rebalance`; the helper's first partition is lopsided and its
 next one balanced with the ranks' labels turned, so that bodies and their contacts' impulses and law states move to
-another rank; the one offered after it is no better and is not kept).
+another rank; the one offered after it is no better and is not kept), and a 3D wall (node points) in updated geometry
+re-detected at every step: from the second step each rank detects its own candidates' contacts
+(detection_3d.detect's `bodies`) and the parts are gathered in the whole detection's order (contact/step.py
+`_gather_set`).
 
 One-line bugs these catch (checked): the ghosts' warm start left at zero instead of exchanged (the iterates differ
 from the second step); the own rows gathered in rank order but not put back in contact order; a re-detected
@@ -43,6 +46,9 @@ CASES = {
         'rebalance = 100.0\n'),
     "rebalanced": dist_cases.wall("rebalanced", courses=3, per=3, joint=dist_cases.MIXED).replace(
         "[contact]\n", '[contact]\ngeometry = "updated"\nrebalance = 1.0\n'),
+    "updated3d": dist_cases.WALL3D.format(name="updated3d").replace(
+        "[contact]\n", '[contact]\ngeometry = "updated"\nrebalance = 100.0\n').replace(
+        "duration = 0.03", "duration = 0.05"),
 }
 
 

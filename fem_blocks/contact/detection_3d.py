@@ -54,7 +54,9 @@ is closer to horizontal than to vertical (|n·e_vertical| < √½, vertical axis
 
 Broad phase: body boxes enlarged by max(g0 + alert) on a uniform 3D grid (`box_pairs`, contact/broadphase.py;
 linear in the number of bodies); per body pair only the faces whose box meets the other body's enlarged box are
-examined, and a point is projected only on antagonist faces whose enlarged box contains it.
+examined, and a point is projected only on antagonist faces whose enlarged box contains it. A rank's detection
+(`detect(..., bodies=)`: the contacts of its own candidate bodies) examines the body pairs with one of its bodies
+only, a subsequence of the whole set's pairs: the same contacts, bit for bit.
 """
 from __future__ import annotations
 
@@ -739,9 +741,14 @@ def project_point(bx, bfaces, face: int, p):
 
 
 def detect(bx, bnode_body, bnode_local, bfaces, bface_body, kind, body_group, table: InterfaceTable,
-           reach_frac: float = 0.25, inside_tol: float = 1e-9, vertical: int = 2) -> ContactSet:
+           reach_frac: float = 0.25, inside_tol: float = 1e-9, vertical: int = 2, bodies=None) -> ContactSet:
     """Contact points between 3D bodies (module docstring). Flat inputs as returned by `flatten_boundaries`;
-    kind[b] 0 deformable / 1 rigid; body_group[b] group id (rows of table.pair_iface)."""
+    kind[b] 0 deformable / 1 rigid; body_group[b] group id (rows of table.pair_iface).
+    bodies: (nb,) bool, or None: only the contacts whose candidate body is one of `bodies` (a rank's own bodies),
+    bitwise the rows of the whole detection that have such a candidate, in the same (key, antagonist body) order.
+    The narrow phase runs on the body pairs with a body of `bodies` (a subsequence of the whole set's pairs) and keeps
+    the matches of their candidates: every point of such a candidate keeps all its matches, in the whole detection's
+    relative order, so the selections and the node points' area sums are the same."""
     bx, bnode_body, bfaces, bface_body = _check_flat(bx, bnode_body, bfaces, bface_body)
     bnode_local = np.asarray(bnode_local, dtype=np.int64)
     if bnode_local.shape != (len(bx),):
@@ -762,6 +769,10 @@ def detect(bx, bnode_body, bnode_local, bfaces, bface_body, kind, body_group, ta
         raise InputError(f"vertical: expected the index 0, 1 or 2 of the vertical axis, got {vertical!r}")
     if not 0 <= inside_tol < 0.5:
         raise InputError("inside_tol: expected 0 <= inside_tol < 0.5")
+    if bodies is not None:
+        bodies = np.asarray(bodies)
+        if bodies.shape != (nb,) or bodies.dtype != bool:
+            raise InputError(f"bodies: expected {nb} booleans (one per body), got {bodies.dtype} {bodies.shape}")
     coef, nv, nrm, farea, flo, fhi = _face_data(bx, bfaces, _GX, _GW)
     scale = max(1.0, float(np.ptp(bx))) if len(bx) else 1.0
     bad = farea <= 1e-12 * scale * scale
@@ -771,30 +782,34 @@ def detect(bx, bnode_body, bnode_local, bfaces, bface_body, kind, body_group, ta
     empty = _empty_set()
     if nb < 2 or len(bfaces) == 0:
         return empty
-    # body boxes (of their faces' nodes) and body pairs
+    # faces grouped by body; body boxes (of their faces' nodes) and body pairs
+    face_order = np.argsort(bface_body, kind="stable").astype(np.int64)
+    face_start = np.zeros(nb + 1, dtype=np.int64)
+    face_start[1:] = np.cumsum(np.bincount(bface_body, minlength=nb))
+    ids = np.flatnonzero(np.diff(face_start) > 0)  # the bodies with faces
     blo = np.full((nb, 3), np.inf)
     bhi = np.full((nb, 3), -np.inf)
-    np.minimum.at(blo, bface_body, flo)
-    np.maximum.at(bhi, bface_body, fhi)
-    has = np.isfinite(blo[:, 0])
+    blo[ids] = np.minimum.reduceat(flo[face_order], face_start[ids], axis=0)
+    bhi[ids] = np.maximum.reduceat(fhi[face_order], face_start[ids], axis=0)
     search = float(np.max(table.g0 + table.alert))
-    ids = np.flatnonzero(has)
     bp = box_pairs(blo[ids] - 0.5 * search, bhi[ids] + 0.5 * search)
     bpairs = np.ascontiguousarray(ids[bp]) if len(bp) else np.zeros((0, 2), dtype=np.int64)
+    if bodies is not None:  # (the pairs of a candidate of `bodies`, among others)
+        bpairs = np.ascontiguousarray(bpairs[bodies[bpairs[:, 0]] | bodies[bpairs[:, 1]]])
     # positions sorted per interface
     pos = np.sort(np.where(table.positions >= 0, table.positions, np.inf), axis=1)
     npos = np.isfinite(pos).sum(axis=1).astype(np.int64)
     pos = np.ascontiguousarray(np.where(np.isfinite(pos), pos, -1.0))
     KP = int(max(3, np.max(npos) ** 2 if len(npos) else 1, 4))
-    face_order = np.argsort(bface_body, kind="stable").astype(np.int64)
-    face_start = np.zeros(nb + 1, dtype=np.int64)
-    face_start[1:] = np.cumsum(np.bincount(bface_body, minlength=nb))
     ri, rf = _narrow(bpairs, bx, bfaces, face_order, face_start, coef, nv, nrm, farea, flo, fhi, blo, bhi,
                       kind, body_group, np.ascontiguousarray(table.pair_iface, dtype=np.int64),
                       np.asarray(table.g0, float), np.asarray(table.alert, float),
                       np.asarray(table.placement, np.int64), pos, npos, np.asarray(table.tri_rule, np.int64),
                       np.asarray(table.cand_group, np.int64), np.asarray(table.cos_max_angle, float),
                       float(reach_frac), float(inside_tol), KP, _GX, _GW)
+    if bodies is not None:  # the matches of the candidates of `bodies` (every match of their points)
+        m = bodies[bface_body[ri[:, 0]]]
+        ri, rf = ri[m], rf[m]
     if len(ri) == 0:
         return empty
     cf, ka, af, key, itf = ri.T

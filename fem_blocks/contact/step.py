@@ -443,46 +443,51 @@ class ContactStep:
         return det3.InterfaceTable.from_2d(table)
 
     def _detect(self, bx):
-        """The contact set at positions bx. 2D on N > 1 ranks in colour order once the bodies are partitioned: each
-        rank detects the contacts of its own candidate bodies (detection_2d.detect's `bodies`: bitwise the whole
-        detection's rows of those contacts) and the ranks' parts are gathered whole, in key order (`_gather_set`):
+        """The contact set at positions bx. On N > 1 ranks in colour order once the bodies are partitioned: each rank
+        detects the contacts of its own candidate bodies (the detections' `bodies`: bitwise the whole detection's rows
+        of those contacts) and the ranks' parts are gathered whole, in the whole detection's order (`_gather_set`):
         every rank then holds the serial contact set, and the detection's work is split."""
         s = self.scene
-        if self.dim == 3:
-            return det3.detect(bx, s.bnode_body, s.bnode_local, s.bfaces, s.bface_body, s.kind, self.body_group,
-                               self.table)
+        args = (bx, s.bnode_body, s.bnode_local) + ((s.bedges, s.bedge_body) if self.dim == 2 else
+                                                    (s.bfaces, s.bface_body)) + (s.kind, self.body_group, self.table)
         split = self._split() and self.body_owner is not None and len(self.body_owner) == s.nb
         if not split:
-            cs = det.detect(bx, s.bnode_body, s.bnode_local, s.bedges, s.bedge_body, s.kind, self.body_group,
-                            self.table)
+            cs = self._det.detect(*args)
         else:  # (an error found by one rank, e.g. a node facing too many bodies, raised on every rank alike)
             cs, err = None, None
             try:
-                cs = det.detect(bx, s.bnode_body, s.bnode_local, s.bedges, s.bedge_body, s.kind, self.body_group,
-                                self.table, bodies=self.body_owner == self.comm.Get_rank())
+                cs = self._det.detect(*args, bodies=self.body_owner == self.comm.Get_rank())
             except InputError as e:
                 err = str(e)
             first = next((e for e in self.comm.allgather(err) if e is not None), None)
             if first is not None:
                 raise InputError(first)
             cs = self._gather_set(cs)
-        cs.area = cs.area * self.body_thickness[cs.cand_body]  # tributary length x thickness
+        if self.dim == 2:
+            cs.area = cs.area * self.body_thickness[cs.cand_body]  # tributary length x thickness
         return cs
 
     def _gather_set(self, part):
-        """COLLECTIVE: the ranks' parts of a contact set (each the whole set's rows of its own candidates, in key
-        order) as the whole set on every rank, in key order (the keys are distinct: one per candidate point), which
-        is the order of the whole detection. One Allgatherv per field."""
+        """COLLECTIVE: the ranks' parts of a contact set (each the whole set's rows of its own candidates, in the
+        whole detection's order) as the whole set on every rank, in that order: by key, then antagonist body (one
+        contact per candidate point and antagonist body: 2D keys are distinct, a 3D node point may face several
+        bodies). Two Allgatherv: the integer fields packed in one buffer, the floating-point ones in another."""
         from ..distributed.sweep import gather_rows
         counts = np.array(self.comm.allgather(len(part.gap)), dtype=np.int64)
-        keys = gather_rows(self.comm, np.arange(int(counts.sum()), dtype=np.int64), counts, part.key.astype(np.int64))
-        order = np.empty(keys.size, dtype=np.int64)
-        order[np.argsort(keys, kind="stable")] = np.arange(keys.size, dtype=np.int64)  # rank-major row -> key order
-        out = {}
-        for k, v in part.__dict__.items():
-            v = np.asarray(v)
-            dt = np.float64 if v.dtype.kind == "f" else np.int64
-            out[k] = gather_rows(self.comm, order, counts, v.astype(dt, copy=False)).astype(v.dtype, copy=False)
+        n = int(counts.sum())
+        fields = {k: np.asarray(v) for k, v in part.__dict__.items()}
+        packed = {}
+        for floats, dt in ((False, np.int64), (True, np.float64)):
+            names = [k for k, v in fields.items() if (v.dtype.kind == "f") == floats]
+            cols = [fields[k].reshape(len(part.gap), int(np.prod(fields[k].shape[1:]))).astype(dt, copy=False)
+                    for k in names]
+            flat = np.hstack(cols) if cols else np.zeros((len(part.gap), 0), dtype=dt)
+            rows = gather_rows(self.comm, np.arange(n, dtype=np.int64), counts, flat)  # rank-major
+            at = np.cumsum([0] + [c.shape[1] for c in cols])
+            packed.update({k: rows[:, at[i]:at[i + 1]] for i, k in enumerate(names)})
+        order = np.lexsort((packed["ant_body"][:, 0], packed["key"][:, 0]))
+        out = {k: np.ascontiguousarray(packed[k][order].reshape((n,) + v.shape[1:])).astype(v.dtype, copy=False)
+               for k, v in fields.items()}
         return type(part)(**out)
 
     def _delassus(self, W_flat, W_offset, W_size):
