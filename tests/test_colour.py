@@ -200,7 +200,7 @@ def test_group_couplings_pair_the_groups_of_every_moving_body():
     """group_couplings against the pairs of contacts written out one by one: (g_a, g_b) is an edge iff contacts a
     and b share a body that moves; own_groups keeps the edges from those groups. Catches a segment of a body cut
     short or run into the next body's, the held bodies' pairs kept."""
-    from fem_blocks.distributed.colour import body_pair_groups, group_couplings
+    from fem_blocks.distributed.colour import body_pair_groups, body_pair_keys, group_couplings
     rng = np.random.default_rng(3)
     nb, nc = 12, 60
     cand = rng.integers(0, nb, nc)
@@ -214,6 +214,35 @@ def test_group_couplings_pair_the_groups_of_every_moving_body():
     own = np.array([1, 4, 7])
     ga, gb = group_couplings(group, cand, ant, moving, own_groups=own)
     assert set(zip(ga.tolist(), gb.tolist())) == {e for e in want if e[0] in own}
+    # the groups given by any keys (the time stepper's: body_pair_keys, cand * nb + ant): the same edges in them
+    keys = body_pair_keys(cand, ant, 10**17)  # (to 1.1e18: a code body * (max key + 1) + key would overflow int64)
+    ids = np.unique(keys)
+    ga, gb = group_couplings(keys, cand, ant, moving, own_groups=ids[own])
+    assert set(zip(ga.tolist(), gb.tolist())) == {(ids[a], ids[b]) for a, b in want if a in own}
+
+
+def test_the_colours_of_groups_numbered_by_large_keys_are_those_of_their_order():
+    """The time stepper numbers a group by its body pair's key, cand * nb + ant (up to nb², 10^12 for a million
+    bodies): greedy_colours (on one rank here; on several, tests/test_dist_greedy.py) and sweep_plan colour such
+    keys as the dense numbers of their order. Expectation: pair_colouring of the dense numbers. Catches an encoding
+    of pairs a * (max + 1) + b (it overflows int64 at these keys, merging or losing edges)."""
+    from mpi4py import MPI
+    from fem_blocks.distributed.colour import body_pair_groups, body_pair_keys, sweep_plan
+    from fem_blocks.distributed.greedy import greedy_colours
+    from fem_blocks.solver.parallel import pair_colouring
+    rng = np.random.default_rng(8)
+    n, m = 300, 1500
+    a, b = rng.integers(0, n, m), rng.integers(0, n, m)
+    key = np.sort(rng.choice(10**6, n, replace=False)) * 10**12 + 7  # increasing, up to 1e18
+    want = pair_colouring(n, np.concatenate([a, b]), np.concatenate([b, a]))
+    ids, col, rounds = greedy_colours(key, key[a], key[b], lambda x: np.zeros(len(x), dtype=np.int64), MPI.COMM_SELF)
+    assert np.array_equal(ids, key) and np.array_equal(col, want) and rounds == 1
+    W, q, mu, cand, ant = problem(seed=4, held=True)
+    moving = np.arange(9) != 0
+    ref = sweep_plan(body_pair_groups(cand, ant, 9)[0], cand, ant, moving)
+    for nb in (9, 10**17):  # (keys to 8e17 + 8)
+        got = sweep_plan(body_pair_keys(cand, ant, nb), cand, ant, moving)
+        assert np.array_equal(got.colour, ref.colour) and np.array_equal(got.rows, ref.rows)
 
 
 def test_rows_in_sweep_order_solve_as_the_whole_operator():

@@ -498,19 +498,15 @@ class ContactStep:
         from .. import delassus
         if self.opts.order != "colours":
             return delassus.assemble(self.G, W_flat, W_offset, W_size, self.scene.nb)
-        from ..distributed.colour import body_pair_groups, moving_bodies, sweep_plan
-        cs, loc = self.cs, self._local
-        group = body_pair_groups(cs.cand_body, cs.ant_body, self.scene.nb)[0]
+        from ..distributed.colour import body_pair_keys, moving_bodies, sweep_plan
+        cs, loc, nb = self.cs, self._local, self.scene.nb
         moving = moving_bodies(W_flat, W_offset, W_size)
         if loc is None:
-            self._plan = sweep_plan(group, cs.cand_body, cs.ant_body, moving)
-        else:
-            owner = self._owner()
-            one = np.zeros(int(group.max()) + 1 if group.size else 0, dtype=np.int64)
-            one[group] = np.arange(group.size)  # a contact of each group: its owner is the group's
-            L = loc.L
-            self._plan = sweep_plan(group[L], cs.cand_body[L], cs.ant_body[L], moving, own=loc.own_pos,
-                                    owner_of=lambda g: owner[one[g]], comm=self.comm)
+            self._plan = sweep_plan(body_pair_keys(cs.cand_body, cs.ant_body, nb), cs.cand_body, cs.ant_body, moving)
+        else:  # (the contacts L only: a group's key gives its candidate body, whose rank owns the group)
+            cand, ant, owner = cs.cand_body[loc.L], cs.ant_body[loc.L], self.body_owner
+            self._plan = sweep_plan(body_pair_keys(cand, ant, nb), cand, ant, moving, own=loc.own_pos,
+                                    owner_of=lambda g: owner[g // nb], comm=self.comm)
         return delassus.assemble(self.G, W_flat, W_offset, W_size, self.scene.nb, rows=self._plan.rows,
                                  couplings=True)
 

@@ -79,12 +79,17 @@ MAX_OUTER = 100      # interface laws: most staggered passes (solver/nlgs.solve_
 X_TOL = 1e-12        # interface laws: the internal variables have stopped changing
 
 
+def body_pair_keys(cand, ant, nb: int) -> np.ndarray:
+    """The group key of each contact: cand * nb + ant, one per (candidate, antagonist) body pair, increasing in
+    (candidate, antagonist) order, the same on every rank without the contact set (the group's candidate body is
+    key // nb)."""
+    return np.asarray(cand, dtype=np.int64) * int(nb) + np.asarray(ant, dtype=np.int64)
+
+
 def body_pair_groups(cand, ant, nb: int) -> tuple[np.ndarray, int]:
     """(group of each contact, number of groups): contacts grouped by (candidate, antagonist) body pair, groups
-    numbered in increasing (candidate, antagonist) order."""
-    cand = np.asarray(cand, dtype=np.int64)
-    ant = np.asarray(ant, dtype=np.int64)
-    keys, group = np.unique(cand * nb + ant, return_inverse=True)
+    numbered 0, 1, ... in increasing (candidate, antagonist) order (the ranks of their `body_pair_keys`)."""
+    keys, group = np.unique(body_pair_keys(cand, ant, nb), return_inverse=True)
     return group.astype(np.int64).ravel(), int(keys.size)
 
 
@@ -150,23 +155,24 @@ def moving_bodies(W_flat, W_offset, W_size) -> np.ndarray:
 def group_couplings(group, cand, ant, moving, own_groups=None) -> tuple[np.ndarray, np.ndarray]:
     """Edges (ga, gb) of the group graph read from the bodies: the groups of two contacts are coupled when the
     contacts share a moving body (`moving_bodies`), since W_αβ = Σ_{shared bodies b} G^α_b W_b G^βᵀ_b is zero
-    when every shared body has W_b = 0. group, cand, ant: per contact (one array entry each); own_groups
-    (increasing): only the edges whose ga is one of them (a rank's own groups), else every edge. Each edge once per
-    moving body the two groups share, both directions, self-pairs included (the colourings ignore them)."""
-    group = np.asarray(group, dtype=np.int64)
+    when every shared body has W_b = 0. group, cand, ant: per contact (one array entry each; group: any integer
+    keys, e.g. `body_pair_keys`, numbered densely here in their order); own_groups (increasing): only the edges
+    whose ga is one of them (a rank's own groups), else every edge. Each edge once per moving body the two groups
+    share, both directions, self-pairs included (the colourings ignore them); the edges are given in `group`'s keys."""
+    ids, dense = np.unique(np.asarray(group, dtype=np.int64), return_inverse=True)
     moving = np.asarray(moving, dtype=bool)
     body = np.concatenate([np.asarray(cand, dtype=np.int64), np.asarray(ant, dtype=np.int64)])
-    g = np.concatenate([group, group])
+    g = np.concatenate([dense, dense]).astype(np.int64)
     keep = moving[body]
-    ng = int(group.max()) + 1 if group.size else 1
+    ng = max(int(ids.size), 1)
     code = np.unique(body[keep] * ng + g[keep])  # the distinct (body, group) pairs, grouped by body
     eb, eg = code // ng, code % ng
     start = np.searchsorted(eb, eb)              # first pair of the same body
     count = np.searchsorted(eb, eb, side="right") - start
-    src = np.arange(eg.size) if own_groups is None else np.flatnonzero(np.isin(eg, own_groups))
+    src = np.arange(eg.size) if own_groups is None else np.flatnonzero(np.isin(ids[eg], own_groups))
     rep = count[src]
     k = np.arange(int(rep.sum()), dtype=np.int64) - np.repeat(np.cumsum(rep) - rep, rep)
-    return np.repeat(eg[src], rep), eg[np.repeat(start[src], rep) + k]
+    return ids[np.repeat(eg[src], rep)], ids[eg[np.repeat(start[src], rep) + k]]
 
 
 @dataclass
@@ -181,12 +187,12 @@ class SweepPlan:
 
 def sweep_plan(group, cand, ant, moving, own=None, owner_of=None, comm=None) -> SweepPlan:
     """Colours and sweep order from the contacts' bodies (the time stepper, before it assembles W): contacts grouped
-    by body pair (group: the global group number of each contact given, `body_pair_groups` of the whole contact
-    set), groups coupled when they share a moving body (`group_couplings`), coloured greedily in increasing group
-    number (`colour_group_graph` on one process; on N > 1 ranks `greedy.greedy_colours`, each rank colouring its own
-    groups: the same colours). The sweep order: own contacts by colour, increasing within a colour (stable sort of
-    their positions). own: positions of this rank's contacts among those given (None: all, one process);
-    owner_of(g): the rank owning each group of the array g (N > 1).
+    by body pair (group: the key of each contact's group, `body_pair_keys`: the same on every rank, read from the
+    contact's bodies alone), groups coupled when they share a moving body (`group_couplings`), coloured greedily in
+    increasing key (`colour_group_graph` on one process; on N > 1 ranks `greedy.greedy_colours`, each rank
+    colouring its own groups: the same colours). The sweep order: own contacts by colour, increasing within a colour
+    (stable sort of their positions). own: positions of this rank's contacts among those given (None: all, one
+    process); owner_of(g): the rank owning each group of the array g of keys (N > 1).
 
     The colours are those of `colour_groups` on the assembled W unless a block between contacts sharing a moving
     body is exactly zero (then these separate more groups): the group graph read from the bodies holds every
@@ -198,8 +204,9 @@ def sweep_plan(group, cand, ant, moving, own=None, owner_of=None, comm=None) -> 
     rounds = 0
     if comm is None or comm.Get_size() == 1:
         if n:
-            ga, gb = group_couplings(group, cand, ant, moving)
-            colour = colour_group_graph(int(group.max()) + 1, ga, gb)[group]
+            ids, dense = np.unique(group, return_inverse=True)  # (the keys numbered 0, 1, ... in their order)
+            ga, gb = group_couplings(dense, cand, ant, moving)
+            colour = colour_group_graph(ids.size, ga, gb)[dense]
         n_colours = int(colour.max()) + 1 if n else 0
     else:
         from mpi4py import MPI

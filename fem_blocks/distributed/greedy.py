@@ -34,7 +34,7 @@ from ..solver.parallel import greedy_pass
 
 def greedy_colours(own, a, b, owner_of, comm):
     """The sequential greedy colours of a graph whose vertices are spread over the ranks of `comm` (collective).
-    own: the global numbers of this rank's vertices (distinct); (a, b): edges this rank knows, a ∈ own (either
+    own: the global numbers of this rank's vertices (distinct; any int64 keys, their order the priority); (a, b): edges this rank knows, a ∈ own (either
     direction is an edge; self-pairs ignored); owner_of(x): the rank owning each vertex of the array x (called on
     the b's). Returns (ids, colour, rounds): this rank's vertices and their neighbours (global numbers, increasing),
     their colours (those of pair_colouring on the union of every rank's edges) and the number of rounds."""
@@ -43,12 +43,12 @@ def greedy_colours(own, a, b, owner_of, comm):
     a = np.asarray(a, dtype=np.int64)
     b = np.asarray(b, dtype=np.int64)
     keep = a != b
-    if np.any(keep):  # distinct pairs (a rank's rows give each pair once per coupled block)
-        m = int(max(a[keep].max(), b[keep].max())) + 1
-        e = np.unique(a[keep] * m + b[keep])
-        a, b = e // m, e % m
-    else:
-        a, b = a[keep], b[keep]
+    a, b = a[keep], b[keep]
+    if a.size:  # distinct pairs, in (a, b) order (a rank's rows give each pair once per coupled block); the vertex
+        # numbers may be any keys (the time stepper's: body pairs): numbered densely first, in their order
+        ids, ab = np.unique(np.concatenate([a, b]), return_inverse=True)
+        e = np.unique(ab[:a.size] * ids.size + ab[a.size:])
+        a, b = ids[e // ids.size], ids[e % ids.size]
     if np.any(~np.isin(a, own)):
         raise ValueError("greedy_colours: an edge (a, b) with a not among this rank's vertices")
     p, size = comm.Get_rank(), comm.Get_size()
