@@ -243,8 +243,8 @@ MUTATIONS = [
              "    out[:] = buf\n", ("tests/test_dist_own_rows.py",)),
     Mutation("own_rows_redetect_whole_index", "N ranks, own rows: a re-detected contact's impulse carried from its "
              "old number in the whole set, not from the old own rows", "fem_blocks/contact/step.py",
-             "                elif self._local is not None:  # the old arrays hold the old own contacts' rows",
-             "                elif False:  # the old arrays hold the old own contacts' rows",
+             "                    src = self._old_own_rows(old_local.own, take(m))\n",
+             "                    src = take(m)\n",
              ("tests/test_dist_own_rows.py",)),
     Mutation("own_rows_L_not_scattered", "N ranks, own rows: the impulses of the contacts L owned elsewhere not "
              "scattered (zero in H P)", "fem_blocks/contact/step.py",
@@ -337,10 +337,12 @@ MUTATIONS = [
              "other than the first is dropped)", "fem_blocks/distributed/exact.py",
              "    return float(np.max(every))\n",
              "    from mpi4py import MPI\n    return comm.allreduce(x, op=MPI.MAX)\n", ("tests/test_exact_sum.py",)),
-    Mutation("rebalance_rows_not_gathered", "updated geometry, a new partition: the old rows carried by the old own "
-             "positions, not gathered", "fem_blocks/contact/step.py",
-             "                if self._local is not None and self._rebalance():",
-             "                if self._local is not None and self._rebalance() and False:",
+    Mutation("rebalance_rows_unsorted", "updated geometry, a new partition: the rows received taken in the new rows' "
+             "order, not grouped by the rank that sent them", "fem_blocks/contact/step.py",
+             '        has = has[np.argsort(frm, kind="stable")]\n', "", ("tests/test_dist_own_rows.py",)),
+    Mutation("rebalance_send_unsorted", "updated geometry, a new partition: the rows sent in the new contacts' order, "
+             "not grouped by the rank they go to", "fem_blocks/contact/step.py",
+             '        o = np.argsort(dest, kind="stable")\n', "        o = np.arange(j.size)\n",
              ("tests/test_dist_own_rows.py",)),
     Mutation("rebalance_bound_inclusive", "a new partition also when the busiest rank owns exactly rebalance x the "
              "mean", "fem_blocks/contact/step.py",

@@ -42,7 +42,9 @@ def own_contacts(step, comm) -> np.ndarray:
 
 def scripted_partition(step):
     """The case "rebalanced" (rebalance = 1.0): the first partition puts every body on rank 0 but one body on each
-    other rank, so that the next re-detection partitions again; the later ones split the bodies, in order, into runs
+    other rank (the first bodies, on the ranks in decreasing order: a rank that owns them next receives their rows
+    from several ranks, not in the ranks' order), so that the next re-detection partitions again; the later ones
+    split the bodies, in order, into runs
     of about equal weight (1 + contacts as candidate, graph.contact_weights) and turn the ranks' labels with the
     step count, so that the new partition is better than the first (kept: bodies and their contacts' rows move to
     another rank) and no better than the one before it (not kept). Any partition gives the same iterates; this one
@@ -52,7 +54,7 @@ def scripted_partition(step):
     size, nb = step.comm.Get_size(), step.scene.nb
     if step.body_owner is None:
         owner = np.zeros(nb, dtype=np.int64)
-        owner[nb - size + 1:] = np.arange(1, size)
+        owner[:size - 1] = np.arange(size - 1, 0, -1)
         return owner
     w = contact_weights(nb, step.cs.cand_body)
     before = np.cumsum(w) - w
@@ -120,5 +122,12 @@ def main(path, out):
 if __name__ == "__main__":
     args = sys.argv[1:]
     assert args and len(args) % 2 == 0, "expected pairs CASE.toml OUT"
-    for k in range(0, len(args), 2):
-        main(args[k], args[k + 1])
+    try:
+        for k in range(0, len(args), 2):
+            main(args[k], args[k + 1])
+    except BaseException:  # (an error on one rank stops every rank now, as the command line does, instead of
+        import traceback   # leaving the others waiting until the test's timeout)
+        from mpi4py import MPI
+        traceback.print_exc()
+        sys.stderr.flush()
+        MPI.COMM_WORLD.Abort(1)

@@ -511,31 +511,36 @@ class ContactStep:
                                  couplings=True)
 
     def _initial_state(self):
-        """Committed law state of new contacts: 2D (nc, NSTATE); 3D one more column, S_US = NSTATE (u_S)."""
+        """Committed law state of new contacts (the step's rows): 2D (n, NSTATE); 3D one more column, S_US = NSTATE
+        (u_S)."""
         from ..laws import initial_state
         return initial_state(self.law, self.dim)
 
-    def _assign_laws(self):
-        """Per-contact law code, parameters (per unit area) and friction from the contact's interface."""
+    def _assign_laws(self, rows=None):
+        """Per-contact law code, parameters (per unit area) and friction from the contact's interface: of every
+        contact, or of the contacts `rows` (this rank's own, increasing: the step's rows on N > 1 ranks in colour
+        order). Whether any contact of the set is cohesive is read from every contact's interface alike."""
         cs = self.cs
         self._assign_cracks()
         from ..laws import pack
-        rows = [pack(itf.law, itf.law_values) for itf in self.interfaces]
-        codes = np.array([c for c, _ in rows], dtype=np.int64)
-        pars = np.array([p for _, p in rows])
+        laws = [pack(itf.law, itf.law_values) for itf in self.interfaces]
+        codes = np.array([c for c, _ in laws], dtype=np.int64)
+        pars = np.array([p for _, p in laws])
         self._codes = codes  # (per interface: the law code of every contact is codes[cs.interface], law_codes)
-        self.law = codes[cs.interface]
-        self.par = np.ascontiguousarray(pars[cs.interface])
+        mine = cs.interface if rows is None else cs.interface[rows]
+        self.law = codes[mine]
+        self.par = np.ascontiguousarray(pars[mine])
         self.mu = self.par[:, 0].copy()
         from ..laws import P_FC
-        self.cohesive = bool(np.any(self.law != 0) or np.any(self.par[:, P_FC] > 0))  # caps: cohesive kernels
+        used = np.bincount(cs.interface, minlength=len(self.interfaces)) > 0  # (the interfaces of the whole set)
+        self.cohesive = bool(np.any(used & ((codes != 0) | (pars[:, P_FC] > 0))))  # caps: cohesive kernels
         if self.opts.coarse != "none" and self.cohesive:
-            bad = next(itf for itf, (c, p) in zip(self.interfaces, rows) if c != 0 or p[P_FC] > 0)
+            bad = next(itf for itf, (c, p) in zip(self.interfaces, laws) if c != 0 or p[P_FC] > 0)
             raise InputError(f"interfaces.{bad.name}.law = {bad.law!r}: contact.coarse = {self.opts.coarse!r} handles "
                              "the Coulomb law without crushing cap only; expected contact.coarse = 'none'")
         self._coarse = None  # built at the next solve from the new contact set
         if self.dim == 3 and self.cohesive and self.opts.solver == "newton":
-            bad = next(itf for itf, (c, p) in zip(self.interfaces, rows) if c != 0 or p[P_FC] > 0)
+            bad = next(itf for itf, (c, p) in zip(self.interfaces, laws) if c != 0 or p[P_FC] > 0)
             raise InputError(f"interfaces.{bad.name}.law = {bad.law!r}: the 3D Newton solver handles the Coulomb law "
                              f"without crushing cap only; expected contact.solver = 'nlgs' for 3D interface laws")
 
@@ -562,45 +567,43 @@ class ContactStep:
         if redetect:
             ref = first and not updated
             bx = s.positions(reference=ref)
-            old, oldP = self.cs, self.P
+            old, oldP, old_built, old_local = self.cs, self.P, self.g_built, self._local
+            old_state = getattr(self, "state", None)
+            old_owner = self.body_owner
             self.P_prev = None  # (a new contact set: no extrapolation across a re-detection)
             self.cs = self._detect(bx)
             self._check_initial_penetration(first, bx)
-            self._assign_laws()
             nc = len(self.cs.gap)
-            self.P = np.zeros((nc, self.dim))
+            carry = old is not None and oldP is not None and nc > 0
+            moved = carry and old_local is not None and self._rebalance()  # (a new partition: body_owner replaced)
+            rows = self._new_rows()  # the step's rows of the new set: its own contacts, or None (every contact)
+            self._assign_laws(rows)
+            take = (lambda x: x) if rows is None else (lambda x: x[rows])
+            n = nc if rows is None else rows.size
+            self.P = np.zeros((n, self.dim))
             st = self._initial_state()
-            built = np.zeros(nc)  # updated geometry: as-built gap offsets g_built (0 = nominal)
-            if old is not None and oldP is not None and nc:
+            built = np.zeros(n)  # updated geometry: as-built gap offsets g_built (0 = nominal)
+            if carry:  # each row continues the old contact matched to it (same candidate point and antagonist body)
                 m = match(old, self.cs)
-                ok = m >= 0
-                src = m[ok]
-                old_state, old_built = self.state, self.g_built
-                if self._local is not None and self._rebalance():  # a new partition: the old own rows gathered
-                    # whole (each contact's rows are then cut to its new owner's at _own_rows)
-                    gather = self._gather()  # (the layout of the old partition's rows)
-                    oldP, old_state = gather(oldP), gather(old_state)
-                    old_built = None if old_built is None else gather(old_built)
-                elif self._local is not None:  # the old arrays hold the old own contacts' rows: a contact
-                    # continues one with the same candidate point, so of the same candidate body and owner; the
-                    # others' rows are another rank's (and cut at _own_rows)
-                    old_own = self._local.own
-                    pos = np.minimum(np.searchsorted(old_own, src), max(old_own.size - 1, 0))
-                    hit = old_own[pos] == src if old_own.size else np.zeros(src.size, dtype=bool)
-                    ok[ok] = hit
-                    src = pos[hit]
-                self.P[ok] = oldP[src]
-                st[ok] = old_state[src]
-                if old_built is not None:
-                    built[ok] = old_built[src]
+                olds = [oldP, old_state] + ([old_built] if old_built is not None else [])
+                if old_local is not None and (moved or rows is None):  # old rows held by other ranks
+                    olds, src = self._carry_rows(old, old_owner, old_local, m, rows, olds)
+                elif old_local is not None:  # the old arrays hold the old own contacts' rows: a contact continues
+                    # one with the same candidate point, so of the same candidate body and owner
+                    src = self._old_own_rows(old_local.own, take(m))
+                else:
+                    src = take(m)
+                ok = src >= 0
+                for new, o in zip([self.P, st, built], olds):
+                    new[ok] = o[src[ok]]
             self.state = st
             if ref:  # frozen geometry: reference gaps; "as_built" joints are closed in the initial configuration
-                self.gap_ref = self.cs.gap - self.cs.g0
-                self.gap_ref[self._as_built()[self.cs.interface]] = 0.0
+                self.gap_ref = take(self.cs.gap - self.cs.g0)
+                self.gap_ref[take(self._as_built()[self.cs.interface])] = 0.0
             elif updated:  # the initial set's as-built contacts keep their initial g - g0 as an offset
                 if first:
-                    ab = self._as_built()[self.cs.interface] if nc else np.zeros(0, dtype=bool)
-                    built[ab] = (self.cs.gap - self.cs.g0)[ab]
+                    ab = take(self._as_built()[self.cs.interface]) if nc else np.zeros(0, dtype=bool)
+                    built[ab] = take(self.cs.gap - self.cs.g0)[ab]
                 self.g_built = built
         elif updated:  # between re-detections: same pairs, current points, frames and gaps
             bx = s.positions()
@@ -621,6 +624,71 @@ class ContactStep:
             if self.comm is not None:
                 self._check_replicas(bx)
             self.timers["delassus"] += perf_counter() - c
+
+    def _new_rows(self):
+        """The step's rows of a new contact set: N > 1 ranks in colour order with the bodies partitioned, this rank's
+        own contacts (candidate body its own; increasing, as `_rank_contacts` finds them); else None (every contact,
+        cut at `_own_rows` once the partition is made)."""
+        s = self.scene
+        if not self._split() or self.body_owner is None or len(self.body_owner) != s.nb:
+            return None
+        return np.flatnonzero(self.body_owner[self.cs.cand_body] == self.comm.Get_rank())
+
+    @staticmethod
+    def _old_own_rows(old_own, src) -> np.ndarray:
+        """The rows, among the old own contacts `old_own` (increasing), of the old contacts src (-1: none, kept)."""
+        pos = np.searchsorted(old_own, src)
+        hit = src >= 0
+        if np.any(pos[hit] >= old_own.size) or np.any(old_own[pos[hit]] != src[hit]):
+            raise RuntimeError("contact step: a contact continues an old contact this rank did not own")
+        return np.where(hit, pos, -1)
+
+    def _carry_rows(self, old, old_owner, old_local, m, rows, olds):
+        """COLLECTIVE (N > 1 ranks, the old set's rows held by their owners, `old_local`, under the partition
+        old_owner): the old rows `olds` (arrays of the old own contacts' rows) that the new set's rows continue (m:
+        the old contact matched to each new contact, -1 none). rows: the new set's rows (this rank's new own
+        contacts, under the partition in use) or None (every contact). Returns (arrays, src): new row i continues
+        arrays[k][src[i]] (src -1: a new contact).
+        rows None: the old rows gathered whole (every contact's, the old layout). Else each old row goes to the new
+        owner of the contact continuing it, one Alltoallv of the rows packed (every rank knows both partitions and
+        the match: sender and receiver list the same contacts, in increasing new number per peer rank), and only
+        the rows moved travel; a rank receives its new rows only, never the whole set's."""
+        from mpi4py import MPI
+        comm = self.comm
+        if rows is None:
+            from ..distributed.sweep import gather_rows
+            return [gather_rows(comm, old_local.order, old_local.counts, x) for x in olds], m
+        p, size = comm.Get_rank(), comm.Get_size()
+        was = old_owner[old.cand_body]  # the old owner of each old contact
+        j = np.flatnonzero(m >= 0)
+        j = j[was[m[j]] == p]  # the new contacts continuing an old row of this rank
+        dest = self.body_owner[self.cs.cand_body[j]]
+        o = np.argsort(dest, kind="stable")
+        send = self._old_own_rows(old_local.own, m[j[o]])
+        scounts = np.bincount(dest, minlength=size).astype(np.int64)
+        src = m[rows]
+        has = np.flatnonzero(src >= 0)  # the new rows continuing an old contact, by the rank that held it
+        frm = was[src[has]]
+        has = has[np.argsort(frm, kind="stable")]
+        rcounts = np.bincount(frm, minlength=size).astype(np.int64)
+        check = np.empty(size, dtype=np.int64)
+        comm.Alltoall(scounts, check)
+        if not np.array_equal(check, rcounts):
+            raise RuntimeError("contact step: the rows carried to the new partition do not match their senders'")
+        flat = [np.asarray(x, dtype=np.float64).reshape(len(x), int(np.prod(np.shape(x)[1:]))) for x in olds]
+        width = [f.shape[1] for f in flat]
+        w = sum(width)
+        sbuf = np.ascontiguousarray(np.hstack([f[send] for f in flat]))
+        rbuf = np.empty((int(rcounts.sum()), w))
+        comm.Alltoallv([sbuf, (scounts * w, (np.cumsum(scounts) - scounts) * w), MPI.DOUBLE],
+                       [rbuf, (rcounts * w, (np.cumsum(rcounts) - rcounts) * w), MPI.DOUBLE])
+        out, at = [], 0
+        for x, k in zip(olds, width):
+            a = np.zeros((rows.size,) + np.shape(x)[1:])
+            a[has] = rbuf[:, at:at + k].reshape((has.size,) + np.shape(x)[1:])
+            out.append(a)
+            at += k
+        return out, np.where(src >= 0, np.arange(rows.size), -1)
 
     def _check_initial_penetration(self, first, bx):
         """Bodies overlapping at the start (boundaries crossing deeper than the alert distance) are a
