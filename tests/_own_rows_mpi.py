@@ -41,20 +41,23 @@ def own_contacts(step, comm) -> np.ndarray:
 
 
 def scripted_partition(step):
-    """The case "rebalanced" (rebalance = 1.0): the first partition puts every body on rank 0 but one body on each
-    other rank (the first bodies, on the ranks in decreasing order: a rank that owns them next receives their rows
-    from several ranks, not in the ranks' order), so that the next re-detection partitions again; the later ones
-    split the bodies, in order, into runs
-    of about equal weight (1 + contacts as candidate, graph.contact_weights) and turn the ranks' labels with the
-    step count, so that the new partition is better than the first (kept: bodies and their contacts' rows move to
-    another rank) and no better than the one before it (not kept). Any partition gives the same iterates; this one
-    is the same for the same step (the step taken again after the restore) on every rank, as PT-Scotch's need not
-    be."""
+    """The cases "rebalanced", "rebalanced3d" (rebalance = 1.0): the first partition puts every body on rank 0 but
+    every fourth (b = 1 mod 4 on rank 1; on 3 ranks b = 3 mod 4 on rank 2), so that the next re-detection partitions
+    again, and a rank that owns a run of bodies next receives their rows from several ranks, interleaved in contact
+    order (the order in which the new rows list them is not the ranks' order); the later ones split the bodies, in
+    order, into runs of about equal weight (1 + contacts as candidate, graph.contact_weights) and turn the ranks'
+    labels with the step count, so that the new partition is better than the first (kept: bodies and their
+    contacts' rows move to another rank) and no better than the one before it (not kept). Any partition gives the
+    same iterates; this one is the same for the same step (the step taken again after the restore) on every rank, as
+    PT-Scotch's need not be."""
     from fem_blocks.distributed.graph import contact_weights
     size, nb = step.comm.Get_size(), step.scene.nb
     if step.body_owner is None:
+        b = np.arange(nb)
         owner = np.zeros(nb, dtype=np.int64)
-        owner[:size - 1] = np.arange(size - 1, 0, -1)
+        owner[b % 4 == 1] = 1
+        if size > 2:
+            owner[b % 4 == 3] = 2
         return owner
     w = contact_weights(nb, step.cs.cand_body)
     before = np.cumsum(w) - w
@@ -84,7 +87,7 @@ def main(path, out):
     from mpi4py import MPI
     comm = MPI.COMM_WORLD
     _, model, sim, step = stepping(path, comm)
-    if path.endswith("rebalanced.toml") and comm.Get_size() > 1:
+    if os.path.basename(path).startswith("rebalanced") and comm.Get_size() > 1:
         step._partition = lambda: scripted_partition(step)  # (this object only: the others keep PT-Scotch's)
     res = dict(rank=comm.Get_rank(), size=comm.Get_size(), steps=[], owners=[], own_counts=[])
     pieces = f"{out}.pieces"

@@ -497,3 +497,38 @@ def test_a_detection_error_of_one_rank_is_raised_on_every_rank(tmp_path, monkeyp
         step._detect(step.scene.positions())
     assert seen[-1] == "this rank's error"
     monkeypatch.setattr(detection_2d, "detect", real)
+
+
+def test_a_rank_whose_old_rows_do_not_match_stops_every_rank():
+    """At a re-detection on N > 1 ranks a rank looks up the old rows its new rows continue (its own old contacts'
+    rows: ContactStep._old_own_rows) and, at a new partition, checks the counts its peers send against its own list
+    (`_carry_rows`); a mismatch (ranks whose copies diverged) must stop every rank with the same error, not only the
+    rank that found it while the others wait in the next collective (`_fail_together`: an all-reduce of the flag).
+    A fake communicator of 2 ranks stands for the other rank. Catches the error raised only where it was found, and
+    a lookup that takes a contact the rank did not own for a row."""
+    import pytest
+    from fem_blocks.contact.step import ContactStep
+    rows, bad = ContactStep._old_own_rows(np.array([2, 5, 9]), np.array([5, -1, 9, 2]))
+    assert rows.tolist() == [1, -1, 2, 0] and not bad
+    for src in ([5, 4], [5, 10]):  # (4: between own contacts; 10: beyond the last)
+        rows, bad = ContactStep._old_own_rows(np.array([2, 5, 9]), np.array(src))
+        assert bad and rows.tolist() == [-1, -1]
+    seen = []
+
+    class Comm:
+        def __init__(self, other):
+            self.other = other
+
+        def allreduce(self, x, op=None):
+            seen.append(x)
+            return max(x, self.other)
+
+    step = ContactStep.__new__(ContactStep)
+    step.comm = Comm(1)
+    with pytest.raises(RuntimeError, match="contact step: rows differ \\(found by a rank\\)"):
+        step._fail_together(False, "rows differ")  # (the other rank found it)
+    step.comm = Comm(0)
+    step._fail_together(False, "rows differ")
+    with pytest.raises(RuntimeError, match="rows differ"):
+        step._fail_together(True, "rows differ")
+    assert seen == [0, 0, 1]  # (every call all-reduces, also where nothing was found)

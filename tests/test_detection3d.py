@@ -295,7 +295,7 @@ def test_detection_of_some_candidate_bodies_is_the_whole_detections_rows(placeme
     random (nodes at the head joints of the course above: a node point facing two bricks, its area summed over its
     candidate faces), courses lifted by up to half the alert distance. Expectation: the whole detection (tested
     above). Catches: a body pair of the mask dropped (a contact lost, e.g. with the foundation), the matches not
-    filtered by their candidate (another rank's contacts kept), a partial sum of a node point's area."""
+    filtered by their candidate (another rank's contacts kept)."""
     rng = np.random.default_rng(5)
     L, T, H = 0.5, 0.3, 0.25
     bodies = [box((-0.5, -0.1, -0.2), (3.0, 0.5, 0.2))]

@@ -261,9 +261,10 @@ class ContactStep:
     ROWS = ("P", "P_prev", "state", "law", "par", "mu", "gap_ref", "g_built")
 
     def _own_rows(self):
-        """N > 1 ranks in colour order: cut the step's per-contact arrays (ROWS) of every contact (a new contact set,
-        a checkpoint) to the rows of this rank's own contacts (`_local.own`, increasing numbers); arrays already of
-        those rows (a snapshot of this run, taken on the same ranks) stay. (When a rank owns every contact both are
+        """N > 1 ranks in colour order: cut the step's per-contact arrays (ROWS) of every contact (the first contact
+        set, made before the partition; a checkpoint) to the rows of this rank's own contacts (`_local.own`,
+        increasing numbers); arrays already of those rows (a later re-detection's, `_new_rows`; a snapshot of this
+        run, taken on the same ranks) stay. (When a rank owns every contact both are
         the same.) Each contact's values are then computed, solved and committed by its owner alone."""
         if self._local is None:
             return
@@ -590,7 +591,8 @@ class ContactStep:
                     olds, src = self._carry_rows(old, old_owner, old_local, m, rows, olds)
                 elif old_local is not None:  # the old arrays hold the old own contacts' rows: a contact continues
                     # one with the same candidate point, so of the same candidate body and owner
-                    src = self._old_own_rows(old_local.own, take(m))
+                    src, bad = self._old_own_rows(old_local.own, take(m))
+                    self._fail_together(bad, "a contact continues an old contact this rank did not own")
                 else:
                     src = take(m)
                 ok = src >= 0
@@ -635,13 +637,20 @@ class ContactStep:
         return np.flatnonzero(self.body_owner[self.cs.cand_body] == self.comm.Get_rank())
 
     @staticmethod
-    def _old_own_rows(old_own, src) -> np.ndarray:
-        """The rows, among the old own contacts `old_own` (increasing), of the old contacts src (-1: none, kept)."""
+    def _old_own_rows(old_own, src):
+        """(rows, bad): the rows, among the old own contacts `old_own` (increasing), of the old contacts src (-1:
+        none, kept); bad if one of src is not among them."""
         pos = np.searchsorted(old_own, src)
         hit = src >= 0
-        if np.any(pos[hit] >= old_own.size) or np.any(old_own[pos[hit]] != src[hit]):
-            raise RuntimeError("contact step: a contact continues an old contact this rank did not own")
-        return np.where(hit, pos, -1)
+        bad = bool(np.any(pos[hit] >= old_own.size) or np.any(old_own[pos[hit]] != src[hit]))
+        return np.where(hit & ~bad, pos, -1), bad
+
+    def _fail_together(self, bad: bool, message: str):
+        """COLLECTIVE: RuntimeError("contact step: " + message) on every rank if any rank found `bad` (a check of
+        the ranks' agreement: one rank raising alone would leave the others waiting in the next collective)."""
+        from mpi4py import MPI
+        if self.comm.allreduce(int(bad), op=MPI.MAX):
+            raise RuntimeError(f"contact step: {message} (found by a rank)")
 
     def _carry_rows(self, old, old_owner, old_local, m, rows, olds):
         """COLLECTIVE (N > 1 ranks, the old set's rows held by their owners, `old_local`, under the partition
@@ -651,8 +660,8 @@ class ContactStep:
         arrays[k][src[i]] (src -1: a new contact).
         rows None: the old rows gathered whole (every contact's, the old layout). Else each old row goes to the new
         owner of the contact continuing it, one Alltoallv of the rows packed (every rank knows both partitions and
-        the match: sender and receiver list the same contacts, in increasing new number per peer rank), and only
-        the rows moved travel; a rank receives its new rows only, never the whole set's."""
+        the match: sender and receiver list the same contacts, in increasing new number per peer rank; the rows that
+        stay on their rank are copied by it too): a rank receives its new rows only, never the whole set's."""
         from mpi4py import MPI
         comm = self.comm
         if rows is None:
@@ -664,7 +673,7 @@ class ContactStep:
         j = j[was[m[j]] == p]  # the new contacts continuing an old row of this rank
         dest = self.body_owner[self.cs.cand_body[j]]
         o = np.argsort(dest, kind="stable")
-        send = self._old_own_rows(old_local.own, m[j[o]])
+        send, bad = self._old_own_rows(old_local.own, m[j[o]])
         scounts = np.bincount(dest, minlength=size).astype(np.int64)
         src = m[rows]
         has = np.flatnonzero(src >= 0)  # the new rows continuing an old contact, by the rank that held it
@@ -673,8 +682,8 @@ class ContactStep:
         rcounts = np.bincount(frm, minlength=size).astype(np.int64)
         check = np.empty(size, dtype=np.int64)
         comm.Alltoall(scounts, check)
-        if not np.array_equal(check, rcounts):
-            raise RuntimeError("contact step: the rows carried to the new partition do not match their senders'")
+        self._fail_together(bad or not np.array_equal(check, rcounts),
+                            "the rows carried to the new partition do not match their senders'")
         flat = [np.asarray(x, dtype=np.float64).reshape(len(x), int(np.prod(np.shape(x)[1:]))) for x in olds]
         width = [f.shape[1] for f in flat]
         w = sum(width)
@@ -979,7 +988,7 @@ class _RankContacts:
     contacts (global), own_pos their positions in L, dofs the mask of its bodies' dofs in the flat W numbering;
     stepped the mask of the bodies it steps (its bodies, those of its own contacts, the rigid bodies);
     order every contact grouped by owner rank (rank 0's own contacts, then rank 1's, ..., each increasing) and counts
-    the number each rank owns: the layout of the gather of the own rows (ContactStep._whole)."""
+    the number each rank owns: the layout of the gather of the own rows (ContactStep._gather)."""
     L: np.ndarray
     own: np.ndarray
     own_pos: np.ndarray
