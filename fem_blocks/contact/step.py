@@ -264,8 +264,8 @@ class ContactStep:
         """N > 1 ranks in colour order: cut the step's per-contact arrays (ROWS) of every contact (the first contact
         set, made before the partition; a checkpoint) to the rows of this rank's own contacts (`_local.own`,
         increasing numbers); arrays already of those rows (a later re-detection's, `_new_rows`; a snapshot of this
-        run, taken on the same ranks) stay. (When a rank owns every contact both are
-        the same.) Each contact's values are then computed, solved and committed by its owner alone."""
+        run, taken on the same ranks) stay. (When a rank owns every contact both are the same.) Each contact's values
+        are then computed, solved and committed by its owner alone."""
         if self._local is None:
             return
         for name in self.ROWS:

@@ -34,10 +34,11 @@ from ..solver.parallel import greedy_pass
 
 def greedy_colours(own, a, b, owner_of, comm):
     """The sequential greedy colours of a graph whose vertices are spread over the ranks of `comm` (collective).
-    own: the global numbers of this rank's vertices (distinct; any int64 keys, their order the priority); (a, b): edges this rank knows, a ∈ own (either
-    direction is an edge; self-pairs ignored); owner_of(x): the rank owning each vertex of the array x (called on
-    the b's). Returns (ids, colour, rounds): this rank's vertices and their neighbours (global numbers, increasing),
-    their colours (those of pair_colouring on the union of every rank's edges) and the number of rounds."""
+    own: the global numbers of this rank's vertices (distinct; any int64 keys, their order the priority); (a, b):
+    edges this rank knows, a ∈ own (either direction is an edge; self-pairs ignored); owner_of(x): the rank owning
+    each vertex of the array x (called on the b's). Returns (ids, colour, rounds): this rank's vertices and their
+    neighbours (global numbers, increasing), their colours (those of pair_colouring on the union of every rank's
+    edges) and the number of rounds."""
     from mpi4py import MPI
     own = np.unique(np.asarray(own, dtype=np.int64))
     a = np.asarray(a, dtype=np.int64)
