@@ -9,6 +9,8 @@ from fem_blocks.contact import kinematics_3d as k3
 from fem_blocks.contact.matching import match
 from fem_blocks.errors import InputError
 
+from _split_detection import check_parts
+
 HEX_FACES = np.array([[0, 3, 2, 1], [4, 5, 6, 7], [0, 1, 5, 4], [1, 2, 6, 5], [2, 3, 7, 6], [3, 0, 4, 7]])
 UNIT = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]], float)
 
@@ -311,20 +313,7 @@ def test_detection_of_some_candidate_bodies_is_the_whole_detections_rows(placeme
     assert len(whole) > 60 and np.any(whole.ant_body == 0) and np.all(whole.cand_body != 0)
     if placement == "nodes":  # nodes facing two bodies: one contact per (key, antagonist body)
         assert len(np.unique(whole.key)) < len(whole)
-    for owner in (np.arange(nb) % 3, rng.integers(0, 3, nb), (np.arange(nb) >= nb // 2).astype(int), np.arange(nb) % 2,
-                  np.where(np.arange(nb) == 0, 2, np.arange(nb) % 2)):
-        parts = []
-        for p in range(3):
-            mask = owner == p
-            part = d3.detect(*args, bodies=mask)
-            want = whole.subset(np.flatnonzero(mask[whole.cand_body]))
-            for k, v in want.__dict__.items():
-                assert getattr(part, k).tobytes() == v.tobytes(), (placement, p, k)
-            parts.append(part)
-        cat = {k: np.concatenate([getattr(q, k) for q in parts]) for k in whole.__dict__}
-        o = np.lexsort((cat["ant_body"], cat["key"]))
-        for k, v in whole.__dict__.items():
-            assert cat[k][o].tobytes() == v.tobytes(), (placement, k)
+    check_parts(d3.detect, args, whole, nb, rng, placement)
     with pytest.raises(InputError, match=rf"bodies: expected {nb} booleans \(one per body\), got bool \({nb - 1},\)"):
         d3.detect(*args, bodies=np.ones(nb - 1, dtype=bool))
 

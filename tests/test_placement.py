@@ -14,6 +14,8 @@ from fem_blocks.contact import detection_2d as det
 from fem_blocks.contact.step import ContactOptions, ContactStep, InterfaceSpec
 from fem_blocks.dynamics import Simulation
 from fem_blocks.errors import InputError
+
+from _split_detection import check_parts
 from fem_blocks.meshing import mesh_rectangle
 
 pytestmark = pytest.mark.dolfinx
@@ -242,18 +244,4 @@ def test_detection_of_some_candidate_bodies_is_the_whole_detections_rows(placeme
     args = many_args(polys, placement, kind=kind)
     whole = det.detect(*args)
     assert len(whole) > 40 and np.any(whole.ant_body == 0) and np.all(whole.cand_body != 0)
-    # (the last two: a rank without bodies, a rank whose only body, the foundation, is no contact's candidate)
-    for owner in (np.arange(nb) % 3, rng.integers(0, 3, nb), (np.arange(nb) >= nb // 2).astype(int), np.arange(nb) % 2,
-                  np.where(np.arange(nb) == 0, 2, np.arange(nb) % 2)):
-        parts = []
-        for p in range(3):
-            mask = owner == p
-            part = det.detect(*args, bodies=mask)
-            want = whole.subset(np.flatnonzero(mask[whole.cand_body]))
-            for k, v in want.__dict__.items():
-                assert getattr(part, k).tobytes() == v.tobytes(), (placement, p, k)
-            parts.append(part)
-        keys = np.concatenate([q.key for q in parts])
-        o = np.argsort(keys, kind="stable")
-        for k, v in whole.__dict__.items():
-            assert np.concatenate([getattr(q, k) for q in parts])[o].tobytes() == v.tobytes(), (placement, k)
+    check_parts(det.detect, args, whole, nb, rng, placement)  # (tests/_split_detection.py)
