@@ -289,3 +289,21 @@ def test_grid_pairs_of_a_subset_on_the_whole_grid_keep_the_whole_order():
         assert sorted(map(tuple, own.tolist())) == sorted(map(tuple, whole[inside].tolist()))
         moved += not np.array_equal(own, whole[inside])
     assert moved  # (so the test tells the two grids apart)
+
+
+def test_body_boxes_span_their_items_in_any_order():
+    """broadphase.body_boxes (the 2D and 3D detections' bodies' boxes) against each body's min and max written out:
+    items given out of body order, a body without items (+inf / -inf), a body with one item. Catches a box made from
+    the items' positions in the given order instead of grouped by body, a lost last item, empty bodies given a box."""
+    from fem_blocks.contact.broadphase import body_boxes
+    rng = np.random.default_rng(2)
+    body = rng.permutation(np.r_[np.repeat([0, 1, 3], [5, 1, 7]), [5, 5]])
+    lo = rng.normal(size=(body.size, 3))
+    hi = lo + rng.random((body.size, 3))
+    blo, bhi = body_boxes(lo, hi, body, 6)
+    for b in range(6):
+        on = body == b
+        if on.any():
+            assert np.array_equal(blo[b], lo[on].min(axis=0)) and np.array_equal(bhi[b], hi[on].max(axis=0))
+        else:
+            assert np.all(blo[b] == np.inf) and np.all(bhi[b] == -np.inf)

@@ -103,3 +103,23 @@ def grid_pairs(lo, hi, group, cell: float, origin=None, top=None) -> np.ndarray:
     top = hi.max(axis=0) if top is None else np.asarray(top, dtype=float)
     dims = np.floor((top - origin) / cell).astype(np.int64) + 1
     return _grid_pairs(lo, hi, np.ascontiguousarray(group, dtype=np.int64), float(cell), origin, dims)
+
+
+def body_boxes(lo, hi, body, nb: int):
+    """(blo, bhi) (nb, d): each body's box, spanning the boxes lo/hi (n, d) of its items (nodes, edges, faces; body:
+    the body of each item, in any order); +inf / -inf for a body without items. Min and max are exact: the same
+    numbers whatever the grouping (reduceat over the items grouped by body, not ufunc.at: 0.1 s per 2D detection of the
+    10^4-brick wall)."""
+    lo = np.asarray(lo, dtype=float)
+    hi = np.asarray(hi, dtype=float)
+    body = np.asarray(body, dtype=np.int64)
+    if np.any(np.diff(body) < 0):  # (the scenes list the items grouped by body: no sort then)
+        o = np.argsort(body, kind="stable")
+        lo, hi, body = lo[o], hi[o], body[o]
+    blo = np.full((nb, lo.shape[1]), np.inf)
+    bhi = np.full((nb, lo.shape[1]), -np.inf)
+    ids, first = np.unique(body, return_index=True)  # the bodies with items, their first item
+    if ids.size:
+        blo[ids] = np.minimum.reduceat(lo, first, axis=0)
+        bhi[ids] = np.maximum.reduceat(hi, first, axis=0)
+    return blo, bhi

@@ -43,7 +43,7 @@ from numba import njit
 from ..errors import InputError
 from ..specs import InterfaceSpec, default_of
 from .tables import check_g0_alert, check_lengths, check_positions
-from .broadphase import grid_pairs
+from .broadphase import body_boxes, grid_pairs
 
 
 @dataclass
@@ -263,15 +263,15 @@ def _body_slots(mask, node, ant_body, cand_body) -> np.ndarray:
     return slot
 
 
-def _body_pairs(lo, hi, body) -> np.ndarray:
+def _body_pairs(lo, hi, body, nb: int) -> np.ndarray:
     """(m, 2) int64: the pairs of bodies whose boxes overlap, a body's box spanning the boxes lo/hi (n, 2) of its
-    items (nodes, edges) grouped by body (`body` non-decreasing): the grid broad phase on the bodies' boxes, cells of
-    the median body size. Bodies without items have no box."""
-    ids, first = np.unique(body, return_index=True)  # the bodies with items, their first item
+    items (nodes, edges; broadphase.body_boxes): the grid broad phase on the bodies' boxes, cells of the median body
+    size. Bodies without items have no box."""
+    blo, bhi = body_boxes(lo, hi, body, nb)
+    ids = np.flatnonzero(np.isfinite(blo[:, 0]))  # the bodies with items
     if ids.size < 2:
         return np.zeros((0, 2), dtype=np.int64)
-    blo = np.minimum.reduceat(lo, first, axis=0)
-    bhi = np.maximum.reduceat(hi, first, axis=0)
+    blo, bhi = blo[ids], bhi[ids]
     size = float(np.median(np.max(bhi - blo, axis=1)))
     return ids[grid_pairs(blo, bhi, ids, max(size, 1e-12))]
 
@@ -279,10 +279,7 @@ def _body_pairs(lo, hi, body) -> np.ndarray:
 def _near_bodies(bodies, lo, hi, bedge_body) -> np.ndarray:
     """(nb,) bool: the bodies of `bodies` (bool mask) and every body whose box (its edges' boxes lo/hi, already
     enlarged by the search distance) overlaps one of theirs: every body an edge of `bodies` can pair with."""
-    if np.any(np.diff(bedge_body) < 0):  # (edges grouped by body, as the scene lists them)
-        o = np.argsort(bedge_body, kind="stable")
-        lo, hi, bedge_body = lo[o], hi[o], bedge_body[o]
-    pairs = _body_pairs(lo, hi, bedge_body)
+    pairs = _body_pairs(lo, hi, bedge_body, len(bodies))
     near = bodies.copy()
     mine = bodies[pairs]
     near[pairs[mine[:, 0], 1]] = True
@@ -456,7 +453,7 @@ def find_overlap(bx, bnode_body, bedges, bedge_body, tol: float):
     edge_start[1:] = np.cumsum(np.bincount(bedge_body, minlength=nb))
     if np.any(np.diff(bnode_body) < 0) or np.any(np.diff(bedge_body) < 0):
         raise ValueError("find_overlap: nodes and edges must be sorted by body")
-    pairs = _body_pairs(bx, bx, np.asarray(bnode_body, dtype=np.int64))  # the bodies' boxes: their nodes'
+    pairs = _body_pairs(bx, bx, bnode_body, nb)  # the bodies' boxes: their nodes'
     if len(pairs) == 0:
         return None
     depth = _inside_depth(pairs, bx, bedges, node_start, edge_start, float(tol))

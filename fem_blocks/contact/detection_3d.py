@@ -67,7 +67,7 @@ from numba import njit
 
 from ..errors import InputError
 from .tables import check_g0_alert, check_lengths, check_positions
-from .broadphase import grid_pairs
+from .broadphase import body_boxes, grid_pairs
 from .detection_2d import MAX_ANGLE
 
 PROBE = 1e-2  # node points: fraction of the way from the node toward its candidate face's centre (tie-break probe)
@@ -782,15 +782,9 @@ def detect(bx, bnode_body, bnode_local, bfaces, bface_body, kind, body_group, ta
     empty = _empty_set()
     if nb < 2 or len(bfaces) == 0:
         return empty
-    # faces grouped by body; body boxes (of their faces' nodes) and body pairs
-    face_order = np.argsort(bface_body, kind="stable").astype(np.int64)
-    face_start = np.zeros(nb + 1, dtype=np.int64)
-    face_start[1:] = np.cumsum(np.bincount(bface_body, minlength=nb))
-    ids = np.flatnonzero(np.diff(face_start) > 0)  # the bodies with faces
-    blo = np.full((nb, 3), np.inf)
-    bhi = np.full((nb, 3), -np.inf)
-    blo[ids] = np.minimum.reduceat(flo[face_order], face_start[ids], axis=0)
-    bhi[ids] = np.maximum.reduceat(fhi[face_order], face_start[ids], axis=0)
+    # body boxes (of their faces' nodes) and body pairs
+    blo, bhi = body_boxes(flo, fhi, bface_body, nb)
+    ids = np.flatnonzero(np.isfinite(blo[:, 0]))  # the bodies with faces
     search = float(np.max(table.g0 + table.alert))
     bp = box_pairs(blo[ids] - 0.5 * search, bhi[ids] + 0.5 * search)
     bpairs = np.ascontiguousarray(ids[bp]) if len(bp) else np.zeros((0, 2), dtype=np.int64)
@@ -801,6 +795,9 @@ def detect(bx, bnode_body, bnode_local, bfaces, bface_body, kind, body_group, ta
     npos = np.isfinite(pos).sum(axis=1).astype(np.int64)
     pos = np.ascontiguousarray(np.where(np.isfinite(pos), pos, -1.0))
     KP = int(max(3, np.max(npos) ** 2 if len(npos) else 1, 4))
+    face_order = np.argsort(bface_body, kind="stable").astype(np.int64)  # faces grouped by body
+    face_start = np.zeros(nb + 1, dtype=np.int64)
+    face_start[1:] = np.cumsum(np.bincount(bface_body, minlength=nb))
     ri, rf = _narrow(bpairs, bx, bfaces, face_order, face_start, coef, nv, nrm, farea, flo, fhi, blo, bhi,
                       kind, body_group, np.ascontiguousarray(table.pair_iface, dtype=np.int64),
                       np.asarray(table.g0, float), np.asarray(table.alert, float),
