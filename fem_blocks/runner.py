@@ -502,26 +502,26 @@ class _Guards:
         if a is not None:
             return f"{'displacement' if a[2] == 'q' else 'velocity'} of body {self.names[a[1]]!r} is NaN/Inf"
         c = sim.last_contact  # the record of the step (contact/result.py; N ranks: each rank its own contacts' rows)
-        if c is not None and c.cs is not None and len(c.cs.gap) and c.P is not None:
-            ids = np.arange(len(c.cs.gap)) if c.rows is None else c.rows  # the contacts of the record's rows
+        if c is not None and c.cs is not None and c.P is not None:  # (on every rank alike: the checks agree)
+            rows, order = _held(c)
             nan = np.flatnonzero(~np.isfinite(c.P).all(axis=1))
-            a = self._agree((0.0, int(ids[nan[0]]), None) if nan.size else None)  # the first of every rank's
-            if a is not None:
-                return f"contact impulse at contact {a[1]} (bodies {self._pair(c, a[1])}) is NaN/Inf"
+            a = self._agree((0.0, int(order[nan[0]]), self._pair(c, rows[nan[0]])) if nan.size else None)
+            if a is not None:  # (the first of every rank's)
+                return f"contact impulse at contact {self._number(c, a[1])} (bodies {a[2]}) is NaN/Inf"
             gt = c.gt_end
-            if gt is not None and len(gt) == len(ids):
+            if gt is not None and len(gt) == len(rows):
                 from .laws import ELASTIC, MIXED
                 compliant = (c.law == ELASTIC) | (c.law == MIXED)
-                pen = np.where(compliant, -(gt + c.cs.g0[ids]), -gt)
+                pen = np.where(compliant, -(gt + c.cs.g0[rows]), -gt)
                 lim = (np.full(len(gt), self.max_pen) if self.max_pen is not None
-                       else self.alert[c.cs.interface[ids]])
+                       else self.alert[c.cs.interface[rows]])
                 bad = pen > lim
                 k = int(np.argmax(np.where(bad, pen / lim, -np.inf))) if np.any(bad) else None
-                a = self._agree(None if k is None else (-float(pen[k] / lim[k]), int(ids[k]),
-                                                        (float(pen[k]), float(lim[k]))))  # the worst of every rank's
-                if a is not None:
-                    return (f"penetration {a[2][0]:.3g} m at contact {a[1]} (bodies {self._pair(c, a[1])}) exceeds "
-                            f"{a[2][1]:.3g} m ([checks] max_penetration)")
+                a = self._agree(None if k is None else (-float(pen[k] / lim[k]), int(order[k]),
+                                                        (float(pen[k]), float(lim[k]), self._pair(c, rows[k]))))
+                if a is not None:  # (the worst of every rank's)
+                    return (f"penetration {a[2][0]:.3g} m at contact {self._number(c, a[1])} (bodies {a[2][2]}) "
+                            f"exceeds {a[2][1]:.3g} m ([checks] max_penetration)")
         K0, El0, V0 = e0
         dE = info.total_energy - (K0 + El0 + V0) - sim.external_work - sim.driver_work
         scale = K0 + El0 + abs(info.gravity_potential - V0) + abs(sim.external_work) + abs(sim.driver_work)
@@ -553,7 +553,17 @@ class _Guards:
         return (0.0, min(found), found[min(found)]) if found else None
 
     def _pair(self, c, a) -> str:
+        """The bodies of contact `a` (a row of the record's contact set c.cs)."""
         return f"{self.names[c.cs.cand_body[a]]} / {self.names[c.cs.ant_body[a]]}"
+
+    def _number(self, c, at: int) -> int:
+        """The number, in the whole contact set, of the contact agreed by `_agree` (its `_held` order key `at`):
+        the key itself on one process; on N > 1 ranks the contacts of every rank with a smaller id, counted (one
+        all-reduce, every rank calling it: they agreed on the same contact)."""
+        if c.rows is None:
+            return at
+        from mpi4py import MPI
+        return int(self.comm.allreduce(int(np.count_nonzero(c.gather.ids < at)), op=MPI.SUM))
 
     def _agree(self, found):
         """What a check found on this rank's contacts, (key, contact, payload) or None, agreed by every rank: of
@@ -562,6 +572,17 @@ class _Guards:
         every = [found] if self.comm is None else self.comm.allgather(found)
         found = [x for x in every if x is not None]
         return min(found, key=lambda x: (x[0], x[1])) if found else None
+
+
+def _held(c):
+    """(rows, order): the contacts whose rows the record c holds (numbers in c.cs) and a key per held contact that
+    orders them as in the whole contact set — their numbers when the record holds every contact; on N > 1 ranks
+    their contact ids (contact/matching.contact_ids, the ids of the record's gather), in the whole set's order too
+    without the whole set."""
+    if c.rows is None:
+        rows = np.arange(len(c.cs.gap))
+        return rows, rows
+    return c.rows, c.gather.ids
 
 
 class _MissedContactWatch:
@@ -585,8 +606,8 @@ class _MissedContactWatch:
 
     FRACTION = 0.1
 
-    def __init__(self, model: Model, names, state: dict | None = None):
-        self.names = names
+    def __init__(self, model: Model, names, state: dict | None = None, comm=None):
+        self.names, self.comm = names, comm
         ct = self.step = model.contact
         self.active = ct is not None and getattr(ct.opts, "geometry", "frozen") == "updated"
         self.itf_names = [i.name for i in ct.interfaces] if ct is not None else []
@@ -594,28 +615,23 @@ class _MissedContactWatch:
         self.state = state if state is not None else dict(steps=0, first=None, deepest=None)
 
     def check(self, sim: Simulation) -> str | None:
-        """Update the record with this step's contacts; returns the warning at the first step with a missed one."""
+        """Update the record with this step's contacts; returns the warning at the first step with a missed one. N > 1
+        ranks: each rank reads the contacts of its record's rows, and the deepest (the first among equals) is agreed
+        by one all-gather (every rank alike)."""
         c = sim.last_contact
-        if not self.active or sim.step_count <= 1 or c is None or c.cs is None or not len(c.cs.gap) or c.law is None:
+        if not self.active or sim.step_count <= 1 or c is None or c.cs is None or c.law is None:
             return None  # (step 1: the start's overlaps, up to the alert distance, are the case's, not missed)
-        from .laws import ELASTIC, MIXED
-        cs = c.cs
-        ub = cs.g0 - cs.gap  # >= p0 (g0 >= 0): the common case, nothing near the threshold, in two array passes
-        if float(ub.max()) <= self.FRACTION * float(self.alert.min()):
+        found = self._deepest(c)
+        if c.rows is not None:
+            every = [x for x in self.comm.allgather(found) if x is not None]
+            found = min(every) if every else None
+        if found is None:
             return None
-        # every contact's law codes (the contact set is whole on every rank; the record's rows may be a rank's own)
-        law = self.step.law_codes(cs)
-        compliant = (law == ELASTIC) | (law == MIXED)
-        p0 = np.where(compliant, -cs.gap, ub)
-        ratio = p0 / self.alert[cs.interface]
-        a = int(np.argmax(ratio))
-        if ratio[a] <= self.FRACTION:
-            return None
+        _, _, i, (cand, ant), depth = found
         st = self.state
-        i = int(cs.interface[a])
-        rec = dict(interface=self.itf_names[i], bodies=[self.names[cs.cand_body[a]], self.names[cs.ant_body[a]]],
-                   time=float(sim.time), step=int(sim.step_count), depth=float(p0[a]), alert=float(self.alert[i]),
-                   suggested_alert=float(_round_up(2 * (self.alert[i] + p0[a]))))
+        rec = dict(interface=self.itf_names[i], bodies=[self.names[cand], self.names[ant]],
+                   time=float(sim.time), step=int(sim.step_count), depth=depth, alert=float(self.alert[i]),
+                   suggested_alert=float(_round_up(2 * (self.alert[i] + depth))))
         st["steps"] += 1
         if st["deepest"] is None or rec["depth"] > st["deepest"]["depth"]:
             st["deepest"] = rec
@@ -623,6 +639,28 @@ class _MissedContactWatch:
             return None
         st["first"] = rec
         return self.message()
+
+    def _deepest(self, c):
+        """(-ratio, order key, interface, (candidate, antagonist body), depth) of the held contact with the largest
+        p0 / alert above FRACTION (the first among equals), or None."""
+        from .laws import ELASTIC, MIXED
+        rows, order = _held(c)
+        cs = c.cs
+        if not len(rows):
+            return None
+        ub = cs.g0[rows] - cs.gap[rows]  # >= p0 (g0 >= 0): the common case, nothing near the threshold, in two passes
+        if float(ub.max()) <= self.FRACTION * float(self.alert.min()):
+            return None
+        law = self.step.law_codes(cs)[rows]
+        compliant = (law == ELASTIC) | (law == MIXED)
+        p0 = np.where(compliant, -cs.gap[rows], ub)
+        ratio = p0 / self.alert[cs.interface[rows]]
+        a = int(np.argmax(ratio))
+        if ratio[a] <= self.FRACTION:
+            return None
+        r = rows[a]
+        return (-float(ratio[a]), int(order[a]), int(cs.interface[r]), (int(cs.cand_body[r]), int(cs.ant_body[r])),
+                float(p0[a]))
 
     def message(self) -> str | None:
         f = self.state["first"]
@@ -1004,7 +1042,7 @@ def run_case(case: Case, out_dir: str, progress: bool = True, resume: bool = Fal
     guards = _Guards(case, model, names, comm)
     watch = _RotationWatch(sim, names, run.get("rotation"))  # the small-rotation bound (resumed: its record)
     run["rotation"] = watch.state
-    missed = _MissedContactWatch(model, names, run.get("missed_contacts"))  # contacts missed by fast bodies
+    missed = _MissedContactWatch(model, names, run.get("missed_contacts"), comm)  # contacts missed by fast bodies
     run["missed_contacts"] = missed.state
     bar = Progress(progress and root)
     info = sim.info()

@@ -346,17 +346,25 @@ MUTATIONS = [
              ("tests/test_dist_own_rows.py",)),
     Mutation("rebalance_bound_inclusive", "a new partition also when the busiest rank owns exactly rebalance x the "
              "mean", "fem_blocks/contact/step.py",
-             "int(busiest * size > self.opts.rebalance * len(self.cs.gap))",
-             "int(busiest * size >= self.opts.rebalance * len(self.cs.gap))",
+             "        if not busiest * size > self.opts.rebalance * counts.sum():\n",
+             "        if not busiest * size >= self.opts.rebalance * counts.sum():\n",
              ("tests/test_dist_partition.py",)),
     Mutation("rebalance_kept_if_worse", "a new partition kept even when its busiest rank owns as many contacts",
              "fem_blocks/contact/step.py",
-             "        if np.bincount(new[cand], minlength=size).max(initial=0) >= busiest:\n",
+             "        if self._rank_counts(new, rows).max(initial=0) >= busiest:\n",
              "        if False:\n", ("tests/test_dist_partition.py",)),
-    Mutation("partition_unweighted", "the time stepper's partition without the contact weights",
-             "fem_blocks/contact/step.py", "        return partition_graph(*g, self.comm, "
-             "vertex_weights=contact_weights(nb, cs.cand_body))\n",
-             "        return partition_graph(*g, self.comm)\n", ("tests/test_dist_partition.py",)),
+    Mutation("partition_unweighted", "the time stepper's partition: the vertex weights from the antagonists' "
+             "counts", "fem_blocks/distributed/graph.py",
+             "    comm.Reduce_scatter(np.bincount(cand, minlength=nb)",
+             "    comm.Reduce_scatter(np.bincount(ant, minlength=nb)", ("tests/test_dist_partition.py",)),
+    Mutation("partition_one_way", "the body graph from the ranks' contacts: each contact's edge one way only",
+             "fem_blocks/distributed/graph.py", "    rows = np.concatenate([cand[two], ant[two]])\n"
+             "    cols = np.concatenate([ant[two], cand[two]])\n",
+             "    rows, cols = cand[two], ant[two]\n", ("tests/test_dist_partition.py",)),
+    Mutation("partition_first_share", "the first partition: every rank gives the whole contact set to the graph",
+             "fem_blocks/contact/step.py",
+             "            self.body_owner = self._partition(np.arange(n * p // size, n * (p + 1) // size))",
+             "            self.body_owner = self._partition(np.arange(n))", ("tests/test_dist_partition.py",)),
     Mutation("pieces_current_partition", "N ranks: a snapshot's checkpoint split by the partition in use, not the "
              "snapshot's own (a failed step after a new partition)", "fem_blocks/runner.py",
              '    kept = None if arrays is None else arrays.get("contact.body_owner")\n', "    kept = None\n",

@@ -88,7 +88,7 @@ def main(path, out):
     comm = MPI.COMM_WORLD
     _, model, sim, step = stepping(path, comm)
     if os.path.basename(path).startswith("rebalanced") and comm.Get_size() > 1:
-        step._partition = lambda: scripted_partition(step)  # (this object only: the others keep PT-Scotch's)
+        step._partition = lambda rows: scripted_partition(step)  # (this object only: the others keep PT-Scotch's)
     res = dict(rank=comm.Get_rank(), size=comm.Get_size(), steps=[], owners=[], own_counts=[])
     pieces = f"{out}.pieces"
     if comm.Get_rank() == 0:

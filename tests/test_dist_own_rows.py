@@ -113,3 +113,22 @@ def test_each_rank_holds_and_steps_its_own_contacts_rows(serial, n):
         assert st["dissipated"] == st["fsum"][0] and st["friction_total"] == total
     assert len(set(s["P"] for s in one["steps"])) == 3  # the steps differ (not a trivial state)
     assert all(s["record_rows"] == nc for s in one["steps"])
+
+
+@pytest.mark.parametrize("n", [2, 3])
+def test_the_own_rows_gather_orders_by_contact_id(tmp_path, n):
+    """distributed/sweep.py OwnRowsGather and gather_fields on n ranks, each holding the rows of a random share of 23
+    contact ids (-40, -35, ..., 70): every rank receives every row in increasing id order, integer, float, bool and
+    (n, 2, 3) arrays with their dtypes and shapes; a contact held by two ranks raises on every rank (no rank left
+    waiting). Catches: the rows in rank order (the layout's inverse not taken), the ids not checked for overlap, a
+    field's trailing shape or dtype lost in the packing."""
+    from _mpi import rank_results, run_helper
+    run_helper(n, "_gather_mpi.py", tmp_path / "g")
+    for r in rank_results(tmp_path / "g", n):
+        want = np.array(r["want"])
+        assert r["i"] == want.tolist()
+        assert np.array_equal(np.array(r["f"]), np.column_stack([want * 0.5, -want * 0.25]))
+        assert r["b"] == (want % 2 == 0).tolist()
+        assert np.array_equal(np.array(r["t"]), np.repeat(want, 6).reshape(-1, 2, 3))
+        assert r["dtypes"] == ["int64", "float64", "bool", "float64"]
+        assert "held by two ranks" in r["twice"]

@@ -271,11 +271,14 @@ class _Ranks:
     """A stand-in communicator of `size` ranks for the contact step's rule (one process: its all-reduce returns
     this rank's value, which every rank computes alike)."""
 
-    def __init__(self, size):
-        self.size = size
+    def __init__(self, size, rank=0):
+        self.size, self.rank = size, rank
 
     def Get_size(self):
         return self.size
+
+    def Get_rank(self):
+        return self.rank
 
     def allreduce(self, x, op=None):
         return x
@@ -294,7 +297,8 @@ def _stepper(counts, bound, new):
     step.body_owner = owner[::-1].copy()
     step.opts = ContactOptions(geometry="updated", rebalance=bound)
     step.rebalanced = 0
-    step._partition = lambda: new
+    step._partition = lambda rows: new
+    step._given = lambda: np.arange(owner.size)  # (this one "rank" counts every contact: the stand-in's sums)
     return step
 
 
@@ -336,29 +340,45 @@ def test_a_new_partition_no_better_is_not_kept():
     assert step._rebalance() is True and step.body_owner is better and step.rebalanced == 1
 
 
-def test_the_time_steppers_partition_weighs_each_body_by_its_contacts(monkeypatch):
-    """contact/step.py ContactStep._partition gives PT-Scotch (distributed/graph.partition_graph, stubbed here) the
-    body graph of the contact set and a weight per body of 1 + its contacts as candidate (docs/scaling.md
-    "Rebalancing"), counted here by hand: bodies 0..4, contacts (cand, ant) = (0, 1), (0, 2), (3, 0), (3, 4),
-    (3, 1), (2, 4): weights 3, 1, 2, 4, 1. Catches: the partition made without the weights, or with the
-    antagonists' counts (3, 3, 2, 1, 3)."""
+def test_the_first_partition_takes_each_contact_from_one_rank(monkeypatch):
+    """contact/step.py ContactStep._owner's first partition (every rank holding the whole first contact set) gives
+    the graph (distributed/graph.partition_contact_graph, stubbed here) a contiguous share of the contacts per
+    rank: over 3 ranks the shares are the 7 contacts once each, in order. Catches: every rank giving the whole set
+    (each contact counted 3 times in the edge and vertex weights), or shares that overlap or leave a contact out."""
     from types import SimpleNamespace
     import fem_blocks.distributed.graph as graph
     from fem_blocks.contact.step import ContactStep
-    seen = {}
+    seen = []
 
-    def stub(indptr, indices, weights, comm, method="ptscotch", vertex_weights=None):
-        seen["w"] = None if vertex_weights is None else np.asarray(vertex_weights).tolist()
-        seen["edges"] = int(len(indices))
-        return np.zeros(len(indptr) - 1, dtype=np.int64)
-    monkeypatch.setattr(graph, "partition_graph", stub)
-    step = ContactStep.__new__(ContactStep)
-    step.comm = _Ranks(2)
-    step.scene = SimpleNamespace(nb=5)
-    step.cs = SimpleNamespace(cand_body=np.array([0, 0, 3, 3, 3, 2]), ant_body=np.array([1, 2, 0, 4, 1, 4]))
-    assert step._partition().tolist() == [0] * 5
-    assert seen["w"] == [3, 1, 2, 4, 1]
-    assert seen["edges"] == 12  # the 6 body pairs, both ways
+    def stub(nb, cand, ant, comm, method="ptscotch"):
+        seen.append((np.asarray(cand).tolist(), np.asarray(ant).tolist()))
+        return np.zeros(nb, dtype=np.int64)
+    monkeypatch.setattr(graph, "partition_contact_graph", stub)
+    cand, ant = [0, 0, 3, 3, 3, 2, 4], [1, 2, 0, 4, 1, 4, 0]
+    for rank in range(3):
+        step = ContactStep.__new__(ContactStep)
+        step.comm = _Ranks(3, rank)
+        step.scene = SimpleNamespace(nb=5)
+        step.body_owner = None
+        step.cs = SimpleNamespace(cand_body=np.array(cand), ant_body=np.array(ant), gap=np.zeros(7))
+        assert step._owner().tolist() == [0] * 7
+    assert sum((c for c, _ in seen), []) == cand and sum((a for _, a in seen), []) == ant
+    assert all(len(c) in (2, 3) for c, _ in seen)
+
+
+@pytest.mark.parametrize("n", [1, 2, 3])
+def test_the_body_graph_is_assembled_from_the_contacts_each_rank_gives(tmp_path, n):
+    """distributed/graph.py contact_graph_rows on n ranks, each giving an interleaved share of 120 contacts among
+    23 bodies (pairs repeated and in both orientations, a self pair, a body without contacts): every rank's rows of
+    the graph (CSR and edge weights) and its vertex weights are those of body_graph and contact_weights of the
+    whole list, its block of rows PETSc's default. Catches: an edge sent one way only, an edge's weight 1 instead of
+    its contacts, the vertex weights counted from the antagonists or not summed over the ranks, rows sent to the
+    wrong rank."""
+    from _mpi import rank_results, run_helper
+    run_helper(n, "_graph_rows_mpi.py", tmp_path / "g")
+    for r in rank_results(tmp_path / "g", n):
+        assert r["got"] == r["want"]
+        assert len(r["want"]["ja"]) > 0
 
 
 @pytest.mark.parametrize("err", [0, 73])

@@ -7,6 +7,14 @@ antagonist body,
 the lowest such i if several (detection keeps one contact per (key, antagonist body) in 3D and one per key in 2D,
 so there is at most one). Keys are the detection modules' stable candidate-point ids (contact/detection_2d.py,
 contact/detection_3d.py: position points from their edge/face and index, node points from the node).
+
+A contact's id (`contact_ids`), the same number on every MPI rank without the whole contact set,
+
+    id = key · nb + ant_body        (nb bodies, 0 <= ant_body < nb),
+
+increases with (key, ant_body) in lexicographic order, which is the detections' order of their contacts: sorting
+contacts by id gives them in the whole detection's order, and the contacts of two detections continue each other
+when their ids are equal.
 """
 from __future__ import annotations
 
@@ -28,3 +36,12 @@ def match(old, new) -> np.ndarray:
     pos = np.minimum(np.searchsorted(co[o], cn), len(co) - 1)
     hit = co[o][pos] == cn
     return np.where(hit, o[pos], -1).astype(np.int64)
+
+
+def contact_ids(key, ant_body, nb: int) -> np.ndarray:
+    """(n,) int64: the contacts' ids key · nb + ant_body (module docstring). OverflowError if a key is too large for
+    the ids to fit in int64 with nb bodies."""
+    key = np.asarray(key, dtype=np.int64)
+    if key.size and int(np.abs(key).max()) >= (2 ** 62) // max(int(nb), 1):
+        raise OverflowError(f"contact ids: keys up to {int(np.abs(key).max())} with {nb} bodies exceed int64")
+    return key * np.int64(nb) + np.asarray(ant_body, dtype=np.int64)

@@ -18,8 +18,8 @@ dissipation per contact `friction` = -r̃_T · Δu_T [J] and its running total `
 `dissipated` the law states' dissipated energy Σ_α S_DISS [J] (decohesion and crushing) over every contact.
 
 Rows: on N > 1 MPI ranks in colour order (contact/step.py ContactStep._own_rows) a rank's record holds the rows of
-its own contacts only (`rows`: their numbers in the contact set `cs`, which every rank holds whole); `whole()`
-gathers every contact's rows (collective: every rank calls it together). The statistics, `friction_total` and
+its own contacts only (`rows`: their numbers in the contact set `cs`); `whole()` gathers every contact's rows and
+contact set rows, in the whole set's order (collective: every rank calls it together). The statistics, `friction_total` and
 `dissipated` are of every contact on every rank.
 """
 from __future__ import annotations
@@ -64,21 +64,20 @@ class ContactResult:
 
     def whole(self) -> "ContactResult":
         """The record with the rows of every contact: itself when it holds them; else (a rank's rows, N > 1 ranks)
-        one gather of the per-contact arrays side by side. COLLECTIVE in that case: every rank calls it together."""
+        the per-contact arrays and the contact set's rows of the held contacts gathered (two gathers: the integer
+        and the floating-point arrays, distributed/sweep.gather_fields), in the whole set's order. COLLECTIVE in
+        that case: every rank calls it together."""
         if self.rows is None:
             return self
+        from ..distributed.sweep import gather_fields
         names = [k for k in ("P", "r", "v", "gt_end", "status", "law", "state", "friction")
                  if getattr(self, k) is not None]
-        cols = [np.asarray(getattr(self, k), dtype=np.float64) for k in names]
-        cols = [c.reshape(len(self.rows), int(np.prod(c.shape[1:], dtype=np.int64))) for c in cols]
-        every = self.gather(np.hstack(cols) if cols else np.zeros((len(self.rows), 0)))
-        out, j = {}, 0
-        for k, c in zip(names, cols):
-            x = every[:, j:j + c.shape[1]]
-            j += c.shape[1]
-            x = x.reshape((-1,) + np.shape(getattr(self, k))[1:])
-            out[k] = np.ascontiguousarray(x.astype(np.int64) if k in ("status", "law") else x)
-        return replace(self, rows=None, gather=None, **out)
+        part = self.cs.subset(self.rows)
+        fields = {f"cs.{k}": v for k, v in part.__dict__.items()}
+        fields.update({k: getattr(self, k) for k in names})
+        every = gather_fields(self.gather, fields)
+        cs = type(part)(**{k: every[f"cs.{k}"] for k in part.__dict__})
+        return replace(self, cs=cs, rows=None, gather=None, **{k: every[k] for k in names})
 
     def export(self) -> dict:
         """The per-contact outputs for a checkpoint ("contact.out.<name>"; a rank's rows on N > 1 ranks: its piece)."""

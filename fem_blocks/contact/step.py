@@ -50,7 +50,7 @@ from . import detection_2d as det
 from . import detection_3d as det3
 from . import kinematics_2d as kin
 from . import kinematics_3d as kin3
-from .matching import match
+from .matching import contact_ids, match
 from .result import OUT_FIELDS, OUT_PREFIX, ContactResult
 from .scene import ContactScene
 
@@ -168,35 +168,47 @@ class ContactStep:
         body-contact graph at the first step, `_partition`, again at a re-detection that unbalances the ranks,
         `_rebalance`, or restored from the checkpoint)."""
         if self.body_owner is None or len(self.body_owner) != self.scene.nb:
-            self.body_owner = self._partition()
+            n, p, size = len(self.cs.gap), self.comm.Get_rank(), self.comm.Get_size()
+            self.body_owner = self._partition(np.arange(n * p // size, n * (p + 1) // size))  # (a share of the set
+            # every rank holds whole before the first partition)
         return self.body_owner[self.cs.cand_body]
 
-    def _partition(self) -> np.ndarray:
+    def _given(self) -> np.ndarray:
+        """The contacts (numbers in the current contact set) this rank counts in the collective counts and graph of
+        a re-partition: its own, so that every contact is counted by one rank."""
+        return np.flatnonzero(self.body_owner[self.cs.cand_body] == self.comm.Get_rank())
+
+    def _partition(self, rows) -> np.ndarray:
         """COLLECTIVE: the rank of each body, PETSc MatPartitioning (PT-Scotch) of the body-contact graph of the
         current contact set (distributed/graph.py: edges weighted by their contacts, bodies by 1 + their contacts as
-        candidate), so that the ranks own about as many contacts each."""
-        from ..distributed.graph import body_graph, contact_weights, partition_graph
-        nb, cs = self.scene.nb, self.cs
-        g = body_graph(nb, np.zeros((0, 2), dtype=np.int64), cs.cand_body, cs.ant_body)
-        return partition_graph(*g, self.comm, vertex_weights=contact_weights(nb, cs.cand_body))
+        candidate), so that the ranks own about as many contacts each. rows: the contacts this rank gives to the
+        graph, each contact given by one rank (`partition_contact_graph`: no rank needs the whole set)."""
+        from ..distributed.graph import partition_contact_graph
+        cs = self.cs
+        return partition_contact_graph(self.scene.nb, cs.cand_body[rows], cs.ant_body[rows], self.comm)
+
+    def _rank_counts(self, owner, rows) -> np.ndarray:
+        """COLLECTIVE: the number of contacts each rank owns under the body partition `owner`, counted from the
+        contacts `rows` this rank gives (`_given`) and summed over the ranks (one all-reduce of `size` integers)."""
+        from mpi4py import MPI
+        c = np.bincount(owner[self.cs.cand_body[rows]], minlength=self.comm.Get_size()).astype(np.int64)
+        return self.comm.allreduce(c, op=MPI.SUM)
 
     def _rebalance(self) -> bool:
         """COLLECTIVE (N > 1 ranks in colour order, updated geometry, at a re-detection, the new contact set in
         self.cs and the old partition's `_local` still in place): if the rank that would own most of the new
         contacts owns more than `rebalance` × their mean per rank, partition the bodies again (`_partition`) and
         keep the new partition if its busiest rank owns fewer contacts; True if kept (the caller moves the
-        per-contact rows to their new owners), else False. Every rank holds the same contact set and partition
-        and decides the same; the decision is still taken as the ranks' largest (an all-reduce), so that ranks
-        whose contact sets differ (caught by `_check_replicas` after the assembly) do not part ways here."""
-        from mpi4py import MPI
+        per-contact rows to their new owners), else False. The counts are the ranks' own contacts summed (each
+        contact counted by its owner), the same on every rank, and so is the decision."""
         size = self.comm.Get_size()
-        cand = self.cs.cand_body
-        busiest = np.bincount(self.body_owner[cand], minlength=size).max(initial=0)
-        again = self.comm.allreduce(int(busiest * size > self.opts.rebalance * len(self.cs.gap)), op=MPI.MAX)
-        if not again:
+        rows = self._given()
+        counts = self._rank_counts(self.body_owner, rows)
+        busiest = counts.max(initial=0)
+        if not busiest * size > self.opts.rebalance * counts.sum():
             return False
-        new = self._partition()
-        if np.bincount(new[cand], minlength=size).max(initial=0) >= busiest:
+        new = self._partition(rows)
+        if self._rank_counts(new, rows).max(initial=0) >= busiest:
             return False  # (PT-Scotch did no better: the partition in use is kept)
         self.body_owner = new
         self.rebalanced += 1
@@ -239,9 +251,11 @@ class ContactStep:
         L = np.flatnonzero(near[cs.cand_body] | near[cs.ant_body])
         stepped = near.copy()
         stepped[self.scene.rigid] = True
+        from ..distributed.sweep import OwnRowsGather
+        gather = OwnRowsGather(self.comm, contact_ids(cs.key[own], cs.ant_body[own], self.scene.nb))
         return _RankContacts(L, own, np.searchsorted(L, own), np.repeat(mine, self.scene.W_size),
                              np.argsort(owner, kind="stable"), np.bincount(owner, minlength=self.comm.Get_size()),
-                             stepped)
+                             stepped, gather)
 
     def _build_G(self, centers, new_set: bool):
         """The G blocks of the contact set (N > 1 ranks in colour order: of this rank's contacts L only). new_set: the
@@ -282,19 +296,13 @@ class ContactStep:
                                f"{own.size} of this rank")
         return np.ascontiguousarray(a[own])
 
-    def _gather(self):
-        """N > 1 ranks in colour order: the gather of the own rows of the current contact set (distributed/sweep.py
-        `gather_rows` bound to its layout: a record keeps the gather of its own contact set)."""
-        import functools
-        from ..distributed.sweep import gather_rows
-        return functools.partial(gather_rows, self.comm, self._local.order, self._local.counts)
-
     def _record_rows(self) -> dict:
         """The rows a step's record holds (contact/result.py): those of every contact, or on N > 1 ranks in colour
-        order this rank's own, with the gather of the others'."""
+        order this rank's own, with the gather of every rank's (distributed/sweep.OwnRowsGather of the own contacts'
+        ids: a record keeps the gather of its own contact set)."""
         if self._local is None:
             return {}
-        return dict(rows=self._local.own, gather=self._gather())
+        return dict(rows=self._local.own, gather=self._local.gather)
 
     def _totals(self, friction=None) -> list:
         """[Σ S_DISS of the committed law states (+ Σ friction, the step's frictional work per contact, when given)]
@@ -470,26 +478,12 @@ class ContactStep:
 
     def _gather_set(self, part):
         """COLLECTIVE: the ranks' parts of a contact set (each the whole set's rows of its own candidates, in the
-        whole detection's order) as the whole set on every rank, in that order: by key, then antagonist body (one
-        contact per candidate point and antagonist body: 2D keys are distinct, a 3D node point may face several
-        bodies). Two Allgatherv: the integer fields packed in one buffer, the floating-point ones in another."""
-        from ..distributed.sweep import gather_rows
-        counts = np.array(self.comm.allgather(len(part.gap)), dtype=np.int64)
-        n = int(counts.sum())
-        fields = {k: np.asarray(v) for k, v in part.__dict__.items()}
-        packed = {}
-        for floats, dt in ((False, np.int64), (True, np.float64)):
-            names = [k for k, v in fields.items() if (v.dtype.kind == "f") == floats]
-            cols = [fields[k].reshape(len(part.gap), int(np.prod(fields[k].shape[1:]))).astype(dt, copy=False)
-                    for k in names]
-            flat = np.hstack(cols) if cols else np.zeros((len(part.gap), 0), dtype=dt)
-            rows = gather_rows(self.comm, np.arange(n, dtype=np.int64), counts, flat)  # rank-major
-            at = np.cumsum([0] + [c.shape[1] for c in cols])
-            packed.update({k: rows[:, at[i]:at[i + 1]] for i, k in enumerate(names)})
-        order = np.lexsort((packed["ant_body"][:, 0], packed["key"][:, 0]))
-        out = {k: np.ascontiguousarray(packed[k][order].reshape((n,) + v.shape[1:])).astype(v.dtype, copy=False)
-               for k, v in fields.items()}
-        return type(part)(**out)
+        whole detection's order) as the whole set on every rank, in that order: by contact id (key, then antagonist
+        body: one contact per candidate point and antagonist body; contact/matching.contact_ids). The integer
+        fields packed in one buffer, the floating-point ones in another (distributed/sweep.gather_fields)."""
+        from ..distributed.sweep import OwnRowsGather, gather_fields
+        ids = contact_ids(part.key, part.ant_body, self.scene.nb)
+        return type(part)(**gather_fields(OwnRowsGather(self.comm, ids), part.__dict__))
 
     def _delassus(self, W_flat, W_offset, W_size):
         """W of the contact set. In colour order only the blocks that couple are assembled (delassus.assemble's
@@ -665,8 +659,7 @@ class ContactStep:
         from mpi4py import MPI
         comm = self.comm
         if rows is None:
-            from ..distributed.sweep import gather_rows
-            return [gather_rows(comm, old_local.order, old_local.counts, x) for x in olds], m
+            return [old_local.gather(x) for x in olds], m
         p, size = comm.Get_rank(), comm.Get_size()
         was = old_owner[old.cand_body]  # the old owner of each old contact
         j = np.flatnonzero(m >= 0)
@@ -996,6 +989,7 @@ class _RankContacts:
     order: np.ndarray
     counts: np.ndarray
     stepped: np.ndarray  # the bodies this rank steps (ContactStep.stepped_bodies): B and the rigid bodies
+    gather: object = None  # the gather of the own rows of every rank in the set's order (sweep.OwnRowsGather)
     scatter: tuple = None  # the PETSc scatter of the impulses of L's contacts owned elsewhere (_L_impulses)
 
     def destroy(self):

@@ -364,9 +364,7 @@ class ColourSolver:
         self.dist = DistSweep(lr, colour_local, self.n_colours, self.comm)
         self.order = self.dist.order
         self.r = self.dist.r  # owned then ghost impulses; the owned part is the PETSc vector's array
-        counts = np.array(self.comm.allgather(self.owned.size), dtype=np.int64)
-        self._counts = counts
-        self._ids = np.concatenate(self.comm.allgather(self.owned))  # gathered owned contacts, in rank order
+        self._layout = None  # the gather's (every rank's owned contacts, their counts): made by the first `gather`
 
     def _take_over(self, previous, lr, colour_local) -> bool:
         """Become `previous` with the blocks of `lr` (`from_sweep_rows`'s previous) if both have the same structure:
@@ -413,12 +411,16 @@ class ColourSolver:
             self.dist.scatters[c].scatter(self.dist.vec, self.dist.gvec)
 
     def gather(self, x_own: np.ndarray, width: int) -> np.ndarray:
-        """The owned rows' values (n_own, width) of every rank, as one (n, width) array in contact order, on every
-        rank (one Allgatherv)."""
+        """COLLECTIVE: the owned rows' values (n_own, width) of every rank, as one (n, width) array in contact order,
+        on every rank (one Allgatherv). Its layout, every rank's owned contact numbers (n integers on every rank),
+        is gathered at the first call only: the time stepper, whose ranks keep their own rows, never makes it."""
         if self.comm is None:
             return x_own.reshape(-1, width).copy()
         from .sweep import gather_rows
-        return gather_rows(self.comm, self._ids, self._counts, np.asarray(x_own).reshape(-1, width))
+        if self._layout is None:
+            self._layout = (np.concatenate(self.comm.allgather(self.owned)),
+                            np.array(self.comm.allgather(self.owned.size), dtype=np.int64))
+        return gather_rows(self.comm, *self._layout, np.asarray(x_own).reshape(-1, width))
 
     def _sum_int(self, x: np.ndarray) -> np.ndarray:
         if self.comm is None:

@@ -96,25 +96,81 @@ def _set_vertex_weights(part, w_local: np.ndarray, comm) -> bool:
     return True
 
 
+def row_block(nb: int, size: int, rank: int) -> tuple[int, int]:
+    """(start, count): the contiguous block of vertices a rank holds the rows of (PETSc's default layout)."""
+    return rank * (nb // size) + min(rank, nb % size), nb // size + (1 if rank < nb % size else 0)
+
+
+def contact_graph_rows(nb: int, cand, ant, comm):
+    """COLLECTIVE: this rank's rows (start, indptr, indices, weights, vertex weights) of the time stepper's body graph
+    — `body_graph(nb, [], cand, ant)` and `contact_weights(nb, cand)` of every contact — from the contacts (cand,
+    ant) this rank gives, each contact given by one rank (its owner): no rank needs the whole contact set. Each
+    contact's two directed edges go to the ranks holding their rows (one Alltoallv, `row_block`), where the edges
+    are counted (the weight of an edge = the contacts between its two bodies, as body_graph's); the vertex weights
+    1 + #{contacts with candidate b} are the ranks' counts summed (one Reduce_scatter)."""
+    from mpi4py import MPI
+    size, rank = comm.Get_size(), comm.Get_rank()
+    cand, ant = np.asarray(cand, dtype=np.int64), np.asarray(ant, dtype=np.int64)
+    two = cand != ant
+    rows = np.concatenate([cand[two], ant[two]])
+    cols = np.concatenate([ant[two], cand[two]])
+    starts = np.array([row_block(nb, size, p)[0] for p in range(size)], dtype=np.int64)
+    dest = np.searchsorted(starts, rows, side="right") - 1
+    o = np.argsort(dest, kind="stable")
+    send = np.ascontiguousarray(np.column_stack([rows[o], cols[o]]))
+    scounts = np.bincount(dest, minlength=size).astype(np.int64)
+    rcounts = np.empty(size, dtype=np.int64)
+    comm.Alltoall(scounts, rcounts)
+    recv = np.empty((int(rcounts.sum()), 2), dtype=np.int64)
+    comm.Alltoallv([send, (2 * scounts, 2 * (np.cumsum(scounts) - scounts)), MPI.INT64_T],
+                   [recv, (2 * rcounts, 2 * (np.cumsum(rcounts) - rcounts)), MPI.INT64_T])
+    start, n_loc = row_block(nb, size, rank)
+    uk, w = np.unique(recv[:, 0] * nb + recv[:, 1], return_counts=True)  # (sorted by row, then column)
+    r, c = uk // nb - start, uk % nb
+    indptr = np.zeros(n_loc + 1, dtype=np.int64)
+    np.add.at(indptr, r + 1, 1)
+    vw = np.empty(n_loc, dtype=np.int64)
+    comm.Reduce_scatter(np.bincount(cand, minlength=nb).astype(np.int64), vw,
+                        recvcounts=[row_block(nb, size, p)[1] for p in range(size)], op=MPI.SUM)
+    return start, np.cumsum(indptr), c, w.astype(np.int64), 1 + vw
+
+
+def partition_contact_graph(nb: int, cand, ant, comm, method: str = "ptscotch") -> np.ndarray:
+    """COLLECTIVE: owner (nb,) int64 on every rank, the partition of the time stepper's body graph (edges weighted by
+    their contacts, bodies by 1 + their contacts as candidate) from the contacts (cand, ant) this rank gives, each
+    contact given by one rank (`contact_graph_rows`); the same graph as `body_graph` and `contact_weights` of the
+    whole set, so the same partition as `partition_graph` of it."""
+    if comm.Get_size() == 1:
+        return np.zeros(nb, dtype=np.int64)
+    start, ia, ja, w, vw = contact_graph_rows(nb, cand, ant, comm)
+    return _partition_rows(nb, start, ia, ja, w, vw, comm, method)
+
+
 def partition_graph(indptr, indices, weights, comm, method: str = "ptscotch", vertex_weights=None) -> np.ndarray:
     """owner (nb,) int64 on every rank: PETSc MatPartitioning of type `method` into comm.size parts of the graph
     (CSR, symmetric, no diagonal, positive integer weights used as edge weights; `vertex_weights` (nb,) positive
     integers, the same on every rank, or None: every vertex weighs 1). Each rank inserts the rows of a contiguous
-    block of vertices (PETSc's default layout) into an MPIAIJ adjacency; the part of each row is gathered with
-    Allgatherv."""
-    from petsc4py import PETSc
+    block of vertices (`row_block`, PETSc's default layout) into an MPIAIJ adjacency; the part of each row is
+    gathered with Allgatherv."""
     nb = len(indptr) - 1
-    size = comm.size
-    if size == 1:
+    if comm.size == 1:
         return np.zeros(nb, dtype=np.int64)
-    pcomm = PETSc.Comm(comm)
-    n_loc = nb // size + (1 if comm.rank < nb % size else 0)
-    start = comm.rank * (nb // size) + min(comm.rank, nb % size)
+    start, n_loc = row_block(nb, comm.size, comm.rank)
     s, e = int(indptr[start]), int(indptr[start + n_loc])
-    ia = (indptr[start:start + n_loc + 1] - s).astype(PETSc.IntType)
-    ja = indices[s:e].astype(PETSc.IntType)
-    A = PETSc.Mat().createAIJ(size=((n_loc, nb), (n_loc, nb)), csr=(ia, ja, weights[s:e].astype(PETSc.ScalarType)),
-                              comm=pcomm)
+    vw = None if vertex_weights is None else np.asarray(vertex_weights)[start:start + n_loc]
+    return _partition_rows(nb, start, indptr[start:start + n_loc + 1] - s, indices[s:e], weights[s:e], vw, comm,
+                           method)
+
+
+def _partition_rows(nb, start, ia, ja, weights, vertex_weights, comm, method) -> np.ndarray:
+    """COLLECTIVE: the partition (owner (nb,) on every rank) of the graph whose rows start .. start + len(ia) - 2
+    this rank holds (CSR ia, ja, weights; vertex weights of those rows, or None)."""
+    from petsc4py import PETSc
+    pcomm = PETSc.Comm(comm)
+    n_loc = len(ia) - 1
+    A = PETSc.Mat().createAIJ(size=((n_loc, nb), (n_loc, nb)),
+                              csr=(np.asarray(ia).astype(PETSc.IntType), np.asarray(ja).astype(PETSc.IntType),
+                                   np.asarray(weights).astype(PETSc.ScalarType)), comm=pcomm)
     A.assemble()
     part = PETSc.MatPartitioning().create(comm=pcomm)
     prefix = "fb_partition_"
@@ -123,8 +179,7 @@ def partition_graph(indptr, indices, weights, comm, method: str = "ptscotch", ve
     opts[prefix + "mat_partitioning_use_edge_weights"] = "true"
     part.setAdjacency(A)
     part.setType(method)
-    if vertex_weights is not None and not _set_vertex_weights(part, np.asarray(vertex_weights)[start:start + n_loc],
-                                                              comm):
+    if vertex_weights is not None and not _set_vertex_weights(part, vertex_weights, comm):
         if comm.rank == 0:
             warnings.warn("the bodies are partitioned without vertex weights (no loaded PETSc library exports "
                           "MatPartitioningSetVertexWeights): the ranks get equal numbers of bodies, not of contacts",

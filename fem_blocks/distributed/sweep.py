@@ -183,6 +183,60 @@ def gather_rows(comm, order, counts, x: np.ndarray) -> np.ndarray:
     return out
 
 
+class OwnRowsGather:
+    """COLLECTIVE when called: gather(x), the rows x (n_own, ...) of every rank's own contacts as the rows of every
+    contact, in the whole contact set's order (increasing contact id, contact/matching.contact_ids), on every rank
+    (one Allgatherv). ids: this rank's own contacts' ids, increasing. The layout (every rank's ids: n integers on
+    every rank) is gathered at the first call only, for the outputs that need every contact; a rank's step never
+    calls it."""
+
+    def __init__(self, comm, ids):
+        self.comm, self.ids, self._layout = comm, np.asarray(ids, dtype=np.int64), None
+
+    def layout(self):
+        """(order, counts): gather_rows' layout, made once (two all-gathers); RuntimeError on every rank if two
+        ranks hold the same contact."""
+        if self._layout is None:
+            from mpi4py import MPI
+            counts = np.array(self.comm.allgather(self.ids.size), dtype=np.int64)
+            every = np.empty(int(counts.sum()), dtype=np.int64)
+            self.comm.Allgatherv(self.ids, [every, counts, np.concatenate([[0], np.cumsum(counts)[:-1]]),
+                                            MPI.INT64_T])
+            o = np.argsort(every, kind="stable")
+            if np.any(every[o][1:] == every[o][:-1]):
+                raise RuntimeError("the ranks' own contacts overlap: a contact id held by two ranks")
+            order = np.empty(every.size, dtype=np.int64)
+            order[o] = np.arange(every.size)
+            self._layout = (order, counts)
+        return self._layout
+
+    def __call__(self, x):
+        return gather_rows(self.comm, *self.layout(), x)
+
+
+def gather_fields(gather, fields: dict) -> dict:
+    """COLLECTIVE: every array of `fields` (rows of this rank's contacts, the same number of rows each; int or
+    float) gathered by `gather` (`OwnRowsGather` or gather_rows bound to a layout) in two gathers: the integer
+    arrays packed side by side in one int64 buffer, the floating-point ones in one float64 buffer. Returns the
+    gathered arrays, each with its dtype and trailing shape."""
+    fields = {k: np.asarray(v) for k, v in fields.items()}
+    n = len(next(iter(fields.values()))) if fields else 0
+    out = {}
+    for floats, dt in ((False, np.int64), (True, np.float64)):
+        names = [k for k, v in fields.items() if (v.dtype.kind == "f") == floats]
+        if not names:
+            continue
+        cols = [fields[k].reshape(n, int(np.prod(fields[k].shape[1:], dtype=np.int64))).astype(dt, copy=False)
+                for k in names]
+        rows = gather(np.hstack(cols))
+        at = np.cumsum([0] + [c.shape[1] for c in cols])
+        for i, k in enumerate(names):
+            v = fields[k]
+            out[k] = np.ascontiguousarray(rows[:, at[i]:at[i + 1]].reshape((len(rows),) + v.shape[1:])).astype(
+                v.dtype, copy=False)
+    return out
+
+
 def ownership(n: int, size: int, kind: str = "blocks") -> np.ndarray:
     """Owner rank per contact: "blocks" contiguous blocks in contact order, "cyclic" contact a on rank a mod size,
     "skip0" contiguous blocks on ranks 1..size-1 and none on rank 0 (size >= 2); "ptscotch": see
