@@ -133,7 +133,7 @@ def run(n_bricks, comm, steps, warm, show=True, max_sweeps=1000, ck_dir=None, ge
     if comm.rank == 0 and show:
         nsw = sum(sweeps)
         h = hashlib.sha1(np.array(reac).tobytes() + np.array(sweeps).tobytes()).hexdigest()[:12]
-        print(f"| {comm.size} | {n_bricks} ({len(model.bodies) - 1}) | {len(cs.cs.gap)} | {col.n_colours} | "
+        print(f"| {comm.size} | {n_bricks} ({len(model.bodies) - 1}) | {col.n} | {col.n_colours} | "
               f"{rows[:, 0].min():.0f}–{rows[:, 0].max():.0f} | {rows[:, 1].max():.1f} | "
               f"{1e3 * rows[:, 2].max() / steps:.1f} | {nsw / steps:.1f} | {1e3 * rows[:, 3].max() / max(nsw, 1):.3f} | "
               f"{rows[:, 4].max():.0f} / {rows[:, 5].max():.0f} | {rows[:, 6].max():.0f} | {rows[:, 7].max():.0f} | "

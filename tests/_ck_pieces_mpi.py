@@ -18,6 +18,7 @@ def state(step):
     """4 bodies, 5 contacts, rows depending on the step."""
     return {"sim.step": np.int64(step), **{f"sim.body{i}.q": np.full(3, step + i, dtype=float) for i in range(4)},
             "contact.cs.cand_body": np.array([0, 1, 2, 3, 3]), "contact.cs.ant_body": np.array([1, 2, 3, 0, 1]),
+            "contact.cs.key": np.array([3, 7, 11, 15, 16]),
             "contact.P": np.arange(10, dtype=float).reshape(5, 2) + step}
 
 

@@ -31,13 +31,21 @@ def record(sim, step) -> dict:
                 fsum=[math.fsum(c.state[:, S_DISS]), math.fsum(c.friction)])
 
 
+def ids(step, rows=None) -> np.ndarray:
+    """The contact ids (contact/matching.contact_ids) of the contact step's set, or of its `rows`."""
+    from fem_blocks.contact.matching import contact_ids
+    cs = step.cs
+    rows = np.arange(len(cs.gap)) if rows is None else rows
+    return contact_ids(cs.key[rows], cs.ant_body[rows], step.scene.nb)
+
+
 def own_contacts(step, comm) -> np.ndarray:
-    """The contacts whose candidate body this rank owns in the contact step's partition now (every contact on one
-    process)."""
+    """The ids of the contacts whose candidate body this rank owns in the contact step's partition now (every contact
+    on one process)."""
     cs = step.cs
     if step.body_owner is None:
-        return np.arange(len(cs.gap))
-    return np.flatnonzero(np.asarray(step.body_owner)[cs.cand_body] == comm.Get_rank())
+        return ids(step)
+    return ids(step, np.flatnonzero(np.asarray(step.body_owner)[cs.cand_body] == comm.Get_rank()))
 
 
 def scripted_partition(step):
@@ -59,7 +67,8 @@ def scripted_partition(step):
         if size > 2:
             owner[b % 4 == 3] = 2
         return owner
-    w = contact_weights(nb, step.cs.cand_body)
+    cand = step.cs.cand_body[np.asarray(step.body_owner)[step.cs.cand_body] == step.comm.Get_rank()]
+    w = step.comm.allreduce(contact_weights(nb, cand) - 1) + 1  # (every rank's own contacts: the whole set's)
     before = np.cumsum(w) - w
     return (before * size // w.sum() + step.steps) % size
 
@@ -112,9 +121,12 @@ def main(path, out):
     res["restored"] = dict(P=digest(back.P), state=digest(back.state))
     sim.step()
     res["again"] = record(sim, step)
-    n = len(step.cs.gap)
+    n = len(step.cs.gap) if step._local is None else step._local.n
     own = own_contacts(step, comm)
-    res.update(n_contacts=n, own=own.tolist(), rebalanced=step.rebalanced,
+    cs = step.cs
+    res.update(n_contacts=n, own=own.tolist(), rebalanced=step.rebalanced, held=ids(step).tolist(),
+               owner_end=None if step.body_owner is None else np.asarray(step.body_owner).tolist(),
+               pairs=np.column_stack([ids(step), cs.cand_body, cs.ant_body]).tolist(),
                rows={name: (None if getattr(step, name, None) is None else int(len(getattr(step, name))))
                      for name in step.ROWS})
     step.close()

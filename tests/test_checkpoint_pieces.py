@@ -97,7 +97,7 @@ def test_merge_refuses_an_incomplete_set(real):
         merge([p0])
     with pytest.raises(InputError, match="complete set"):
         merge([p0, split(ck, 1, 2, "other", owner, body_of_key, keys)])
-    p1["part.contacts"] = p1["part.contacts"][1:]
+    p1["part.contact_ids"] = p1["part.contact_ids"][1:]
     for k in keys:
         p1[k] = p1[k][1:]
     with pytest.raises(InputError, match="each of the"):
@@ -111,6 +111,7 @@ def _state(step):
     return {"sim.step": np.int64(step), "sim.time": np.float64(step * 1e-3),
             **{f"sim.body{i}.q": np.full(3, step + i, dtype=float) for i in range(4)},
             "contact.cs.cand_body": np.array([0, 1, 2, 3, 3]), "contact.cs.ant_body": np.array([1, 2, 3, 0, 1]),
+            "contact.cs.key": np.array([3, 7, 11, 15, 16]),
             "contact.P": np.arange(10, dtype=float).reshape(5, 2) + step, "contact.steps": np.int64(step)}
 
 

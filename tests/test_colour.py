@@ -121,9 +121,10 @@ def test_serial_colour_solver_is_nlgs_sweeps_in_colour_order_with_exact_sums():
 def test_ranks_whose_models_differ_stop_with_a_clear_error():
     """N ranks each build the model: the contact step compares their contact sets and Delassus operators when it
     rebuilds W and raises RankMismatchError (on every rank: the comparison is all-gathered) if one differs; equal
-    copies pass; in colour order in updated geometry (the contact set gathered, equal on every rank) the positions
-    the ranks detected at are compared (one last bit of one coordinate differs: raised). (A fake communicator stands
-    for the ranks.) Catches a check left without anything that can differ once the detection is split."""
+    copies pass; in colour order (each rank holding its part of the contact set) the whole set's contact count and
+    the positions the ranks detected at are compared (one last bit of one coordinate differs: raised; another count:
+    raised). (A fake communicator stands for the ranks.) Catches a check left without anything that can differ once
+    the detection is split, or comparing what differs between the ranks' parts (their sizes: a false alarm)."""
     import types
 
     import pytest
@@ -146,18 +147,20 @@ def test_ranks_whose_models_differ_stop_with_a_clear_error():
     step.comm = Comm(lambda x: (x[0], x[1], x[2] + 1, x[3]))
     with pytest.raises(RankMismatchError, match="ranks' copies of the model differ"):
         step._check_replicas()
-    # colour order, updated geometry: the contact set is gathered from the ranks' parts, so the positions are compared
+    # colour order: each rank holds its part of the contact set (another size than the other rank's part here)
     from fem_blocks.contact.step import ContactOptions
     pos = np.arange(12.0).reshape(6, 2)
-    step._local, step.opts = object(), ContactOptions(geometry="updated", order="colours")
+    step._local, step.opts = types.SimpleNamespace(n=40), ContactOptions(geometry="updated", order="colours")
+    step.cs = types.SimpleNamespace(gap=np.arange(7, dtype=float))
     import zlib
-    step.comm = Comm(lambda x: x[:2] + (zlib.crc32(pos.tobytes()),))  # (the other rank at the same positions)
+    step.comm = Comm(lambda x: (40, zlib.crc32(pos.tobytes())))  # (the other rank at the same positions)
     step._check_replicas(pos)
     other = pos.copy()
     other[3, 1] = np.nextafter(other[3, 1], 10.0)
-    step.comm = Comm(lambda x: x[:2] + (zlib.crc32(other.tobytes()),))
-    with pytest.raises(RankMismatchError, match="ranks' copies of the model differ"):
-        step._check_replicas(pos)
+    for them in ((40, zlib.crc32(other.tobytes())), (41, zlib.crc32(pos.tobytes()))):
+        step.comm = Comm(lambda x: them)
+        with pytest.raises(RankMismatchError, match="ranks' copies of the model differ"):
+            step._check_replicas(pos)
 
 
 def _rows_in_order(W, order):
@@ -499,20 +502,18 @@ def test_a_detection_error_of_one_rank_is_raised_on_every_rank(tmp_path, monkeyp
     monkeypatch.setattr(detection_2d, "detect", real)
 
 
-def test_a_rank_whose_old_rows_do_not_match_stops_every_rank():
-    """At a re-detection on N > 1 ranks a rank looks up the old rows its new rows continue (its own old contacts'
-    rows: ContactStep._old_own_rows) and, at a new partition, checks the counts its peers send against its own list
-    (`_carry_rows`); a mismatch (ranks whose copies diverged) must stop every rank with the same error, not only the
-    rank that found it while the others wait in the next collective (`_fail_together`: an all-reduce of the flag).
-    A fake communicator of 2 ranks stands for the other rank. Catches the error raised only where it was found, and
-    a lookup that takes a contact the rank did not own for a row."""
+def test_a_rank_that_finds_the_ranks_disagree_stops_every_rank():
+    """On N > 1 ranks a rank looks contacts up by id among sorted ids (`_lookup`: the old own rows its new rows
+    continue, a contact's number asked of its owner, `_numbers`); a contact its owner does not hold (ranks whose
+    copies diverged) must stop every rank with the same error, not only the rank that found it while the others wait
+    in the next collective (`_fail_together`: an all-reduce of the flag). A fake communicator of 2 ranks stands for
+    the other rank. Catches the error raised only where it was found, and a lookup that takes the next contact for
+    one that is not there."""
     import pytest
     from fem_blocks.contact.step import ContactStep
-    rows, bad = ContactStep._old_own_rows(np.array([2, 5, 9]), np.array([5, -1, 9, 2]))
-    assert rows.tolist() == [1, -1, 2, 0] and not bad
-    for src in ([5, 4], [5, 10]):  # (4: between own contacts; 10: beyond the last)
-        rows, bad = ContactStep._old_own_rows(np.array([2, 5, 9]), np.array(src))
-        assert bad and rows.tolist() == [-1, -1]
+    from fem_blocks.contact.step import _lookup
+    assert _lookup(np.array([2, 5, 9]), np.array([5, -1, 9, 2, 4, 10])).tolist() == [1, -1, 2, 0, -1, -1]
+    assert _lookup(np.zeros(0, dtype=np.int64), np.array([3])).tolist() == [-1]
     seen = []
 
     class Comm:

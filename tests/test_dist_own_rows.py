@@ -84,8 +84,14 @@ def test_each_rank_holds_and_steps_its_own_contacts_rows(serial, n):
     nc = one["n_contacts"]
     assert nc > 20 and all(r["n_contacts"] == nc for r in ranks)
     owns = [r["own"] for r in ranks]
-    assert sorted(sum(owns, [])) == list(range(nc))  # every contact held by one rank
+    assert sorted(sum(owns, [])) == one["own"] and len(one["own"]) == nc  # every contact owned by one rank
     assert sum(1 for o in owns if o) >= 2  # the contacts are shared
+    pairs = {c: (cand, ant) for c, cand, ant in one["pairs"]}  # (id -> bodies, of the whole set)
+    for r in ranks:  # the contacts a rank keeps: L = those with a body in B (its bodies, those of its own contacts)
+        B = set(np.flatnonzero(np.array(r["owner_end"]) == r["rank"]).tolist())
+        B |= {b for c in r["own"] for b in pairs[c]}
+        assert r["held"] == sorted(c for c, (cand, ant) in pairs.items() if cand in B or ant in B)
+        assert len(r["held"]) < nc  # (no rank holds the whole set)
     for r in ranks:
         k = len(r["own"])
         assert r["rows"]["P"] == r["rows"]["state"] == r["rows"]["par"] == r["rows"]["mu"] == k

@@ -91,13 +91,15 @@ def test_the_runs_do_not_converge_trivially_and_ranks_share_contacts(runs):
     pieces = [np.load(d / "dry.3" / f"checkpoint.rank{p}.npz") for p in range(3)]
     owner = pieces[0]["contact.body_owner"]
     assert set(owner.tolist()) == {0, 1, 2}
-    cand, ant, ids = (np.concatenate([ck[k] for ck in pieces])
-                      for k in ("contact.cs.cand_body", "contact.cs.ant_body", "part.contacts"))
+    cand, ant, key, ids = (np.concatenate([ck[k] for ck in pieces])
+                           for k in ("contact.cs.cand_body", "contact.cs.ant_body", "contact.cs.key",
+                                     "part.contact_ids"))
     assert np.count_nonzero(owner[cand] != owner[ant]) > 0
-    assert sorted(ids.tolist()) == list(range(int(pieces[0]["part.n_contacts"])))  # each contact in one piece
+    assert np.unique(ids).size == ids.size == int(pieces[0]["part.n_contacts"])  # each contact in one piece
+    assert np.array_equal(ids, key * owner.size + ant)  # (its id: key · nb + antagonist body)
     for p, ck in enumerate(pieces):  # the piece of rank p: its contacts and bodies, with the partition
         assert np.array_equal(ck["part.body_owner"], owner)
-        assert np.all(owner[ck["contact.cs.cand_body"]] == p) and len(ck["contact.P"]) == len(ck["part.contacts"])
+        assert np.all(owner[ck["contact.cs.cand_body"]] == p) and len(ck["contact.P"]) == len(ck["part.contact_ids"])
         assert {int(k.split(".")[1][4:]) for k in ck.files if k.startswith("sim.body")} == \
             set(np.flatnonzero(owner == p).tolist())
     ck1 = np.load(d / "one_brick.3" / "checkpoint.rank0.npz")

@@ -123,3 +123,26 @@ def body_boxes(lo, hi, body, nb: int):
         blo[ids] = np.minimum.reduceat(lo, first, axis=0)
         bhi[ids] = np.maximum.reduceat(hi, first, axis=0)
     return blo, bhi
+
+
+def body_pairs(lo, hi, body, nb: int) -> np.ndarray:
+    """(m, 2) int64: the pairs of bodies whose boxes overlap, a body's box spanning the boxes lo/hi (n, d) of its
+    items (nodes, edges, faces; `body_boxes`): the grid broad phase on the bodies' boxes, cells of the median body
+    size. Bodies without items have no box."""
+    blo, bhi = body_boxes(lo, hi, body, nb)
+    ids = np.flatnonzero(np.isfinite(blo[:, 0]))  # the bodies with items
+    if ids.size < 2:
+        return np.zeros((0, 2), dtype=np.int64)
+    blo, bhi = blo[ids], bhi[ids]
+    size = float(np.median(np.max(bhi - blo, axis=1)))
+    return ids[grid_pairs(blo, bhi, ids, max(size, 1e-12))]
+
+
+def near_bodies(pairs, bodies) -> np.ndarray:
+    """(nb,) bool: the bodies of `bodies` (bool mask) and every body paired with one of them in `pairs` (m, 2) (e.g.
+    `body_pairs` of boxes enlarged by the search distance: every body one of `bodies` can be in contact with)."""
+    near = np.array(bodies, dtype=bool)
+    mine = near[pairs]
+    near[pairs[mine[:, 0], 1]] = True
+    near[pairs[mine[:, 1], 0]] = True
+    return near

@@ -43,7 +43,7 @@ from numba import njit
 from ..errors import InputError
 from ..specs import InterfaceSpec, default_of
 from .tables import check_g0_alert, check_lengths, check_positions
-from .broadphase import body_boxes, grid_pairs
+from .broadphase import body_pairs, grid_pairs, near_bodies
 
 
 @dataclass
@@ -263,30 +263,6 @@ def _body_slots(mask, node, ant_body, cand_body) -> np.ndarray:
     return slot
 
 
-def _body_pairs(lo, hi, body, nb: int) -> np.ndarray:
-    """(m, 2) int64: the pairs of bodies whose boxes overlap, a body's box spanning the boxes lo/hi (n, 2) of its
-    items (nodes, edges; broadphase.body_boxes): the grid broad phase on the bodies' boxes, cells of the median body
-    size. Bodies without items have no box."""
-    blo, bhi = body_boxes(lo, hi, body, nb)
-    ids = np.flatnonzero(np.isfinite(blo[:, 0]))  # the bodies with items
-    if ids.size < 2:
-        return np.zeros((0, 2), dtype=np.int64)
-    blo, bhi = blo[ids], bhi[ids]
-    size = float(np.median(np.max(bhi - blo, axis=1)))
-    return ids[grid_pairs(blo, bhi, ids, max(size, 1e-12))]
-
-
-def _near_bodies(bodies, lo, hi, bedge_body) -> np.ndarray:
-    """(nb,) bool: the bodies of `bodies` (bool mask) and every body whose box (its edges' boxes lo/hi, already
-    enlarged by the search distance) overlaps one of theirs: every body an edge of `bodies` can pair with."""
-    pairs = _body_pairs(lo, hi, bedge_body, len(bodies))
-    near = bodies.copy()
-    mine = bodies[pairs]
-    near[pairs[mine[:, 0], 1]] = True
-    near[pairs[mine[:, 1], 0]] = True
-    return near
-
-
 def detect(bx, bnode_body, bnode_local, bedges, bedge_body, kind, body_group, table: InterfaceTable,
            reach_frac: float = 0.25, bodies=None) -> ContactSet:
     """Contact points between bodies (see module docstring). All inputs are flat arrays (architecture.md).
@@ -320,7 +296,7 @@ def detect(bx, bnode_body, bnode_local, bedges, bedge_body, kind, body_group, ta
         pairs = grid_pairs(lo, hi, bedge_body, cell)
     else:
         bodies = np.asarray(bodies, dtype=bool)
-        sub = np.flatnonzero(_near_bodies(bodies, lo, hi, bedge_body)[bedge_body])
+        sub = np.flatnonzero(near_bodies(body_pairs(lo, hi, bedge_body, len(bodies)), bodies)[bedge_body])
         pairs = sub[grid_pairs(lo[sub], hi[sub], bedge_body[sub], cell, origin=lo.min(axis=0), top=hi.max(axis=0))] \
             if sub.size > 1 else np.zeros((0, 2), dtype=np.int64)
         pairs = pairs[bodies[bedge_body[pairs[:, 0]]] | bodies[bedge_body[pairs[:, 1]]]]
@@ -453,7 +429,7 @@ def find_overlap(bx, bnode_body, bedges, bedge_body, tol: float):
     edge_start[1:] = np.cumsum(np.bincount(bedge_body, minlength=nb))
     if np.any(np.diff(bnode_body) < 0) or np.any(np.diff(bedge_body) < 0):
         raise ValueError("find_overlap: nodes and edges must be sorted by body")
-    pairs = _body_pairs(bx, bx, bnode_body, nb)  # the bodies' boxes: their nodes'
+    pairs = body_pairs(bx, bx, bnode_body, nb)  # the bodies' boxes: their nodes'
     if len(pairs) == 0:
         return None
     depth = _inside_depth(pairs, bx, bedges, node_start, edge_start, float(tol))

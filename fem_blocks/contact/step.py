@@ -232,16 +232,19 @@ class ContactStep:
         return self._local.stepped
 
     def _split(self) -> bool:
-        """N > 1 ranks in colour order: each rank holds the G blocks of its contacts and their neighbours only, and
-        the Delassus rows of its own contacts (docs/scaling.md "Phase B1")."""
+        """N > 1 ranks in colour order: each rank holds its part of the contact set only (its contacts and their
+        neighbours, `_rank_contacts`), their G blocks, and the Delassus rows and per-contact arrays of its own
+        contacts (docs/scaling.md "Phase B1", "Phase B2")."""
         return self.comm is not None and self.opts.order == "colours"
 
-    def _rank_contacts(self) -> "_RankContacts":
-        """This rank's part of the contact set (N > 1 ranks, colour order). With O the bodies of this rank and A the
-        contacts it owns (candidate body in O): B = O ∪ the bodies of A, and L = the contacts with a body in B
-        (global numbers, increasing). L holds every contact coupled to one of A (W_αβ needs a shared body) and every
-        contact acting on a body of O (its impulse reaches that body)."""
-        cs, p = self.cs, self.comm.Get_rank()
+    def _rank_contacts(self):
+        """COLLECTIVE: this rank's part of the contact set (N > 1 ranks, colour order), from the current set (the
+        whole set: the first detection, a checkpoint; or the contacts a split detection found, `_detect`). With O the
+        bodies of this rank and A the contacts it owns (candidate body in O): B = O ∪ the bodies of A, and L = the
+        contacts with a body in B. L holds every contact coupled to one of A (W_αβ needs a shared body) and every
+        contact acting on a body of O (its impulse reaches that body); it is the contact set the rank keeps.
+        Returns (the _RankContacts of L, A and L as numbers in the current set)."""
+        cs, p, nb = self.cs, self.comm.Get_rank(), self.scene.nb
         owner = self._owner()
         own = np.flatnonzero(owner == p)
         mine = self.body_owner == p
@@ -252,43 +255,81 @@ class ContactStep:
         stepped = near.copy()
         stepped[self.scene.rigid] = True
         from ..distributed.sweep import OwnRowsGather
-        gather = OwnRowsGather(self.comm, contact_ids(cs.key[own], cs.ant_body[own], self.scene.nb))
-        return _RankContacts(L, own, np.searchsorted(L, own), np.repeat(mine, self.scene.W_size),
-                             np.argsort(owner, kind="stable"), np.bincount(owner, minlength=self.comm.Get_size()),
-                             stepped, gather)
+        ids = contact_ids(cs.key[L], cs.ant_body[L], nb)
+        own_pos = np.searchsorted(L, own)
+        counts = np.array(self.comm.allgather(own.size), dtype=np.int64)
+        number = self._numbers(ids, own_pos, owner[L], counts)
+        loc = _RankContacts(own_pos, np.repeat(mine, self.scene.W_size), stepped,
+                            OwnRowsGather(self.comm, ids[own_pos]), ids, number, int(counts.sum()))
+        return loc, own, L
+
+    def _numbers(self, ids, own_pos, owner, counts) -> np.ndarray:
+        """COLLECTIVE: the global numbers of the contacts `ids` (increasing; this rank's own at own_pos, the others
+        owned by the ranks `owner`): every rank's own contacts numbered in rank order, each rank's in increasing id
+        (rank p's are start_p .. start_p + counts[p] - 1, the layout of the distributed vectors of the impulses). The
+        numbers of contacts owned elsewhere are asked of their owners by id (one Alltoall of the counts, two
+        Alltoallv: the ids, then the numbers); RuntimeError on every rank if an owner does not hold one."""
+        from mpi4py import MPI
+        comm, p, size = self.comm, self.comm.Get_rank(), self.comm.Get_size()
+        start = int(counts[:p].sum())
+        number = np.empty(ids.size, dtype=np.int64)
+        number[own_pos] = start + np.arange(own_pos.size)
+        other = np.ones(ids.size, dtype=bool)
+        other[own_pos] = False
+        other = np.flatnonzero(other)
+        other = other[np.argsort(owner[other], kind="stable")]
+        scounts = np.bincount(owner[other], minlength=size).astype(np.int64)
+        rcounts = np.empty(size, dtype=np.int64)
+        comm.Alltoall(scounts, rcounts)
+        sd, rd = np.cumsum(scounts) - scounts, np.cumsum(rcounts) - rcounts
+        asked = np.empty(int(rcounts.sum()), dtype=np.int64)
+        comm.Alltoallv([np.ascontiguousarray(ids[other]), (scounts, sd), MPI.INT64_T],
+                       [asked, (rcounts, rd), MPI.INT64_T])
+        pos = _lookup(ids[own_pos], asked)
+        reply = np.where(pos >= 0, start + pos, -1)
+        got = np.empty(other.size, dtype=np.int64)
+        comm.Alltoallv([reply, (rcounts, rd), MPI.INT64_T], [got, (scounts, sd), MPI.INT64_T])
+        number[other] = got
+        self._fail_together(bool(np.any(got < 0)), "a contact of this rank's set is not among its owner's contacts")
+        return number
 
     def _build_G(self, centers, new_set: bool):
-        """The G blocks of the contact set (N > 1 ranks in colour order: of this rank's contacts L only). new_set: the
-        contact set was detected or restored, so L is found again; between re-detections (updated geometry) the
-        pairs and their order stay, and so does L."""
-        s, cs = self.scene, self.cs
+        """The G blocks of the contact set. new_set: the contact set was detected or restored; on N > 1 ranks in
+        colour order this rank's part is then found (`_rank_contacts`), the step's per-contact arrays cut to its own
+        contacts' rows (`_own_rows`) and the contact set to its contacts L: what the rank keeps. Between
+        re-detections (updated geometry) the pairs and their order stay, and so does the part. Returns the own
+        contacts as numbers in the set before the cut (None: every contact kept)."""
+        s = self.scene
+        own = None
         if new_set:
             if self._local is not None:
                 self._local.destroy()
-            self._local = self._rank_contacts() if self._split() else None
-        if self._local is not None:
-            cs = cs.subset(self._local.L)
-        self.G = self._kin.build_G(cs, s.kind, s.rot, centers, s.bnode_index_flat, s.bnode_offset)
+            self._local = None
+            if self._split():
+                self._local, own, L = self._rank_contacts()
+                self._own_rows(own)
+                if L.size != len(self.cs.gap):
+                    self.cs = self.cs.subset(L)
+        self.G = self._kin.build_G(self.cs, s.kind, s.rot, centers, s.bnode_index_flat, s.bnode_offset)
+        return own
 
     # the step's arrays with one row per contact: N > 1 ranks in colour order, of this rank's own contacts only
     # (`_own_rows`); else of every contact
     ROWS = ("P", "P_prev", "state", "law", "par", "mu", "gap_ref", "g_built")
 
-    def _own_rows(self):
-        """N > 1 ranks in colour order: cut the step's per-contact arrays (ROWS) of every contact (the first contact
-        set, made before the partition; a checkpoint) to the rows of this rank's own contacts (`_local.own`,
-        increasing numbers); arrays already of those rows (a later re-detection's, `_new_rows`; a snapshot of this
-        run, taken on the same ranks) stay. (When a rank owns every contact both are the same.) Each contact's values
-        are then computed, solved and committed by its owner alone."""
-        if self._local is None:
-            return
+    def _own_rows(self, own):
+        """N > 1 ranks in colour order: cut the step's per-contact arrays (ROWS) of every contact of the current set
+        (the first contact set, made before the partition; a checkpoint) to the rows of this rank's own contacts
+        `own` (numbers in that set, increasing); arrays already of those rows (a later re-detection's, `_new_rows`;
+        a snapshot of this run, taken on the same ranks) stay. (When the set holds only the own contacts both are
+        the same.) Each contact's values are then computed, solved and committed by its owner alone."""
         for name in self.ROWS:
-            setattr(self, name, self._to_own(name, getattr(self, name, None)))
+            setattr(self, name, self._to_own(name, getattr(self, name, None), own))
 
-    def _to_own(self, name: str, a):
-        """Per-contact rows `a` (named `name`) as those of this rank's own contacts: the rows of every contact cut,
-        the own rows (or None) as they are (N > 1 ranks in colour order, `_local` set)."""
-        n, own = len(self.cs.gap), self._local.own
+    def _to_own(self, name: str, a, own):
+        """Per-contact rows `a` (named `name`) as those of the own contacts `own` (numbers in the current set): the
+        rows of every contact of the set cut, the own rows (or None) as they are."""
+        n = len(self.cs.gap)
         if a is None or len(a) == own.size:
             return a
         if len(a) != n:
@@ -336,25 +377,22 @@ class ContactStep:
     def _L_impulses(self, P_own: np.ndarray) -> np.ndarray:
         """The impulses (len(L), d) of this rank's contacts L from those of its own contacts: the others' from their
         owners by one PETSc scatter (built once per contact set: a distributed vector of every rank's own rows, in
-        rank order, scattered to the rows of L that another rank owns)."""
+        the global numbering `_RankContacts.number`, scattered to the rows of L that another rank owns)."""
         from petsc4py import PETSc
         loc, d = self._local, self.dim
         if loc.scatter is None:
-            n = int(loc.counts.sum())
-            pos = np.empty(n, dtype=np.int64)
-            pos[loc.order] = np.arange(n)  # each contact's row in the distributed vector (rank order)
-            other = np.setdiff1d(np.arange(loc.L.size), loc.own_pos, assume_unique=True)
+            other = np.setdiff1d(np.arange(loc.ids.size), loc.own, assume_unique=True)
             pc = PETSc.Comm(self.comm)
-            vec = PETSc.Vec().createMPI((d * loc.own.size, d * n), bsize=d, comm=pc)
+            vec = PETSc.Vec().createMPI((d * loc.own.size, d * loc.n), bsize=d, comm=pc)
             gvec = PETSc.Vec().createSeq(d * other.size, bsize=d, comm=PETSc.COMM_SELF)
-            isf = PETSc.IS().createBlock(d, pos[loc.L[other]].astype(PETSc.IntType), comm=PETSc.COMM_SELF)
+            isf = PETSc.IS().createBlock(d, loc.number[other].astype(PETSc.IntType), comm=PETSc.COMM_SELF)
             ist = PETSc.IS().createBlock(d, np.arange(other.size, dtype=PETSc.IntType), comm=PETSc.COMM_SELF)
             loc.scatter = (PETSc.Scatter().create(vec, isf, gvec, ist), vec, gvec, other)
             isf.destroy()
             ist.destroy()
         sc, vec, gvec, other = loc.scatter
-        out = np.empty((loc.L.size, d))
-        out[loc.own_pos] = P_own
+        out = np.empty((loc.ids.size, d))
+        out[loc.own] = P_own
         vec.placeArray(np.ascontiguousarray(P_own, dtype=np.float64).ravel())
         try:
             sc.scatter(vec, gvec)
@@ -375,21 +413,22 @@ class ContactStep:
 
     def _check_replicas(self, bx=None):
         """N > 1 ranks: every rank built its own copy of the model; their contact sets and Delassus operators must
-        agree (nodes whose BLAS or CPU differ can give different bits). Compared by the contact count and a checksum
-        of the gaps; in colour order in updated geometry (the contact set gathered from the ranks' parts, so equal
-        everywhere) a checksum of a sample of the positions bx of the step's geometry (`_geometry`'s: the ranks
-        detected at them); when every rank holds the whole W (not in colour order), its block count and a checksum of
-        a sample of its blocks; RankMismatchError on every rank if they differ."""
+        agree (nodes whose BLAS or CPU differ can give different bits). When every rank holds the whole contact set
+        and W (not in colour order): the contact count, a checksum of the gaps, W's block count and a checksum of a
+        sample of its blocks. In colour order each rank holds its own part of both: the number of contacts of the
+        whole set and a checksum of a sample of the positions bx its detection and G read (`_geometry`'s, when the
+        step detected or updated the geometry). RankMismatchError on every rank if they differ."""
         import zlib
         from ..errors import RankMismatchError
-        mine = (len(self.cs.gap), zlib.crc32(np.ascontiguousarray(self.cs.gap).tobytes()))
-        if self._local is not None and self.opts.geometry == "updated":  # every rank steps every body; the contact
-            # set is gathered from the ranks' parts (`_detect`), equal everywhere: the positions it came from are not
-            mine += (zlib.crc32(np.ascontiguousarray(bx[::max(1, len(bx) // 4096)]).tobytes()),)
-        if self._local is None:  # (else each rank holds its own rows of W)
+        if self._local is not None:
+            mine = (self._local.n,)
+            if bx is not None:
+                mine += (zlib.crc32(np.ascontiguousarray(bx[::max(1, len(bx) // 4096)]).tobytes()),)
+        else:
             W = self.Wdel
             step = max(1, W.blocks.shape[0] // 4096)
-            mine += (W.n, W.indices.size, zlib.crc32(np.ascontiguousarray(W.blocks[::step]).tobytes()))
+            mine = (len(self.cs.gap), zlib.crc32(np.ascontiguousarray(self.cs.gap).tobytes()), W.n, W.indices.size,
+                    zlib.crc32(np.ascontiguousarray(W.blocks[::step]).tobytes()))
         every = self.comm.allgather(mine)
         if any(x != every[0] for x in every):
             bad = [p for p, x in enumerate(every) if x != every[0]]
@@ -424,8 +463,9 @@ class ContactStep:
         if self._plan is None:
             raise RuntimeError("contact step: no sweep plan for the Delassus operator (W assembled outside _delassus)")
         prev, loc = self._colours, self._local
-        columns = loc.L if loc is not None else np.arange(len(self.cs.gap), dtype=np.int64)
-        self._colours = ColourSolver.from_sweep_rows(self.Wdel, self._plan, columns, len(self.cs.gap),
+        n = len(self.cs.gap) if loc is None else loc.n
+        columns = np.arange(n, dtype=np.int64) if loc is None else loc.number
+        self._colours = ColourSolver.from_sweep_rows(self.Wdel, self._plan, columns, n,
                                                      self.comm if loc is not None else None,
                                                      previous=prev if self.opts.geometry == "updated" else None)
         self._plan = None
@@ -453,9 +493,9 @@ class ContactStep:
 
     def _detect(self, bx):
         """The contact set at positions bx. On N > 1 ranks in colour order once the bodies are partitioned: each rank
-        detects the contacts of its own candidate bodies (the detections' `bodies`: bitwise the whole detection's rows
-        of those contacts) and the ranks' parts are gathered whole, in the whole detection's order (`_gather_set`):
-        every rank then holds the serial contact set, and the detection's work is split."""
+        detects the contacts whose candidate body is within two rings of body neighbours of its own bodies (the
+        detections' `bodies`: bitwise the whole detection's rows of those contacts, in its order), a superset of the
+        contacts L it keeps (`_candidates`; cut by `_build_G`): no rank detects or holds the whole set."""
         s = self.scene
         args = (bx, s.bnode_body, s.bnode_local) + ((s.bedges, s.bedge_body) if self.dim == 2 else
                                                     (s.bfaces, s.bface_body)) + (s.kind, self.body_group, self.table)
@@ -465,25 +505,26 @@ class ContactStep:
         else:  # (an error found by one rank, e.g. a node facing too many bodies, raised on every rank alike)
             cs, err = None, None
             try:
-                cs = self._det.detect(*args, bodies=self.body_owner == self.comm.Get_rank())
+                cs = self._det.detect(*args, bodies=self._candidates(bx))
             except InputError as e:
                 err = str(e)
             first = next((e for e in self.comm.allgather(err) if e is not None), None)
             if first is not None:
                 raise InputError(first)
-            cs = self._gather_set(cs)
         if self.dim == 2:
             cs.area = cs.area * self.body_thickness[cs.cand_body]  # tributary length x thickness
         return cs
 
-    def _gather_set(self, part):
-        """COLLECTIVE: the ranks' parts of a contact set (each the whole set's rows of its own candidates, in the
-        whole detection's order) as the whole set on every rank, in that order: by contact id (key, then antagonist
-        body: one contact per candidate point and antagonist body; contact/matching.contact_ids). The integer
-        fields packed in one buffer, the floating-point ones in another (distributed/sweep.gather_fields)."""
-        from ..distributed.sweep import OwnRowsGather, gather_fields
-        ids = contact_ids(part.key, part.ant_body, self.scene.nb)
-        return type(part)(**gather_fields(OwnRowsGather(self.comm, ids), part.__dict__))
+    def _candidates(self, bx) -> np.ndarray:
+        """(nb,) bool: the candidate bodies of the contacts this rank's part L can hold (`_rank_contacts`): its own
+        bodies O, their neighbours (the bodies of its own contacts: B ⊆ N(O)) and theirs (a contact with a body in B
+        has its candidate in N(B) ⊆ N(N(O))); neighbours are the bodies whose boxes, enlarged by the search distance
+        g0 + alert, overlap (broadphase.body_pairs: the 2D detection's own body pairs, and more than the 3D one's)."""
+        from .broadphase import body_pairs, near_bodies
+        t, s = self.table, self.scene
+        reach = float(np.max(t.g0 + t.alert)) if len(t.g0) else 0.0
+        pairs = body_pairs(bx - reach, bx + reach, s.bnode_body, s.nb)
+        return near_bodies(pairs, near_bodies(pairs, self.body_owner == self.comm.Get_rank()))
 
     def _delassus(self, W_flat, W_offset, W_size):
         """W of the contact set. In colour order only the blocks that couple are assembled (delassus.assemble's
@@ -499,8 +540,8 @@ class ContactStep:
         if loc is None:
             self._plan = sweep_plan(body_pair_keys(cs.cand_body, cs.ant_body, nb), cs.cand_body, cs.ant_body, moving)
         else:  # (the contacts L only: a group's key gives its candidate body, whose rank owns the group)
-            cand, ant, owner = cs.cand_body[loc.L], cs.ant_body[loc.L], self.body_owner
-            self._plan = sweep_plan(body_pair_keys(cand, ant, nb), cand, ant, moving, own=loc.own_pos,
+            cand, ant, owner = cs.cand_body, cs.ant_body, self.body_owner
+            self._plan = sweep_plan(body_pair_keys(cand, ant, nb), cand, ant, moving, own=loc.own,
                                     owner_of=lambda g: owner[g // nb], comm=self.comm)
         return delassus.assemble(self.G, W_flat, W_offset, W_size, self.scene.nb, rows=self._plan.rows,
                                  couplings=True)
@@ -514,7 +555,8 @@ class ContactStep:
     def _assign_laws(self, rows=None):
         """Per-contact law code, parameters (per unit area) and friction from the contact's interface: of every
         contact, or of the contacts `rows` (this rank's own, increasing: the step's rows on N > 1 ranks in colour
-        order). Whether any contact of the set is cohesive is read from every contact's interface alike."""
+        order). Whether any contact of the set is cohesive is read from the interfaces of these contacts (on N > 1
+        ranks in colour order, COLLECTIVE: of every rank's, all-reduced)."""
         cs = self.cs
         self._assign_cracks()
         from ..laws import pack
@@ -527,7 +569,12 @@ class ContactStep:
         self.par = np.ascontiguousarray(pars[mine])
         self.mu = self.par[:, 0].copy()
         from ..laws import P_FC
-        used = np.bincount(cs.interface, minlength=len(self.interfaces)) > 0  # (the interfaces of the whole set)
+        used = np.bincount(mine, minlength=len(self.interfaces)) > 0
+        if self._split():  # (COLLECTIVE: the interfaces of the whole set, of which a rank may hold a part)
+            from mpi4py import MPI
+            every = np.empty(used.size, dtype=np.int64)
+            self.comm.Allreduce(used.astype(np.int64), every, op=MPI.MAX)
+            used = every > 0
         self.cohesive = bool(np.any(used & ((codes != 0) | (pars[:, P_FC] > 0))))  # caps: cohesive kernels
         if self.opts.coarse != "none" and self.cohesive:
             bad = next(itf for itf, (c, p) in zip(self.interfaces, laws) if c != 0 or p[P_FC] > 0)
@@ -564,13 +611,14 @@ class ContactStep:
             bx = s.positions(reference=ref)
             old, oldP, old_built, old_local = self.cs, self.P, self.g_built, self._local
             old_state = getattr(self, "state", None)
-            old_owner = self.body_owner
             self.P_prev = None  # (a new contact set: no extrapolation across a re-detection)
             self.cs = self._detect(bx)
             self._check_initial_penetration(first, bx)
-            nc = len(self.cs.gap)
-            carry = old is not None and oldP is not None and nc > 0
+            carry = old is not None and oldP is not None and self._total(len(self.cs.gap)) > 0
             moved = carry and old_local is not None and self._rebalance()  # (a new partition: body_owner replaced)
+            if moved:  # (the contacts of the rank's new bodies: detected again for the new partition)
+                self.cs = self._detect(bx)
+            nc = len(self.cs.gap)
             rows = self._new_rows()  # the step's rows of the new set: its own contacts, or None (every contact)
             self._assign_laws(rows)
             take = (lambda x: x) if rows is None else (lambda x: x[rows])
@@ -579,16 +627,12 @@ class ContactStep:
             st = self._initial_state()
             built = np.zeros(n)  # updated geometry: as-built gap offsets g_built (0 = nominal)
             if carry:  # each row continues the old contact matched to it (same candidate point and antagonist body)
-                m = match(old, self.cs)
                 olds = [oldP, old_state] + ([old_built] if old_built is not None else [])
-                if old_local is not None and (moved or rows is None):  # old rows held by other ranks
-                    olds, src = self._carry_rows(old, old_owner, old_local, m, rows, olds)
-                elif old_local is not None:  # the old arrays hold the old own contacts' rows: a contact continues
-                    # one with the same candidate point, so of the same candidate body and owner
-                    src, bad = self._old_own_rows(old_local.own, take(m))
-                    self._fail_together(bad, "a contact continues an old contact this rank did not own")
-                else:
-                    src = take(m)
+                if old_local is None:  # the old rows of every contact
+                    src = take(match(old, self.cs))
+                else:  # the old rows of the old own contacts, matched by contact id
+                    new_ids = contact_ids(take(self.cs.key), take(self.cs.ant_body), s.nb)
+                    olds, src = self._carry_rows(old, old_local, olds, new_ids, moved or rows is None)
                 ok = src >= 0
                 for new, o in zip([self.P, st, built], olds):
                     new[ok] = o[src[ok]]
@@ -607,8 +651,6 @@ class ContactStep:
                 self.cs = self._det.update_geometry(self.cs, bx, s.bedges if self.dim == 2 else s.bfaces)
         if redetect or updated:
             self._build_G(s.centers(reference=redetect and first and not updated), new_set=redetect)
-            if redetect:
-                self._own_rows()
             self.mark_W_dirty()
         if self.W_dirty:
             from time import perf_counter
@@ -630,14 +672,14 @@ class ContactStep:
             return None
         return np.flatnonzero(self.body_owner[self.cs.cand_body] == self.comm.Get_rank())
 
-    @staticmethod
-    def _old_own_rows(old_own, src):
-        """(rows, bad): the rows, among the old own contacts `old_own` (increasing), of the old contacts src (-1:
-        none, kept); bad if one of src is not among them."""
-        pos = np.searchsorted(old_own, src)
-        hit = src >= 0
-        bad = bool(np.any(pos[hit] >= old_own.size) or np.any(old_own[pos[hit]] != src[hit]))
-        return np.where(hit & ~bad, pos, -1), bad
+    def _total(self, n: int) -> int:
+        """The number of contacts of the whole set, from this rank's `n`: n itself when every rank holds the whole
+        set; once a split detection gave each rank its part, the ranks' own contacts summed (COLLECTIVE)."""
+        if not self._split() or self.body_owner is None or len(self.body_owner) != self.scene.nb:
+            return n
+        from mpi4py import MPI
+        return int(self.comm.allreduce(int(np.count_nonzero(self.body_owner[self.cs.cand_body] ==
+                                                            self.comm.Get_rank())), op=MPI.SUM))
 
     def _fail_together(self, bad: bool, message: str):
         """COLLECTIVE: RuntimeError("contact step: " + message) on every rank if any rank found `bad` (a check of
@@ -646,51 +688,46 @@ class ContactStep:
         if self.comm.allreduce(int(bad), op=MPI.MAX):
             raise RuntimeError(f"contact step: {message} (found by a rank)")
 
-    def _carry_rows(self, old, old_owner, old_local, m, rows, olds):
-        """COLLECTIVE (N > 1 ranks, the old set's rows held by their owners, `old_local`, under the partition
-        old_owner): the old rows `olds` (arrays of the old own contacts' rows) that the new set's rows continue (m:
-        the old contact matched to each new contact, -1 none). rows: the new set's rows (this rank's new own
-        contacts, under the partition in use) or None (every contact). Returns (arrays, src): new row i continues
-        arrays[k][src[i]] (src -1: a new contact).
-        rows None: the old rows gathered whole (every contact's, the old layout). Else each old row goes to the new
-        owner of the contact continuing it, one Alltoallv of the rows packed (every rank knows both partitions and
-        the match: sender and receiver list the same contacts, in increasing new number per peer rank; the rows that
-        stay on their rank are copied by it too): a rank receives its new rows only, never the whole set's."""
+    def _carry_rows(self, old, old_local, olds, new_ids, elsewhere: bool):
+        """The old rows `olds` (arrays of the old own contacts' rows, held by their owners, `old_local`, old set
+        `old`) that the new rows continue: new row i continues the old contact with its id new_ids[i]. Returns
+        (arrays, src): new row i continues arrays[k][src[i]] (src -1: a new contact).
+        elsewhere False (no new partition): a contact continues one with the same candidate point, so of the same
+        candidate body and owner: the old own rows as they are, looked up by id.
+        elsewhere True, COLLECTIVE: a new partition (the old rows go to the new owners of their candidate bodies: one
+        Alltoall of the counts, one Alltoallv of the ids, one of the rows packed; a rank receives the rows of its new
+        own contacts' bodies, never the whole set's), or no rows of its own now (the new set whole on every rank: a
+        stage leaving colour order; every old row gathered, in the whole set's order)."""
+        ids = old_local.gather.ids
+        if not elsewhere:
+            return olds, _lookup(ids, new_ids)
         from mpi4py import MPI
         comm = self.comm
-        if rows is None:
-            return [old_local.gather(x) for x in olds], m
-        p, size = comm.Get_rank(), comm.Get_size()
-        was = old_owner[old.cand_body]  # the old owner of each old contact
-        j = np.flatnonzero(m >= 0)
-        j = j[was[m[j]] == p]  # the new contacts continuing an old row of this rank
-        dest = self.body_owner[self.cs.cand_body[j]]
+        if not self._split():
+            every = old_local.gather(ids.reshape(-1, 1))[:, 0]
+            return [old_local.gather(x) for x in olds], _lookup(every, new_ids)
+        size = comm.Get_size()
+        dest = self.body_owner[old.cand_body[old_local.own]]  # the new owner of each old own contact
         o = np.argsort(dest, kind="stable")
-        send, bad = self._old_own_rows(old_local.own, m[j[o]])
         scounts = np.bincount(dest, minlength=size).astype(np.int64)
-        src = m[rows]
-        has = np.flatnonzero(src >= 0)  # the new rows continuing an old contact, by the rank that held it
-        frm = was[src[has]]
-        has = has[np.argsort(frm, kind="stable")]
-        rcounts = np.bincount(frm, minlength=size).astype(np.int64)
-        check = np.empty(size, dtype=np.int64)
-        comm.Alltoall(scounts, check)
-        self._fail_together(bad or not np.array_equal(check, rcounts),
-                            "the rows carried to the new partition do not match their senders'")
+        rcounts = np.empty(size, dtype=np.int64)
+        comm.Alltoall(scounts, rcounts)
+        sd, rd = np.cumsum(scounts) - scounts, np.cumsum(rcounts) - rcounts
+        got = np.empty(int(rcounts.sum()), dtype=np.int64)
+        comm.Alltoallv([np.ascontiguousarray(ids[o]), (scounts, sd), MPI.INT64_T], [got, (rcounts, rd), MPI.INT64_T])
         flat = [np.asarray(x, dtype=np.float64).reshape(len(x), int(np.prod(np.shape(x)[1:]))) for x in olds]
         width = [f.shape[1] for f in flat]
         w = sum(width)
-        sbuf = np.ascontiguousarray(np.hstack([f[send] for f in flat]))
-        rbuf = np.empty((int(rcounts.sum()), w))
-        comm.Alltoallv([sbuf, (scounts * w, (np.cumsum(scounts) - scounts) * w), MPI.DOUBLE],
-                       [rbuf, (rcounts * w, (np.cumsum(rcounts) - rcounts) * w), MPI.DOUBLE])
+        sbuf = np.ascontiguousarray(np.hstack(flat)[o]) if flat else np.zeros((len(o), 0))
+        rbuf = np.empty((got.size, w))
+        comm.Alltoallv([sbuf, (scounts * w, sd * w), MPI.DOUBLE], [rbuf, (rcounts * w, rd * w), MPI.DOUBLE])
+        k = np.argsort(got, kind="stable")  # (the rows received, by id: from several ranks, interleaved)
+        got, rbuf = got[k], rbuf[k]
         out, at = [], 0
-        for x, k in zip(olds, width):
-            a = np.zeros((rows.size,) + np.shape(x)[1:])
-            a[has] = rbuf[:, at:at + k].reshape((has.size,) + np.shape(x)[1:])
-            out.append(a)
-            at += k
-        return out, np.where(src >= 0, np.arange(rows.size), -1)
+        for x, c in zip(olds, width):
+            out.append(rbuf[:, at:at + c].reshape((got.size,) + np.shape(x)[1:]))
+            at += c
+        return out, _lookup(got, new_ids)
 
     def _check_initial_penetration(self, first, bx):
         """Bodies overlapping at the start (boundaries crossing deeper than the alert distance) are a
@@ -785,7 +822,8 @@ class ContactStep:
         if self.cs is None:
             return d
         for k in self._CS:
-            d[f"contact.cs.{k}"] = getattr(self.cs, k)
+            d[f"contact.cs.{k}"] = getattr(self.cs, k)  # (N > 1 ranks in colour order: this rank's part of the set)
+        d["contact.n_contacts"] = np.int64(len(self.cs.gap) if self._local is None else self._local.n)
         d["contact.P"], d["contact.state"], d["contact.law"] = self.P, self.state, self.law
         if self.h_last is not None:  # the predictor's history
             d["contact.h_last"] = np.float64(self.h_last)
@@ -830,14 +868,13 @@ class ContactStep:
                            and owner.max(initial=0) < self.comm.Get_size() else None)  # else partitioned again
         # G: frozen geometry, from the reference placement as at the first step (the frames of the scene, never
         # refreshed); updated geometry rebuilds it at the next step
-        self._build_G(self.scene.centers(reference=self.opts.geometry == "frozen"), new_set=True)
-        self._own_rows()
+        own = self._build_G(self.scene.centers(reference=self.opts.geometry == "frozen"), new_set=True)
         self.W_dirty = True  # rebuilt at the next step (new scene); 3D: with the rigid W in use at the export
         self._rigid_W_restored = (np.array(d["contact.rigid_W"]) if "contact.rigid_W" in d
                                   and not bool(d["contact.W_dirty"]) else None)
         out = {k: np.array(d[OUT_PREFIX + k]) for k in OUT_FIELDS if OUT_PREFIX + k in d}
-        if self._local is not None:  # (the record of a rank's own rows: a checkpoint's whole arrays cut to them)
-            out = {k: self._to_own(OUT_PREFIX + k, x) for k, x in out.items()}
+        if own is not None:  # (the record of a rank's own rows: a checkpoint's whole arrays cut to them)
+            out = {k: (x if len(x) == own.size else np.ascontiguousarray(x[own])) for k, x in out.items()}
         return ContactResult(self.dim, {}, cs=self.cs, P=self.P.copy(), law=self.law.copy(), state=self.state.copy(),
                              friction_total=self.friction_total, dissipated=self._totals()[0],
                              **self._record_rows(), **out)
@@ -870,7 +907,8 @@ class ContactStep:
         tm["detection"] += c1 - c0  # includes the Delassus assembly when geometry or h changed
         s, cs, d = self.scene, self.cs, self.dim
         h, th = sim.h, sim.theta
-        nc = len(cs.gap)
+        loc = self._local
+        nc = len(cs.gap) if loc is None else loc.n  # (the whole set's, on every rank)
         self.steps += 1
         if nc == 0:
             gc, rc, ri = s.corrections(np.zeros(s.n_udof), sim.stepped_columns())
@@ -884,15 +922,13 @@ class ContactStep:
         K = self._kin
         colours = self._colour_solver()
         # the step's contacts: every contact, or on N > 1 ranks in colour order this rank's own contacts (the rows of
-        # the step's arrays, ROWS); `own` picks them from arrays of every contact, `mine` from arrays of G's rows
-        loc = self._local
-        own = (lambda x: x) if loc is None else (lambda x: x[loc.own])
-        mine = (lambda x: x) if loc is None else (lambda x: np.ascontiguousarray(x[loc.own_pos]))
+        # the step's arrays, ROWS); `own` picks them from arrays of the contact set's rows (and G's, the same)
+        own = (lambda x: x) if loc is None else (lambda x: np.ascontiguousarray(x[loc.own]))
         # v_free = G u_free, v_i = G u_i and (frozen geometry) the normal jump (G q)_N
-        vfree = mine(K.local_velocity(self.G, ufree, s.U_offset))
-        vi = mine(K.local_velocity(self.G, s.gather("u", stepped), s.U_offset))
+        vfree = own(K.local_velocity(self.G, ufree, s.U_offset))
+        vi = own(K.local_velocity(self.G, s.gather("u", stepped), s.U_offset))
         if self.opts.geometry == "frozen":
-            gt = self.gap_ref + mine(K.local_velocity(self.G, s.gather("q", stepped), s.U_offset))[:, 0]
+            gt = self.gap_ref + own(K.local_velocity(self.G, s.gather("q", stepped), s.U_offset))[:, 0]
         else:
             gt = own(cs.gap) - own(cs.g0) - self.g_built  # as-built contacts of the initial set: g - g0 - g_built
         area = own(cs.area)
@@ -946,8 +982,8 @@ class ContactStep:
         status[closed] = 1
         status[closed & (np.linalg.norm(P[:, 1:], axis=1) >= self.mu * P[:, 0] * (1 - 1e-9))
                & (np.linalg.norm(v[:, 1:], axis=1) > 1e-12)] = 2
-        # the totals over every contact, in contact order (N > 1 ranks in colour order: the own rows' dissipations
-        # gathered, one Allgatherv; the counts summed)
+        # the totals over every contact (exact sums: N > 1 ranks in colour order add their own rows and all-reduce
+        # the accumulators; the counts summed)
         dissipated, friction_step = self._totals(friction)
         self.friction_total += friction_step
         counts = np.array([np.count_nonzero(status), np.count_nonzero(status == 2)], dtype=np.int64)
@@ -974,22 +1010,32 @@ class ContactStep:
                              dissipated=dissipated, **self._record_rows())
 
 
+def _lookup(sorted_ids, ids) -> np.ndarray:
+    """The position of each of `ids` in `sorted_ids` (increasing, distinct), -1 where it is not there."""
+    pos = np.searchsorted(sorted_ids, ids)
+    if not len(sorted_ids):
+        return np.full(len(ids), -1, dtype=np.int64)
+    pos = np.minimum(pos, len(sorted_ids) - 1)
+    return np.where(sorted_ids[pos] == ids, pos, -1).astype(np.int64)
+
+
 @dataclasses.dataclass
 class _RankContacts:
-    """A rank's part of the contact set (N > 1 ranks in colour order, ContactStep._rank_contacts): L its contacts
-    (global numbers, increasing: its own and those sharing a body with them or acting on its bodies), own its own
-    contacts (global), own_pos their positions in L, dofs the mask of its bodies' dofs in the flat W numbering;
-    stepped the mask of the bodies it steps (its bodies, those of its own contacts, the rigid bodies);
-    order every contact grouped by owner rank (rank 0's own contacts, then rank 1's, ..., each increasing) and counts
-    the number each rank owns: the layout of the gather of the own rows (ContactStep._gather)."""
-    L: np.ndarray
+    """A rank's part of the contact set (N > 1 ranks in colour order, ContactStep._rank_contacts), whose contacts L
+    are the contact set it keeps (`ContactStep.cs`, in the whole set's order: increasing id): own the positions of
+    its own contacts in it, dofs the mask of its bodies' dofs in the flat W numbering; stepped the mask of the
+    bodies it steps (its bodies, those of its own contacts, the rigid bodies); gather the gather of every rank's own
+    rows in the whole set's order (the records', sweep.OwnRowsGather, which holds the own contacts' ids); ids the
+    contact ids of L (contact/matching.contact_ids); number their global numbers (every rank's own contacts in rank
+    order, `ContactStep._numbers`: the impulses' distributed vectors and the colour solver's columns); n the
+    number of contacts of the whole set."""
     own: np.ndarray
-    own_pos: np.ndarray
     dofs: np.ndarray
-    order: np.ndarray
-    counts: np.ndarray
     stepped: np.ndarray  # the bodies this rank steps (ContactStep.stepped_bodies): B and the rigid bodies
-    gather: object = None  # the gather of the own rows of every rank in the set's order (sweep.OwnRowsGather)
+    gather: object
+    ids: np.ndarray
+    number: np.ndarray
+    n: int
     scatter: tuple = None  # the PETSc scatter of the impulses of L's contacts owned elsewhere (_L_impulses)
 
     def destroy(self):

@@ -298,12 +298,13 @@ class ColourSolver:
     def from_sweep_rows(cls, rows: BlockCSR, plan: SweepPlan, columns, n: int, comm=None,
                         previous: "ColourSolver | None" = None) -> "ColourSolver":
         """The colour solver of rows assembled in sweep order (the time stepper; collective on `comm` when it has
-        N > 1 ranks). columns: the contacts (global numbers, increasing) of the rows' column numbers and of the
-        plan's positions (a rank's contacts L, or every contact); rows: row i is the row of contact
+        N > 1 ranks). columns: the contacts (global numbers 0 .. n - 1, the same on every rank; each rank's own
+        contacts numbered consecutively) of the rows' column numbers and of the plan's positions (a rank's contacts
+        L, or every contact); rows: row i is the row of contact
         columns[plan.rows[i]], without off-diagonal blocks of zeros (delassus.assemble(..., rows=plan.rows,
         couplings=True)); n: the number of contacts of the whole run. The rows' arrays become the solver's (column
-        numbers made local in place: own contacts in sweep order, then the ghosts, the other columns met,
-        increasing); W (`rows`) then only identifies the operator the solver was built for.
+        numbers made local in place: own contacts in sweep order, then the ghosts, the other columns met, in the
+        order of `columns`); W (`rows`) then only identifies the operator the solver was built for.
 
         previous: the solver of the operator before (updated geometry assembles W at every step, mostly for the
         same contacts). When the new rows have its structure — the same contacts in the same sweep order, ghosts,

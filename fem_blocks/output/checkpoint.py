@@ -122,19 +122,24 @@ def split(arrays: dict, rank: int, size: int, token: str, body_owner, body_of, c
     """Rank `rank`'s piece (of `size`) of the checkpoint `arrays`: the entries of the bodies it owns
     (body_owner[body_of(key)] == rank; body_of(key) is None for an entry of no body), the rows of its contacts (those
     whose candidate body it owns, "contact.cs.cand_body") of the per-contact entries `contact_keys`, and every other
-    entry; plus `part.*`: rank, size, token, the body partition, the contacts' numbers in the whole set (increasing)
-    and their count, the per-contact entries' names. A per-contact entry holds the rows of every contact, or already
-    those of this rank's contacts only (the contact step's and its record's on N ranks; when the rank owns every
-    contact the two are the same)."""
+    entry; plus `part.*`: rank, size, token, the body partition, the contacts' ids (contact/matching.contact_ids,
+    increasing: their order in the whole set) and the whole set's count ("contact.n_contacts" when the arrays give
+    it: a rank's contact set may be its part of the whole), the per-contact entries' names. A per-contact entry holds
+    the rows of every contact of the arrays' set, or already those of this rank's contacts only (the contact step's
+    and its record's on N ranks; when the rank owns every contact the two are the same)."""
     owner = np.asarray(body_owner, dtype=np.int64)
     keys = sorted(k for k in contact_keys if k in arrays)
     out = {"part.rank": np.int64(rank), "part.size": np.int64(size), "part.token": np.array(str(token)),
            "part.body_owner": owner}
     ids = None
     if keys:
+        from ..contact.matching import contact_ids
         cand = np.asarray(arrays["contact.cs.cand_body"])
         ids = np.flatnonzero(owner[cand] == rank)
-        out.update({"part.contacts": ids, "part.n_contacts": np.int64(len(cand)), "part.contact_keys": np.array(keys)})
+        out.update({"part.contact_ids": contact_ids(np.asarray(arrays["contact.cs.key"])[ids],
+                                                    np.asarray(arrays["contact.cs.ant_body"])[ids], len(owner)),
+                    "part.n_contacts": np.int64(arrays.get("contact.n_contacts", len(cand))),
+                    "part.contact_keys": np.array(keys)})
     for k, v in arrays.items():
         if ids is not None and k in keys:
             v = np.asarray(v)
@@ -165,9 +170,16 @@ def merge(pieces: list, label: str = "checkpoint") -> dict:
                 out.setdefault(k, v)  # a body's entries are in one piece; the others are the same in every piece
     if "part.contact_keys" in pieces[0]:
         n = int(pieces[0]["part.n_contacts"])
-        ids = [np.asarray(d["part.contacts"], dtype=np.int64) for d in pieces]
-        if not np.array_equal(np.sort(np.concatenate(ids)), np.arange(n)):
-            raise InputError(f"{label}: the pieces do not hold each of the {n} contacts once")
+        if all("part.contact_ids" in d for d in pieces):  # each piece's rows placed by their contact ids
+            ids = [np.asarray(d["part.contact_ids"], dtype=np.int64) for d in pieces]
+            every = np.sort(np.concatenate(ids))
+            if every.size != n or np.any(every[1:] == every[:-1]):
+                raise InputError(f"{label}: the pieces do not hold each of the {n} contacts once")
+            ids = [np.searchsorted(every, i) for i in ids]
+        else:  # (pieces written before the contact ids: the contacts' numbers in the whole set)
+            ids = [np.asarray(d["part.contacts"], dtype=np.int64) for d in pieces]
+            if not np.array_equal(np.sort(np.concatenate(ids)), np.arange(n)):
+                raise InputError(f"{label}: the pieces do not hold each of the {n} contacts once")
         for k in pieces[0]["part.contact_keys"]:
             k = str(k)
             first = np.asarray(pieces[0][k])
