@@ -13,7 +13,8 @@ timer / sweeps), of which in the per-colour exchanges (max over ranks), bytes se
 (max), messages per sweep per rank (max), peak RSS per rank [MB] (max), the blocks of W held per rank (max: each
 rank assembles the rows of its own contacts), and the sha1 of the floor's reaction and
 the sweep counts of the timed steps (equal sha1 on any N: the same iterates); then a line with the resident memory
-per rank after the steps (min–max: what the run holds, where the peak may be the set-up's).
+per rank after the steps (min–max: what the run holds, where the peak may be the set-up's) and the contacts each rank
+holds (its part of the contact set, min–max).
 
 With --checkpoint DIR, the state after the steps is also written as a checkpoint, one piece per rank (best of 3; the
 sizes of the pieces). (Until the contact step held its own contacts' rows only, it was also written as one file by
@@ -128,7 +129,7 @@ def run(n_bricks, comm, steps, warm, show=True, max_sweeps=1000, ck_dir=None, ge
     rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     mine = (col.n_owned, t_setup, t_steps, t_nlgs, 8 * dist.entries_sent if dist else 0,
             8 * dist.entries_recv if dist else 0, dist.messages if dist else 0, rss, cs.Wdel.blocks.shape[0],
-            rss_now())
+            rss_now(), len(cs.cs.gap))
     rows = np.array(comm.gather(mine), dtype=float) if comm.size > 1 else np.array([mine], dtype=float)
     if comm.rank == 0 and show:
         nsw = sum(sweeps)
@@ -139,7 +140,8 @@ def run(n_bricks, comm, steps, warm, show=True, max_sweeps=1000, ck_dir=None, ge
               f"{rows[:, 4].max():.0f} / {rows[:, 5].max():.0f} | {rows[:, 6].max():.0f} | {rows[:, 7].max():.0f} | "
               f"{rows[:, 8].max():.0f} | {h} |", flush=True)
         print(f"\nRSS after the steps per rank: {rows[:, 9].min():.0f}–{rows[:, 9].max():.0f} MB (the peak above may "
-              "be the set-up's)", flush=True)
+              f"be the set-up's); contacts held per rank (its part of the set) {rows[:, 10].min():.0f}–"
+              f"{rows[:, 10].max():.0f}", flush=True)
     parts = {k: 1e3 * (v - timers0.get(k, 0.0)) / steps for k, v in cs.timers.items()}
     every = comm.gather(parts) if comm.size > 1 else [parts]
     if comm.rank == 0 and show:  # the contact step's own timers (ContactStep.timers), per step, slowest rank

@@ -426,7 +426,8 @@ MUTATIONS = [
              "fem_blocks/distributed/graph.py", "    rows = np.concatenate([cand[two], ant[two]])\n"
              "    cols = np.concatenate([ant[two], cand[two]])\n",
              "    rows, cols = cand[two], ant[two]\n", ("tests/test_dist_partition.py",)),
-    Mutation("partition_first_share", "the first partition: every rank gives the whole contact set to the graph",
+    Mutation("partition_first_share", "a partition from a whole contact set (a resumed run): every rank gives the "
+             "whole set to the graph",
              "fem_blocks/contact/step.py",
              "            self.body_owner = self._partition(np.arange(n * p // size, n * (p + 1) // size))",
              "            self.body_owner = self._partition(np.arange(n))", ("tests/test_dist_partition.py",)),
@@ -450,11 +451,15 @@ MUTATIONS = [
              "        return at\n", ("tests/test_dist_run.py",)),
     Mutation("watch_not_agreed", "N ranks: the missed-contact watch takes each rank's deepest, not agreed",
              "fem_blocks/runner.py", "            found = min(every) if every else None\n", "",
-             ("tests/test_dist_run.py",)),
+             ("tests/test_guards.py",)),
     Mutation("pieces_by_position", "checkpoint pieces merged by their rows' place among each piece, not by id",
              "fem_blocks/output/checkpoint.py", "            ids = [np.searchsorted(every, i) for i in ids]\n",
              "            ids = list(np.split(np.arange(n), np.cumsum([len(i) for i in ids])[:-1]))\n",
              ("tests/test_checkpoint_pieces.py", "tests/test_dist_run.py")),
+    Mutation("first_partition_all_held", "N ranks, the first partition: each rank gives the graph every contact it "
+             "holds, not its own (contacts counted by several ranks)", "fem_blocks/contact/step.py",
+             "        self.body_owner = self._partition(self._given())\n",
+             "        self.body_owner = self._partition(np.arange(len(self.cs.gap)))\n", ("tests/test_dist_own_rows.py",)),
 ]
 
 IGNORE = shutil.ignore_patterns(".git", "__pycache__", ".venv", "*.pyc", ".pytest_cache", "out", "*.egg-info")

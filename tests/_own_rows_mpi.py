@@ -60,7 +60,7 @@ def scripted_partition(step):
     PT-Scotch's need not be."""
     from fem_blocks.distributed.graph import contact_weights
     size, nb = step.comm.Get_size(), step.scene.nb
-    if step.body_owner is None:
+    if step.steps == 0:  # (the first partition: made at the first step, from a provisional split of the bodies)
         b = np.arange(nb)
         owner = np.zeros(nb, dtype=np.int64)
         owner[b % 4 == 1] = 1
@@ -96,9 +96,13 @@ def main(path, out):
     from mpi4py import MPI
     comm = MPI.COMM_WORLD
     _, model, sim, step = stepping(path, comm)
+    given = []
     if os.path.basename(path).startswith("rebalanced") and comm.Get_size() > 1:
         step._partition = lambda rows: scripted_partition(step)  # (this object only: the others keep PT-Scotch's)
-    res = dict(rank=comm.Get_rank(), size=comm.Get_size(), steps=[], owners=[], own_counts=[])
+    elif comm.Get_size() > 1:  # (PT-Scotch's, recording how many contacts the ranks give to its graph)
+        partition = step._partition
+        step._partition = lambda rows: (given.append(comm.allreduce(len(rows))), partition(rows))[1]
+    res = dict(rank=comm.Get_rank(), size=comm.Get_size(), steps=[], owners=[], own_counts=[], given=given)
     pieces = f"{out}.pieces"
     if comm.Get_rank() == 0:
         os.makedirs(pieces, exist_ok=True)

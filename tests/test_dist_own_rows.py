@@ -113,6 +113,8 @@ def test_each_rank_holds_and_steps_its_own_contacts_rows(serial, n):
         assert (np.array(owners[0]) != np.array(owners[1])).sum() >= 3  # (bodies, and their contacts' rows, moved)
     else:  # rebalance = 100 ("updated"), frozen geometry ("mixed"): the partition of the first step kept
         assert all(r["rebalanced"] == 0 for r in ranks) and ranks[0]["owners"][0] == ranks[0]["owners"][2]
+        # made once, at the first step, from a graph to which the ranks gave every contact of that step once
+        assert all(r["given"] == [one["steps"][0]["stats"][0]] for r in ranks)
     total = 0.0  # the totals: exact sums of the contacts' terms, rounded once (math.fsum), on one process too
     for st in one["steps"]:
         total += st["fsum"][1]

@@ -340,9 +340,10 @@ def test_a_new_partition_no_better_is_not_kept():
     assert step._rebalance() is True and step.body_owner is better and step.rebalanced == 1
 
 
-def test_the_first_partition_takes_each_contact_from_one_rank(monkeypatch):
-    """contact/step.py ContactStep._owner's first partition (every rank holding the whole first contact set) gives
-    the graph (distributed/graph.partition_contact_graph, stubbed here) a contiguous share of the contacts per
+def test_a_partition_from_a_whole_set_takes_each_contact_from_one_rank(monkeypatch):
+    """contact/step.py ContactStep._owner's partition from a whole contact set on every rank (a checkpoint resumed
+    without a usable partition; the run's first partition is made from a provisional split, `_first_partition`)
+    gives the graph (distributed/graph.partition_contact_graph, stubbed here) a contiguous share of the contacts per
     rank: over 3 ranks the shares are the 7 contacts once each, in order. Catches: every rank giving the whole set
     (each contact counted 3 times in the edge and vertex weights), or shares that overlap or leave a contact out."""
     from types import SimpleNamespace

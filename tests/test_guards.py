@@ -132,3 +132,46 @@ def test_a_nan_velocity_is_the_largest_velocity(tmp_path):
     gr = next(g for g in sim.groups if g.U.shape[1] > 1)
     gr.U[:, -1] = np.nan  # the last member of a group: finite bodies before it
     assert math.isnan(sim.max_velocity())
+
+
+def _watch_record(gap, cand, ant, ids):
+    """A stand-in step record of a rank on N ranks: its contact set (one interface, g0 = 0), every row its own,
+    their contact ids (the record's gather's)."""
+    from types import SimpleNamespace
+    n = len(gap)
+    cs = SimpleNamespace(gap=np.array(gap, dtype=float), g0=np.zeros(n), interface=np.zeros(n, dtype=np.int64),
+                         cand_body=np.array(cand, dtype=np.int64), ant_body=np.array(ant, dtype=np.int64))
+    return SimpleNamespace(cs=cs, law=np.zeros(n, dtype=np.int64), rows=np.arange(n),
+                           gather=SimpleNamespace(ids=np.array(ids, dtype=np.int64)))
+
+
+@pytest.mark.parametrize("mine, theirs, first", [
+    (([], [], [], []), ([-8e-4], [2], [3], [7]), ("c", "d", 8e-4)),            # nothing here: the other rank's
+    (([0.0, -5e-4], [0, 0], [1, 2], [3, 4]), ([-8e-4], [2], [3], [7]), ("c", "d", 8e-4)),  # the deeper
+    (([0.0, -8e-4], [0, 1], [1, 2], [3, 4]), ([-8e-4], [2], [3], [7]), ("b", "c", 8e-4)),  # a tie: the smaller id
+    (([0.0, -8e-4], [0, 1], [1, 2], [3, 9]), ([-8e-4], [2], [3], [7]), ("c", "d", 8e-4)),
+])
+def test_the_missed_contact_watch_agrees_across_ranks(mine, theirs, first):
+    """runner._MissedContactWatch on N > 1 ranks reads the contacts of its record's rows (a rank's own) and agrees
+    with the other ranks on the deepest missed contact (p0 / alert largest, the smallest contact id among equals, as
+    one process's argmax over the whole set), every rank recording the same. A fake communicator of 2 ranks gives the
+    other rank's finding, computed by the same watch on its record. Catches each rank keeping its own finding (the
+    rank without one silent: what rank 0 writes in summary.json depends on the partition), the first rank's finding
+    taken, ties broken by rank rather than id."""
+    from types import SimpleNamespace
+    from fem_blocks.runner import _MissedContactWatch
+    names = ["a", "b", "c", "d", "e"]
+    step = SimpleNamespace(opts=SimpleNamespace(geometry="updated"),
+                           interfaces=[SimpleNamespace(name="hit", alert=1e-3)],
+                           law_codes=lambda cs: np.zeros(len(cs.gap), dtype=np.int64))
+    model = SimpleNamespace(contact=step)
+    other = _MissedContactWatch(model, names)._deepest(_watch_record(*theirs))
+
+    class Comm:
+        def allgather(self, x):
+            return [other, x]  # (the other rank is rank 0: its finding comes first)
+    watch = _MissedContactWatch(model, names, comm=Comm())
+    sim = SimpleNamespace(last_contact=_watch_record(*mine), step_count=5, time=0.004)
+    assert watch.check(sim) is not None
+    f = watch.state["first"]
+    assert (f["bodies"][0], f["bodies"][1], f["depth"]) == first and f["interface"] == "hit" and f["step"] == 5

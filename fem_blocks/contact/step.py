@@ -499,8 +499,7 @@ class ContactStep:
         s = self.scene
         args = (bx, s.bnode_body, s.bnode_local) + ((s.bedges, s.bedge_body) if self.dim == 2 else
                                                     (s.bfaces, s.bface_body)) + (s.kind, self.body_group, self.table)
-        split = self._split() and self.body_owner is not None and len(self.body_owner) == s.nb
-        if not split:
+        if not self._parted():
             cs = self._det.detect(*args)
         else:  # (an error found by one rank, e.g. a node facing too many bodies, raised on every rank alike)
             cs, err = None, None
@@ -514,6 +513,21 @@ class ContactStep:
         if self.dim == 2:
             cs.area = cs.area * self.body_thickness[cs.cand_body]  # tributary length x thickness
         return cs
+
+    def _parted(self) -> bool:
+        """N > 1 ranks in colour order with the bodies partitioned: each rank detects and holds its part of the
+        contact set."""
+        return self._split() and self.body_owner is not None and len(self.body_owner) == self.scene.nb
+
+    def _first_partition(self, bx):
+        """COLLECTIVE, the first step on N > 1 ranks in colour order: the bodies' partition without the whole contact
+        set on any rank. The bodies are first split into contiguous blocks of numbers (a provisional partition), each
+        rank detects its part of the contact set for its block (`_detect`), and the body graph is assembled from the
+        contacts each rank owns under it (`_partition`): the graph of the whole set, each contact given once."""
+        size = self.comm.Get_size()
+        self.body_owner = (np.arange(self.scene.nb) * size // max(self.scene.nb, 1)).astype(np.int64)
+        self.cs = self._detect(bx)
+        self.body_owner = self._partition(self._given())
 
     def _candidates(self, bx) -> np.ndarray:
         """(nb,) bool: the candidate bodies of the contacts this rank's part L can hold (`_rank_contacts`): its own
@@ -612,6 +626,8 @@ class ContactStep:
             old, oldP, old_built, old_local = self.cs, self.P, self.g_built, self._local
             old_state = getattr(self, "state", None)
             self.P_prev = None  # (a new contact set: no extrapolation across a re-detection)
+            if first and self._split() and not self._parted():
+                self._first_partition(bx)
             self.cs = self._detect(bx)
             self._check_initial_penetration(first, bx)
             carry = old is not None and oldP is not None and self._total(len(self.cs.gap)) > 0
@@ -667,15 +683,14 @@ class ContactStep:
         """The step's rows of a new contact set: N > 1 ranks in colour order with the bodies partitioned, this rank's
         own contacts (candidate body its own; increasing, as `_rank_contacts` finds them); else None (every contact,
         cut at `_own_rows` once the partition is made)."""
-        s = self.scene
-        if not self._split() or self.body_owner is None or len(self.body_owner) != s.nb:
+        if not self._parted():
             return None
         return np.flatnonzero(self.body_owner[self.cs.cand_body] == self.comm.Get_rank())
 
     def _total(self, n: int) -> int:
         """The number of contacts of the whole set, from this rank's `n`: n itself when every rank holds the whole
         set; once a split detection gave each rank its part, the ranks' own contacts summed (COLLECTIVE)."""
-        if not self._split() or self.body_owner is None or len(self.body_owner) != self.scene.nb:
+        if not self._parted():
             return n
         from mpi4py import MPI
         return int(self.comm.allreduce(int(np.count_nonzero(self.body_owner[self.cs.cand_body] ==
@@ -741,15 +756,21 @@ class ContactStep:
         if ov is not None:
             raise InputError(f"bodies {names[ov[0]]} and {names[ov[1]]} overlap at the start by {ov[2]:.3g} m "
                              f"(more than the alert distance {alert:.3g} m)")
-        if len(self.cs.gap) == 0:
-            return
-        gt = self.cs.gap - self.cs.g0
-        alerts = np.array([itf.alert for itf in self.interfaces])[self.cs.interface]
-        bad = np.flatnonzero((gt < -alerts) & ~self._as_built()[self.cs.interface])
-        if bad.size:
+        cs = self.cs
+        gt = cs.gap - cs.g0
+        alerts = np.array([itf.alert for itf in self.interfaces])[cs.interface]
+        bad = np.flatnonzero((gt < -alerts) & ~self._as_built()[cs.interface])
+        found = None
+        if bad.size:  # (the deepest, the first in the set's order among equals)
             a = bad[np.argmin(gt[bad])]
-            raise InputError(f"bodies {names[self.cs.cand_body[a]]} and {names[self.cs.ant_body[a]]} overlap at the "
-                             f"start by {-gt[a]:.3g} m (more than the alert distance {alerts[a]:.3g} m)")
+            found = (float(gt[a]), int(contact_ids(cs.key[a:a + 1], cs.ant_body[a:a + 1], s.nb)[0]),
+                     f"bodies {names[cs.cand_body[a]]} and {names[cs.ant_body[a]]} overlap at the start by "
+                     f"{-gt[a]:.3g} m (more than the alert distance {alerts[a]:.3g} m)")
+        if self._parted():  # (each rank its part of the set: the deepest of every rank's, by contact id among equals)
+            every = [x for x in self.comm.allgather(found) if x is not None]
+            found = min(every) if every else None
+        if found is not None:
+            raise InputError(found[2])
 
     def _as_built(self) -> np.ndarray:
         """Per interface: joints closed as built (frozen: reference gap 0; updated: the initial set's contacts carry
