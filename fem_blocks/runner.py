@@ -648,13 +648,14 @@ class _MissedContactWatch:
         cs = c.cs
         if not len(rows):
             return None
-        ub = cs.g0[rows] - cs.gap[rows]  # >= p0 (g0 >= 0): the common case, nothing near the threshold, in two passes
+        sel = slice(None) if c.rows is None else rows  # (one process: views of every contact's arrays)
+        ub = cs.g0[sel] - cs.gap[sel]  # >= p0 (g0 >= 0): the common case, nothing near the threshold, in two passes
         if float(ub.max()) <= self.FRACTION * float(self.alert.min()):
             return None
-        law = self.step.law_codes(cs)[rows]
+        law = self.step.law_codes(cs)[sel]
         compliant = (law == ELASTIC) | (law == MIXED)
-        p0 = np.where(compliant, -cs.gap[rows], ub)
-        ratio = p0 / self.alert[cs.interface[rows]]
+        p0 = np.where(compliant, -cs.gap[sel], ub)
+        ratio = p0 / self.alert[cs.interface[sel]]
         a = int(np.argmax(ratio))
         if ratio[a] <= self.FRACTION:
             return None

@@ -18,9 +18,9 @@ dissipation per contact `friction` = -r̃_T · Δu_T [J] and its running total `
 `dissipated` the law states' dissipated energy Σ_α S_DISS [J] (decohesion and crushing) over every contact.
 
 Rows: on N > 1 MPI ranks in colour order (contact/step.py ContactStep._own_rows) a rank's record holds the rows of
-its own contacts only (`rows`: their numbers in the contact set `cs`); `whole()` gathers every contact's rows and
-contact set rows, in the whole set's order (collective: every rank calls it together). The statistics, `friction_total` and
-`dissipated` are of every contact on every rank.
+its own contacts only (`rows`: their numbers in the contact set `cs`, which is the rank's part of the whole set);
+`whole()` gathers every contact's rows and contact set rows, in the whole set's order (collective: every rank calls
+it together). The statistics, `friction_total` and `dissipated` are of every contact on every rank.
 """
 from __future__ import annotations
 
