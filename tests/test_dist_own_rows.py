@@ -1,14 +1,17 @@
 """On N > 1 ranks in colour order each rank holds the contact step's per-contact arrays (impulses, warm start, law
 state and parameters, reference gaps) for its own contacts only, and computes, solves and commits those rows alone;
 so does the step's record (contact/result.py: `rows`), whose whole() gathers every contact's rows on demand; per
-step only the totals cross ranks (contact/step.py ContactStep.ROWS, _own_rows, _whole, _L_impulses).
+step only the totals cross ranks (contact/step.py ContactStep.ROWS, _own_rows, _L_impulses). No rank detects or holds
+the whole contact set: each keeps its part L (the contacts with a body among its own and its own contacts' bodies).
 
 Expectation (from outside the distributed code): the same steps on ONE process in colour order. After each of 3
 steps the record of every contact (impulses, reactions, velocities, law state, end gaps, status, dissipation, law
 codes), its totals and statistics and the velocities of the bodies each rank steps are the serial ones bit for bit
 on every rank; each rank
 and its record hold exactly the rows of the contacts whose candidate body it owns (their union is every contact
-once); the runner's snapshot of a step (what a refined or
+once); each rank's contact set at the end is exactly L computed from the serial set and the partition, smaller than
+the whole set; the first partition is made once, from a graph given every contact of the first step once; the
+runner's snapshot of a step (what a refined or
 adaptive step restores) holds those rows, and restoring it and stepping again gives the same step again, bitwise;
 written as the runner's checkpoint one step later (what a failed step writes; "rebalanced" partitions again in that
 step), its pieces merge into the serial snapshot.
@@ -21,17 +24,18 @@ partitioned again at a re-detection (contact/step.py `_rebalance`; the helper's 
 next one balanced with the ranks' labels turned, so that bodies and their contacts' impulses and law states move to
 another rank, sent to it by their old owners: contact/step.py `_carry_rows`; the one offered after it is no better
 and is not kept), and a 3D wall (node points, the law state one column wider) in
-updated geometry re-detected at every step, partitioned again as "rebalanced": from the second step each rank detects
-its own candidates' contacts (detection_3d.detect's `bodies`) and the parts are gathered in the whole detection's
-order (contact/step.py `_gather_set`).
+updated geometry re-detected at every step, partitioned again as "rebalanced": each rank detects the contacts of the
+candidates around its bodies (detection_3d.detect's `bodies`, contact/step.py `_candidates`) and keeps its part.
 
 One-line bugs these catch (checked): the ghosts' warm start left at zero instead of exchanged (the iterates differ
 from the second step); the own rows gathered in rank order but not put back in contact order; a re-detected
-contact's impulse carried from the old position in the whole set instead of the old own rows; the impulses of the
+contact's impulse carried from its old place in the rank's set instead of the old own rows; the impulses of the
 contacts L owned elsewhere not scattered (the bodies' velocities differ); at a new partition, the old rows sent
-in the new contacts' order instead of grouped by the rank they go to, or received in the new rows' order instead of
-grouped by the rank that sent them (rows misplaced: the helper's first partition gives a rank rows from several
-ranks interleaved); the checkpoint of a snapshot taken before a step that partitioned again (what a failed step
+in the old contacts' order instead of grouped by the rank they go to, or looked up in their arrival order instead of
+sorted by id (rows misplaced: the helper's first partition gives a rank rows from several ranks interleaved); a rank
+keeping the whole set, or detecting the candidates of one ring of neighbours only (L incomplete); its own contacts
+numbered from 0 instead of after the ranks before; the first partition given every contact a rank holds; the
+checkpoint of a snapshot taken before a step that partitioned again (what a failed step
 writes) split with the new partition instead of the snapshot's (its pieces do not merge).
 """
 import numpy as np
