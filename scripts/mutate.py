@@ -460,6 +460,11 @@ MUTATIONS = [
              "holds, not its own (contacts counted by several ranks)", "fem_blocks/contact/step.py",
              "        self.body_owner = self._partition(self._given())\n",
              "        self.body_owner = self._partition(np.arange(len(self.cs.gap)))\n", ("tests/test_dist_own_rows.py",)),
+    Mutation("leave_colours_own_ids", "N ranks, a run leaving colour order: the old rows gathered whole but looked up "
+             "among the rank's own ids", "fem_blocks/contact/step.py",
+             "            return [old_local.gather(x) for x in olds], _lookup(every, new_ids)\n",
+             "            return [old_local.gather(x) for x in olds], _lookup(ids, new_ids)\n",
+             ("tests/test_dist_own_rows.py",)),
 ]
 
 IGNORE = shutil.ignore_patterns(".git", "__pycache__", ".venv", "*.pyc", ".pytest_cache", "out", "*.egg-info")

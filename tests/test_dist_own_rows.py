@@ -144,3 +144,27 @@ def test_the_own_rows_gather_orders_by_contact_id(tmp_path, n):
         assert np.array_equal(np.array(r["t"]), np.repeat(want, 6).reshape(-1, 2, 3))
         assert r["dtypes"] == ["int64", "float64", "bool", "float64"]
         assert "held by two ranks" in r["twice"]
+
+
+def test_leaving_colour_order_carries_every_old_row(tmp_path):
+    """A run that leaves colour order through the Python API (ContactStep.set_options: "given" order with the interface
+    coarse correction, under which every rank runs the same serial solve on the whole contact set) on 2 and 3 ranks:
+    at the re-detection after the switch the old rows, each held by its owner with the rank's part of the set, are
+    gathered whole by contact id (contact/step.py `_carry_rows`) and the run goes on as one process's, bit for bit
+    (the records of the two steps before and the two after the switch). Catches the old rows gathered in rank order,
+    or matched to the new contacts by place instead of id."""
+    import dist_cases
+    from _mpi import rank_results, run_helper
+    case = tmp_path / "lv.toml"
+    case.write_text(dist_cases.wall("lv", courses=3, per=3).replace(
+        "[contact]\n", '[contact]\ngeometry = "updated"\nredetect_every = 1\n', 1))
+    run_helper(1, "_leave_colours_mpi.py", case, tmp_path / "one")
+    one = rank_results(tmp_path / "one", 1)[0]
+    assert [s["order"] for s in one] == ["colours", "colours", "given", "given"] and one[0]["n"] > 20
+    assert len({s["P"] for s in one}) == 4
+    for n in (2, 3):
+        run_helper(n, "_leave_colours_mpi.py", case, tmp_path / f"n{n}")
+        for r in rank_results(tmp_path / f"n{n}", n):
+            assert [s["part"] for s in r] == [True, True, False, False]  # (its part of the set, then the whole set)
+            assert [{k: s[k] for k in ("P", "state", "n")} for s in r] == \
+                [{k: s[k] for k in ("P", "state", "n")} for s in one]
