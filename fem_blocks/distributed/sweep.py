@@ -187,8 +187,8 @@ class OwnRowsGather:
     """COLLECTIVE when called: gather(x), the rows x (n_own, ...) of every rank's own contacts as the rows of every
     contact, in the whole contact set's order (increasing contact id, contact/matching.contact_ids), on every rank
     (one Allgatherv). ids: this rank's own contacts' ids, increasing. The layout (every rank's ids: n integers on
-    every rank) is gathered at the first call only, for the outputs that need every contact; a rank's step never
-    calls it."""
+    every rank) is gathered at the first call only, for the outputs that need every contact (and the step's rows of
+    a run leaving colour order); a step in colour order never calls it."""
 
     def __init__(self, comm, ids):
         self.comm, self.ids, self._layout = comm, np.asarray(ids, dtype=np.int64), None
