@@ -465,6 +465,10 @@ MUTATIONS = [
              "            return [old_local.gather(x) for x in olds], _lookup(every, new_ids)\n",
              "            return [old_local.gather(x) for x in olds], _lookup(ids, new_ids)\n",
              ("tests/test_dist_own_rows.py",)),
+    Mutation("cohesive_flag_own_part", "N ranks: whether the contact set is cohesive read from the rank's own part "
+             "only", "fem_blocks/contact/step.py",
+             "            self.comm.Allreduce(used.astype(np.int64), every, op=MPI.MAX)\n",
+             "            every[:] = used\n", ("tests/test_colour.py",)),
 ]
 
 IGNORE = shutil.ignore_patterns(".git", "__pycache__", ".venv", "*.pyc", ".pytest_cache", "out", "*.egg-info")

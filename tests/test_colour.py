@@ -533,3 +533,31 @@ def test_a_rank_that_finds_the_ranks_disagree_stops_every_rank():
     with pytest.raises(RuntimeError, match="rows differ"):
         step._fail_together(True, "rows differ")
     assert seen == [0, 0, 1]  # (every call all-reduces, also where nothing was found)
+
+
+def test_a_rank_whose_part_is_dry_takes_the_cohesive_path_of_the_set():
+    """contact/step.py ContactStep._assign_laws on N > 1 ranks in colour order: whether the contact set has a cohesive
+    contact (the interface-law path of the solve and the commit, which every rank must take alike through the
+    collective sweep) is read from the interfaces of every rank's part, all-reduced. A rank whose part has only dry
+    (Coulomb) contacts takes the cohesive path when the other rank's part has a mixed-law contact, and not when the
+    other's is dry too. A fake 2-rank communicator gives the other rank's interfaces in use. Catches the flag read
+    from the rank's own part only (the ranks would part ways in the sweep)."""
+    from types import SimpleNamespace
+    from fem_blocks.contact.step import ContactStep
+    from fem_blocks.specs import ContactOptions, InterfaceSpec
+    glue = dict(k_n=82e9, k_s=36e9, f_t=0.25e6, c=0.35e6, G_I=18.0, G_II=125.0, tan_phi=0.75)
+    itfs = [InterfaceSpec("dry", ("b", "b"), mu=0.7), InterfaceSpec("glued", ("b", "g"), law="mixed", params=glue)]
+
+    class Comm:
+        def __init__(self, other):
+            self.other = np.array(other, dtype=np.int64)
+
+        def Allreduce(self, send, recv, op=None):
+            recv[:] = np.maximum(send, self.other)
+    for other, cohesive in (([0, 1], True), ([1, 0], False)):
+        step = ContactStep(itfs, ["b", "b", "g"], ContactOptions(order="colours"))
+        step.comm, step.dim = Comm(other), 2
+        step.cs = SimpleNamespace(interface=np.zeros(3, dtype=np.int64), cand_body=np.array([0, 1, 0]),
+                                  ant_body=np.array([1, 0, 1]), gap=np.zeros(3))
+        step._assign_laws(np.array([0, 2]))
+        assert step.cohesive is cohesive and step.law.tolist() == [0, 0]
