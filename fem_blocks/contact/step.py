@@ -174,8 +174,9 @@ class ContactStep:
         return self.body_owner[self.cs.cand_body]
 
     def _given(self) -> np.ndarray:
-        """The contacts (numbers in the current contact set) this rank counts in the collective counts and graph of
-        a re-partition: its own, so that every contact is counted by one rank."""
+        """This rank's own contacts (numbers in the current contact set, increasing: candidate body its own): the
+        step's rows of a new set (`_new_rows`), and the contacts it counts in the collective counts and graph of a
+        partition, so that every contact is counted by one rank."""
         return np.flatnonzero(self.body_owner[self.cs.cand_body] == self.comm.Get_rank())
 
     def _partition(self, rows) -> np.ndarray:
@@ -269,7 +270,7 @@ class ContactStep:
         (rank p's are start_p .. start_p + counts[p] - 1, the layout of the distributed vectors of the impulses). The
         numbers of contacts owned elsewhere are asked of their owners by id (one Alltoall of the counts, two
         Alltoallv: the ids, then the numbers); RuntimeError on every rank if an owner does not hold one."""
-        from mpi4py import MPI
+        from ..distributed.sweep import exchange
         comm, p, size = self.comm, self.comm.Get_rank(), self.comm.Get_size()
         start = int(counts[:p].sum())
         number = np.empty(ids.size, dtype=np.int64)
@@ -278,17 +279,10 @@ class ContactStep:
         other[own_pos] = False
         other = np.flatnonzero(other)
         other = other[np.argsort(owner[other], kind="stable")]
-        scounts = np.bincount(owner[other], minlength=size).astype(np.int64)
-        rcounts = np.empty(size, dtype=np.int64)
-        comm.Alltoall(scounts, rcounts)
-        sd, rd = np.cumsum(scounts) - scounts, np.cumsum(rcounts) - rcounts
-        asked = np.empty(int(rcounts.sum()), dtype=np.int64)
-        comm.Alltoallv([np.ascontiguousarray(ids[other]), (scounts, sd), MPI.INT64_T],
-                       [asked, (rcounts, rd), MPI.INT64_T])
+        scounts = np.bincount(owner[other], minlength=size)
+        asked, rcounts = exchange(comm, ids[other], scounts)
         pos = _lookup(ids[own_pos], asked)
-        reply = np.where(pos >= 0, start + pos, -1)
-        got = np.empty(other.size, dtype=np.int64)
-        comm.Alltoallv([reply, (rcounts, rd), MPI.INT64_T], [got, (scounts, sd), MPI.INT64_T])
+        got, _ = exchange(comm, np.where(pos >= 0, start + pos, -1), rcounts, rcounts=scounts)  # (the reply)
         number[other] = got
         self._fail_together(bool(np.any(got < 0)), "a contact of this rank's set is not among its owner's contacts")
         return number
@@ -683,9 +677,7 @@ class ContactStep:
         """The step's rows of a new contact set: N > 1 ranks in colour order with the bodies partitioned, this rank's
         own contacts (candidate body its own; increasing, as `_rank_contacts` finds them); else None (every contact,
         cut at `_own_rows` once the partition is made)."""
-        if not self._parted():
-            return None
-        return np.flatnonzero(self.body_owner[self.cs.cand_body] == self.comm.Get_rank())
+        return self._given() if self._parted() else None
 
     def _total(self, n: int) -> int:
         """The number of contacts of the whole set, from this rank's `n`: n itself when every rank holds the whole
@@ -693,8 +685,7 @@ class ContactStep:
         if not self._parted():
             return n
         from mpi4py import MPI
-        return int(self.comm.allreduce(int(np.count_nonzero(self.body_owner[self.cs.cand_body] ==
-                                                            self.comm.Get_rank())), op=MPI.SUM))
+        return int(self.comm.allreduce(int(self._given().size), op=MPI.SUM))
 
     def _fail_together(self, bad: bool, message: str):
         """COLLECTIVE: RuntimeError("contact step: " + message) on every rank if any rank found `bad` (a check of
@@ -716,7 +707,7 @@ class ContactStep:
         ids = old_local.gather.ids
         if not elsewhere:
             return olds, _lookup(ids, new_ids)
-        from mpi4py import MPI
+        from ..distributed.sweep import exchange
         comm = self.comm
         if not self._split():
             every = old_local.gather(ids.reshape(-1, 1))[:, 0]
@@ -724,18 +715,11 @@ class ContactStep:
         size = comm.Get_size()
         dest = self.body_owner[old.cand_body[old_local.own]]  # the new owner of each old own contact
         o = np.argsort(dest, kind="stable")
-        scounts = np.bincount(dest, minlength=size).astype(np.int64)
-        rcounts = np.empty(size, dtype=np.int64)
-        comm.Alltoall(scounts, rcounts)
-        sd, rd = np.cumsum(scounts) - scounts, np.cumsum(rcounts) - rcounts
-        got = np.empty(int(rcounts.sum()), dtype=np.int64)
-        comm.Alltoallv([np.ascontiguousarray(ids[o]), (scounts, sd), MPI.INT64_T], [got, (rcounts, rd), MPI.INT64_T])
+        scounts = np.bincount(dest, minlength=size)
+        got, rcounts = exchange(comm, ids[o], scounts)
         flat = [np.asarray(x, dtype=np.float64).reshape(len(x), int(np.prod(np.shape(x)[1:]))) for x in olds]
         width = [f.shape[1] for f in flat]
-        w = sum(width)
-        sbuf = np.ascontiguousarray(np.hstack(flat)[o]) if flat else np.zeros((len(o), 0))
-        rbuf = np.empty((got.size, w))
-        comm.Alltoallv([sbuf, (scounts * w, sd * w), MPI.DOUBLE], [rbuf, (rcounts * w, rd * w), MPI.DOUBLE])
+        rbuf, _ = exchange(comm, np.hstack(flat)[o] if flat else np.zeros((len(o), 0)), scounts, rcounts)
         k = np.argsort(got, kind="stable")  # (the rows received, by id: from several ranks, interleaved)
         got, rbuf = got[k], rbuf[k]
         out, at = [], 0

@@ -105,10 +105,11 @@ def contact_graph_rows(nb: int, cand, ant, comm):
     """COLLECTIVE: this rank's rows (start, indptr, indices, weights, vertex weights) of the time stepper's body graph
     — `body_graph(nb, [], cand, ant)` and `contact_weights(nb, cand)` of every contact — from the contacts (cand,
     ant) this rank gives, each contact given by one rank (its owner): no rank needs the whole contact set. Each
-    contact's two directed edges go to the ranks holding their rows (one Alltoallv, `row_block`), where the edges
+    contact's two directed edges go to the ranks holding their rows (sweep.exchange, `row_block`), where the edges
     are counted (the weight of an edge = the contacts between its two bodies, as body_graph's); the vertex weights
     1 + #{contacts with candidate b} are the ranks' counts summed (one Reduce_scatter)."""
     from mpi4py import MPI
+    from .sweep import exchange
     size, rank = comm.Get_size(), comm.Get_rank()
     cand, ant = np.asarray(cand, dtype=np.int64), np.asarray(ant, dtype=np.int64)
     two = cand != ant
@@ -117,13 +118,7 @@ def contact_graph_rows(nb: int, cand, ant, comm):
     starts = np.array([row_block(nb, size, p)[0] for p in range(size)], dtype=np.int64)
     dest = np.searchsorted(starts, rows, side="right") - 1
     o = np.argsort(dest, kind="stable")
-    send = np.ascontiguousarray(np.column_stack([rows[o], cols[o]]))
-    scounts = np.bincount(dest, minlength=size).astype(np.int64)
-    rcounts = np.empty(size, dtype=np.int64)
-    comm.Alltoall(scounts, rcounts)
-    recv = np.empty((int(rcounts.sum()), 2), dtype=np.int64)
-    comm.Alltoallv([send, (2 * scounts, 2 * (np.cumsum(scounts) - scounts)), MPI.INT64_T],
-                   [recv, (2 * rcounts, 2 * (np.cumsum(rcounts) - rcounts)), MPI.INT64_T])
+    recv, _ = exchange(comm, np.column_stack([rows[o], cols[o]]), np.bincount(dest, minlength=size))
     start, n_loc = row_block(nb, size, rank)
     uk, w = np.unique(recv[:, 0] * nb + recv[:, 1], return_counts=True)  # (sorted by row, then column)
     r, c = uk // nb - start, uk % nb

@@ -30,6 +30,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..solver.parallel import greedy_pass
+from .sweep import exchange
 
 
 def greedy_colours(own, a, b, owner_of, comm):
@@ -57,14 +58,8 @@ def greedy_colours(own, a, b, owner_of, comm):
     far = ~np.isin(b, own)
     ob = np.asarray(owner_of(b[far]), dtype=np.int64)
     by = np.argsort(ob, kind="stable")  # (b, a) pairs grouped by the owner of b, in rank order
-    sbuf = np.ascontiguousarray(np.column_stack([b[far][by], a[far][by]]), dtype=np.int64).ravel()
-    scounts = 2 * np.bincount(ob, minlength=size).astype(np.int64)
-    rcounts = np.empty(size, dtype=np.int64)
-    comm.Alltoall(scounts, rcounts)
-    rbuf = np.empty(int(rcounts.sum()), dtype=np.int64)
-    comm.Alltoallv([sbuf, (scounts, np.cumsum(scounts) - scounts), MPI.INT64_T],
-                   [rbuf, (rcounts, np.cumsum(rcounts) - rcounts), MPI.INT64_T])
-    extra = rbuf.reshape(-1, 2)
+    pairs = np.column_stack([b[far][by], a[far][by]]).astype(np.int64)
+    extra, _ = exchange(comm, pairs, np.bincount(ob, minlength=size))
     a, b = (np.concatenate([a, b[~far], extra[:, 0]]),  # ... and (b, a) here when b is this rank's
             np.concatenate([b, a[~far], extra[:, 1]]))
     # 2. local numbering: own vertices, then the ghosts (increasing global numbers in each part)

@@ -166,6 +166,28 @@ class DistSweep:
         self.gvec.destroy()
 
 
+def exchange(comm, x, scounts, rcounts=None):
+    """COLLECTIVE: the rows x (n, ...) (int64 or float64) sent in order, scounts[p] of them to rank p (x grouped by
+    destination rank, in rank order); returns (the rows received, grouped by sending rank in rank order, rcounts).
+    One Alltoall of the counts, unless `rcounts` (the rows to receive from each rank) is known — the reply to an
+    exchange, whose scounts they are — and one Alltoallv."""
+    from mpi4py import MPI
+    x = np.ascontiguousarray(x)
+    if x.dtype not in (np.int64, np.float64):
+        raise TypeError(f"exchange: rows of int64 or float64, got {x.dtype}")
+    scounts = np.asarray(scounts, dtype=np.int64)
+    if rcounts is None:
+        rcounts = np.empty(scounts.size, dtype=np.int64)
+        comm.Alltoall(scounts, rcounts)
+    rcounts = np.asarray(rcounts, dtype=np.int64)
+    w = int(np.prod(x.shape[1:], dtype=np.int64))
+    out = np.empty((int(rcounts.sum()),) + x.shape[1:], dtype=x.dtype)
+    mt = MPI.DOUBLE if x.dtype == np.float64 else MPI.INT64_T
+    comm.Alltoallv([x.reshape(-1), (scounts * w, (np.cumsum(scounts) - scounts) * w), mt],
+                   [out.reshape(-1), (rcounts * w, (np.cumsum(rcounts) - rcounts) * w), mt])
+    return out, rcounts
+
+
 def gather_rows(comm, order, counts, x: np.ndarray) -> np.ndarray:
     """COLLECTIVE: the rows x (n_own, ...) of every rank's own contacts as the rows of every contact in contact order,
     on every rank (one Allgatherv). order: every contact grouped by owner rank (rank 0's own contacts, then rank
