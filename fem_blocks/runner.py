@@ -569,9 +569,8 @@ class _Guards:
         """What a check found on this rank's contacts, (key, contact, payload) or None, agreed by every rank: of
         those found, the one with the smallest (key, contact number), or None (key -ratio: the worst penetration,
         the first contact among equals, as one process's argmax over every contact). N > 1 ranks: one all-gather."""
-        every = [found] if self.comm is None else self.comm.allgather(found)
-        found = [x for x in every if x is not None]
-        return min(found, key=lambda x: (x[0], x[1])) if found else None
+        from .distributed.root import least_found
+        return least_found(self.comm, found)
 
 
 def _held(c):
@@ -621,10 +620,8 @@ class _MissedContactWatch:
         c = sim.last_contact
         if not self.active or sim.step_count <= 1 or c is None or c.cs is None or c.law is None:
             return None  # (step 1: the start's overlaps, up to the alert distance, are the case's, not missed)
-        found = self._deepest(c)
-        if c.rows is not None:
-            every = [x for x in self.comm.allgather(found) if x is not None]
-            found = min(every) if every else None
+        from .distributed.root import least_found
+        found = least_found(self.comm if c.rows is not None else None, self._deepest(c))
         if found is None:
             return None
         _, _, i, (cand, ant), depth = found

@@ -751,8 +751,8 @@ class ContactStep:
                      f"bodies {names[cs.cand_body[a]]} and {names[cs.ant_body[a]]} overlap at the start by "
                      f"{-gt[a]:.3g} m (more than the alert distance {alerts[a]:.3g} m)")
         if self._parted():  # (each rank its part of the set: the deepest of every rank's, by contact id among equals)
-            every = [x for x in self.comm.allgather(found) if x is not None]
-            found = min(every) if every else None
+            from ..distributed.root import least_found
+            found = least_found(self.comm, found)
         if found is not None:
             raise InputError(found[2])
 

@@ -1,15 +1,27 @@
-"""Rank 0 does it, every rank gets its value or its exception: `on_root`.
+"""Rank 0 does it, every rank gets its value or its exception: `on_root`. What the ranks found, agreed: `least_found`.
 
 On N > 1 ranks every rank builds the whole model but rank 0 alone touches the output directory (opens the
 history, the ParaView series, the checkpoint; writes the summary). A failure there must stop every rank the same
 way (no rank left waiting in the next collective call), and a value rank 0 found there (the checkpoint to resume,
 the number of frames already written, the summary) must reach the others.
 
-No import of the rest of fem_blocks here: runner.py and output/ import this module.
+A check made by each rank on its own contacts (a NaN impulse, a penetration, a missed contact) must name what one
+process would name over the whole set: every rank's finding (key, contact, payload) or None, the one with the
+smallest (key, contact) (`least_found`: one all-gather; the contact a number or id in the whole set's order).
+
+No import of the rest of fem_blocks here: runner.py, output/ and contact/step.py import this module.
 """
 from __future__ import annotations
 
 import pickle
+
+
+def least_found(comm, found):
+    """Of every rank's finding `found` — (key, contact, payload) or None — the one with the smallest (key, contact),
+    or None if no rank found one; COLLECTIVE (one all-gather) when comm is given, else `found` itself."""
+    every = [found] if comm is None else comm.allgather(found)
+    found = [x for x in every if x is not None]
+    return min(found, key=lambda x: (x[0], x[1])) if found else None
 
 
 def _round_trip(obj):
